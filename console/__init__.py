@@ -1,0 +1,1 @@
+"""The operator's console: the `spacearm` command and its subcommands."""

@@ -1,0 +1,24 @@
+"""`spacearm config check FILE...`: validate configuration files."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from console.errors import CommandFailed, friendly_errors
+from controller.config.arm import load_arm_config
+
+
+def register(app: typer.Typer) -> None:
+    config_app = typer.Typer(help="Validate and inspect configuration files.", no_args_is_help=True)
+
+    @config_app.command("check")
+    @friendly_errors
+    def check(files: list[Path] = typer.Argument(..., help="Arm TOML files (configs/arm/*.toml).")) -> None:
+        """Validate arm files; print a one-line summary each or the first error."""
+        for path in files:
+            config = load_arm_config(path)
+            print(f"{path}: ok ({config.arm.name}, {len(config.joints)} joints, "
+                  f"{config.arm.convention} D-H)")
+
+    app.add_typer(config_app, name="config")

@@ -1,0 +1,1 @@
+"""spacearm controller: kinematics, planning, control, the daemon and its tools."""

@@ -1,0 +1,1 @@
+"""The controller daemon: cycle clock, supervision, modes, command API, recording."""

@@ -1,0 +1,86 @@
+"""Cycle clocks: real time on absolute deadlines, or lockstep as fast as the nodes answer.
+
+Real time: cycle k is due at start + k * period. Waking late is period error; when a cycle
+ran past the next deadline (an overrun) the missed deadlines are skipped, never run back
+to back to catch up, and counted. Lockstep: no waiting at all; the caller paces the cycle
+by waiting for every node's answer, and time advances by exactly one period per cycle.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+
+@dataclass(frozen=True)
+class Tick:
+    cycle: int            # number of this cycle's deadline since start (gaps = skipped cycles)
+    time: float           # the plant/controller time of this cycle, s (cycle * period)
+    deadline: float       # monotonic deadline, s (lockstep: equals time)
+    woke_at: float        # monotonic wake-up, s
+    skipped: int          # deadlines skipped just before this tick because of an overrun
+
+    @property
+    def period_error(self) -> float:
+        return self.woke_at - self.deadline
+
+
+class CycleClock(Protocol):
+    period: float
+
+    def next_tick(self) -> Tick: ...
+
+
+class RealTimeClock:
+    def __init__(self, period: float, now: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep):
+        if not period > 0:
+            raise ValueError(f"period must be positive, got {period}")
+        self.period = period
+        self._now = now
+        self._sleep = sleep
+        self._start: float | None = None
+        self._cycle = -1
+        self.overruns = 0
+        self.skipped_cycles = 0
+
+    def next_tick(self) -> Tick:
+        now = self._now()
+        if self._start is None:
+            self._start = now
+            self._cycle = 0
+            return Tick(0, 0.0, now, now, 0)
+        cycle = self._cycle + 1
+        deadline = self._start + cycle * self.period
+        skipped = 0
+        if now > deadline + self.period * 1e-3:
+            # Still busy past the deadline we were heading for: the previous cycle overran.
+            # Jump to the next deadline still ahead and count the ones missed.
+            late_cycles = math.floor((now - deadline) / self.period) + 1
+            skipped = late_cycles
+            cycle += late_cycles
+            deadline = self._start + cycle * self.period
+            self.overruns += 1
+            self.skipped_cycles += skipped
+        wait = deadline - self._now()
+        if wait > 0:
+            self._sleep(wait)
+        self._cycle = cycle
+        return Tick(cycle, cycle * self.period, deadline, self._now(), skipped)
+
+
+class LockstepClock:
+    def __init__(self, period: float, now: Callable[[], float] = time.monotonic):
+        if not period > 0:
+            raise ValueError(f"period must be positive, got {period}")
+        self.period = period
+        self._now = now
+        self._cycle = -1
+        self.overruns = 0
+        self.skipped_cycles = 0
+
+    def next_tick(self) -> Tick:
+        self._cycle += 1
+        wall = self._now()
+        return Tick(self._cycle, self._cycle * self.period, wall, wall, 0)

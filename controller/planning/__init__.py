@@ -1,0 +1,1 @@
+"""Trajectory planning: jerk-limited joint moves (Ruckig) and Cartesian paths."""

@@ -1,0 +1,2 @@
+class PlanningError(ValueError):
+    """A requested motion cannot be planned (outside limits, unreachable, bad input)."""

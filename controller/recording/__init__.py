@@ -1,0 +1,1 @@
+"""Recording of runs: MCAP (Foxglove/PlotJuggler), a raw CAN trace, and CSV export."""

@@ -1,0 +1,1 @@
+"""Controller-side device drivers: CANopen objects in, SI values out (and back)."""

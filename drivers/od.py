@@ -1,0 +1,146 @@
+"""Object-dictionary indices, named once for the whole stack.
+
+Both the controller-side drivers and the simulated firmware import their indices from
+here; the EDS files in configs/eds/ are generated from the same names
+(firmware_sim/eds_builder.py), so an index is written down exactly once.
+
+(index, subindex) pairs are plain tuples; ``OD_NAMES`` gives the EDS parameter names.
+"""
+from __future__ import annotations
+
+# --- CiA 301 communication profile area -------------------------------------------
+DEVICE_TYPE = 0x1000
+ERROR_REGISTER = 0x1001
+PREDEFINED_ERROR_FIELD = 0x1003
+COB_ID_SYNC = 0x1005
+COMM_CYCLE_PERIOD = 0x1006
+DEVICE_NAME = 0x1008
+HW_VERSION = 0x1009
+SW_VERSION = 0x100A
+COB_ID_EMCY = 0x1014
+CONSUMER_HEARTBEAT = 0x1016
+PRODUCER_HEARTBEAT = 0x1017
+IDENTITY = 0x1018
+
+RPDO_COMM = 0x1400  # + n (0..3)
+RPDO_MAP = 0x1600
+TPDO_COMM = 0x1800
+TPDO_MAP = 0x1A00
+N_PDOS = 4           # four RPDOs and four TPDOs per device (pre-defined connection set)
+MAX_MAPPED = 8       # mapping entries per PDO
+
+# PDO communication parameter sub-indices
+PDO_COB_ID = 1
+PDO_TRANSMISSION_TYPE = 2
+PDO_INHIBIT_TIME = 3
+PDO_EVENT_TIMER = 5
+PDO_SYNC_START = 6
+PDO_COB_ID_INVALID = 0x8000_0000   # bit 31 of the COB-ID: PDO does not exist / disabled
+TRANSMISSION_SYNC = 1              # transmission type 1: on every SYNC
+
+# Pre-defined connection set (CiA 301 7.3.5)
+NMT_COB_ID = 0x000
+SYNC_COB_ID_DEFAULT = 0x080
+EMCY_BASE = 0x080
+TPDO_BASE = (0x180, 0x280, 0x380, 0x480)
+RPDO_BASE = (0x200, 0x300, 0x400, 0x500)
+SDO_TX_BASE = 0x580   # server -> client
+SDO_RX_BASE = 0x600   # client -> server
+HEARTBEAT_BASE = 0x700
+
+# Error register bits (1001h)
+ERR_REG_GENERIC = 0x01
+ERR_REG_CURRENT = 0x02
+ERR_REG_VOLTAGE = 0x04
+ERR_REG_TEMPERATURE = 0x08
+ERR_REG_COMMUNICATION = 0x10
+ERR_REG_PROFILE = 0x20
+ERR_REG_MANUFACTURER = 0x80
+
+# EMCY error codes used by the devices
+EMCY_NO_ERROR = 0x0000
+EMCY_GENERIC = 0x1000
+EMCY_OVER_TEMPERATURE_DEVICE = 0x4210
+EMCY_OVER_TEMPERATURE_DRIVE = 0x4310
+EMCY_PDO_LENGTH = 0x8210
+EMCY_HEARTBEAT_ERROR = 0x8130
+EMCY_FOLLOWING_ERROR = 0x8611
+EMCY_POSITION_LIMIT = 0x8612  # CiA 402: positioning controller / limit
+EMCY_EE_JAM = 0xFF01          # manufacturer specific: end-effector mechanism jammed
+EMCY_EE_SCREW_TORQUE = 0xFF02 # manufacturer specific: screw torque limit before lock
+EMCY_FT_OVERLOAD = 0xFF10     # manufacturer specific: force/torque overload
+
+# --- CiA 402 drive profile (joint drives) -----------------------------------------
+ERROR_CODE = 0x603F
+CONTROLWORD = 0x6040
+STATUSWORD = 0x6041
+QUICK_STOP_OPTION = 0x605A
+FAULT_REACTION_OPTION = 0x605E
+MODES_OF_OPERATION = 0x6060
+MODES_OF_OPERATION_DISPLAY = 0x6061
+POSITION_DEMAND = 0x6062
+POSITION_ACTUAL = 0x6064
+FOLLOWING_ERROR_WINDOW = 0x6065
+FOLLOWING_ERROR_TIMEOUT = 0x6066
+POSITION_WINDOW = 0x6067
+VELOCITY_ACTUAL = 0x606C
+TARGET_TORQUE = 0x6071
+MAX_TORQUE = 0x6072
+MOTOR_RATED_TORQUE = 0x6076
+TORQUE_ACTUAL = 0x6077
+TARGET_POSITION = 0x607A
+SOFTWARE_POSITION_LIMIT = 0x607D   # sub 1 min, sub 2 max
+MAX_PROFILE_VELOCITY = 0x607F
+PROFILE_VELOCITY = 0x6081
+PROFILE_ACCELERATION = 0x6083
+PROFILE_DECELERATION = 0x6084
+QUICK_STOP_DECELERATION = 0x6085
+POSITION_ENCODER_RESOLUTION = 0x608F  # sub 1 encoder increments, sub 2 motor revolutions
+GEAR_RATIO = 0x6091                   # sub 1 motor revolutions, sub 2 shaft revolutions
+VELOCITY_OFFSET = 0x60B1
+TORQUE_OFFSET = 0x60B2
+INTERPOLATION_TIME_PERIOD = 0x60C2    # sub 1 value, sub 2 index (10^index s)
+FOLLOWING_ERROR_ACTUAL = 0x60F4
+SUPPORTED_DRIVE_MODES = 0x6502
+
+# manufacturer-specific joint objects
+DRIVE_TEMPERATURE = 0x2000   # INTEGER16, 0.1 degC
+BRAKE_STATUS = 0x2001        # UNSIGNED8, 1 = brake engaged
+
+MODE_PROFILE_POSITION = 1
+MODE_CSP = 8
+
+# --- End-effector controller (manufacturer specific, 2100h..) ----------------------
+EE_COMMAND = 0x2100          # UNSIGNED8, see EeCommand
+EE_STATE = 0x2101            # UNSIGNED8, see EeState
+EE_SCREW_TORQUE = 0x2102     # INTEGER16, mN m
+EE_SCREW_TURNS = 0x2103      # INTEGER32, milli-turns
+EE_GRIP_POSITION = 0x2104    # UNSIGNED16, per mille of stroke (0 open, 1000 closed)
+EE_FAULT_CODE = 0x2105       # UNSIGNED16, last EMCY code (0 = none)
+EE_SCREW_TORQUE_LIMIT = 0x2110   # UNSIGNED16, mN m: lock torque
+EE_LOCK_TURNS = 0x2111           # UNSIGNED32, milli-turns to full lock
+
+# --- Six-axis force/torque sensor (manufacturer specific, 2200h..) -----------------
+FT_VALUES = 0x2200           # ARRAY of INTEGER16, sub 1..6 = Fx Fy Fz Tx Ty Tz
+FT_FORCE_COUNTS_PER_N = 0x2201
+FT_TORQUE_COUNTS_PER_NM = 0x2202
+FT_STATUS = 0x2203           # UNSIGNED8, bit 0 overload, bit 1 tared
+FT_TARE = 0x2204             # UNSIGNED8, write 1: tare (bias = current load), 2: clear bias
+FT_OVERLOAD_LIMIT = 0x2205   # sub 1 force N, sub 2 torque N m (UNSIGNED16)
+
+FT_STATUS_OVERLOAD = 0x01
+FT_STATUS_TARED = 0x02
+
+# NMT
+NMT_START = 0x01
+NMT_STOP = 0x02
+NMT_PRE_OPERATIONAL = 0x80
+NMT_RESET_NODE = 0x81
+NMT_RESET_COMMUNICATION = 0x82
+NMT_STATE_BOOTUP = 0x00
+NMT_STATE_STOPPED = 0x04
+NMT_STATE_OPERATIONAL = 0x05
+NMT_STATE_PRE_OPERATIONAL = 0x7F
+NMT_STATE_NAMES = {0x00: "INITIALISING", 0x04: "STOPPED", 0x05: "OPERATIONAL", 0x7F: "PRE-OPERATIONAL"}
+
+DEVICE_TYPES = ("joint_drive", "end_effector", "ft_sensor")

@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# Creates everything spacearm needs on a fresh machine: system packages, a virtual
+# environment in .venv and the package installed into it (editable). Idempotent and
+# quick when nothing changed, so both README commands call it first.
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$ROOT/.venv"
+STAMP="$VENV/.spacearm-installed"
+
+need_apt=()
+command -v python3 >/dev/null 2>&1 || need_apt+=(python3 python3-venv python3-pip)
+if command -v python3 >/dev/null 2>&1 && ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then
+    need_apt+=(python3-venv)
+fi
+for extra in ${SPACEARM_APT_EXTRA:-}; do need_apt+=("$extra"); done
+if ((${#need_apt[@]})); then
+    SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+    echo "[bootstrap] installing system packages: ${need_apt[*]}"
+    $SUDO apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need_apt[@]}" >/dev/null
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+    echo "[bootstrap] creating virtual environment in $VENV"
+    python3 -m venv "$VENV"
+fi
+# Reinstall only when the dependency list changed.
+if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
+    echo "[bootstrap] installing spacearm and its dependencies"
+    "$VENV/bin/python" -m pip install -q --upgrade pip
+    "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
+    touch "$STAMP"
+fi

@@ -1,0 +1,68 @@
+"""Clock behaviour on a fake time source: deadlines are absolute, overruns are skipped."""
+import pytest
+
+from controller.daemon.clock import LockstepClock, RealTimeClock
+from controller.daemon.cycle_stats import CycleStats, CycleThresholds
+
+
+class FakeTime:
+    def __init__(self):
+        self.now = 100.0
+
+    def monotonic(self):
+        return self.now
+
+    def sleep(self, dt):
+        assert dt > 0
+        self.now += dt
+
+
+def test_deadlines_are_absolute_so_work_time_does_not_accumulate_drift():
+    fake = FakeTime()
+    clock = RealTimeClock(0.02, now=fake.monotonic, sleep=fake.sleep)
+    ticks = []
+    for _ in range(100):
+        tick = clock.next_tick()
+        ticks.append(tick)
+        fake.now += 0.007  # the cycle's work
+    assert [t.cycle for t in ticks] == list(range(100))
+    assert ticks[-1].deadline == pytest.approx(100.0 + 99 * 0.02)
+    assert all(abs(t.period_error) < 1e-9 for t in ticks)
+    assert clock.overruns == 0
+
+
+def test_overrun_skips_missed_cycles_instead_of_catching_up():
+    fake = FakeTime()
+    clock = RealTimeClock(0.02, now=fake.monotonic, sleep=fake.sleep)
+    clock.next_tick()
+    fake.now += 0.005
+    clock.next_tick()                 # cycle 1 at 100.02
+    fake.now += 0.065                 # cycle 1 runs 65 ms: deadlines 100.04, .06, .08 pass
+    tick = clock.next_tick()          # so the next cycle waits for 100.10, the first ahead
+    assert tick.cycle == 5 and tick.skipped == 3
+    assert tick.deadline == pytest.approx(100.10)
+    assert clock.overruns == 1 and clock.skipped_cycles == 3
+    fake.now += 0.001
+    follow = clock.next_tick()        # back on the grid, no burst
+    assert follow.cycle == 6 and follow.skipped == 0
+    assert follow.woke_at == pytest.approx(100.12)
+
+
+def test_lockstep_advances_time_by_one_period_per_cycle_without_waiting():
+    clock = LockstepClock(0.004)
+    times = [clock.next_tick().time for _ in range(5)]
+    assert times == pytest.approx([0.0, 0.004, 0.008, 0.012, 0.016])
+
+
+def test_cycle_stats_thresholds_and_bounded_window():
+    stats = CycleStats(CycleThresholds(period_error_warn=0.001, period_error_error=0.005), window=10)
+    assert stats.add(0.0002, 0.001) == "ok"
+    assert stats.add(0.002, 0.001) == "warn"
+    assert stats.add(0.0001, 0.001, skipped=2) == "error"
+    for _ in range(50):
+        stats.add(0.0001, 0.001)
+    summary = stats.summary()
+    assert summary.cycles == 53 and summary.overruns == 1 and summary.skipped_cycles == 2
+    assert summary.period_error_max == pytest.approx(0.002)
+    assert summary.period_error_p99 == pytest.approx(0.0001)  # old spikes left the window
+    assert summary.level == "ok" and summary.warnings == 1 and summary.errors == 1
