@@ -1,0 +1,221 @@
+"""Operator commands that talk to a running daemon: status, enable, jog, move, stop, ...
+
+Human-readable output by default, `--json` for scripts. Exit code 0 when the daemon
+accepted (and, with --wait, completed) the command; 1 with a one-line reason otherwise.
+Units: joint angles in rad unless suffixed (`5deg`), lengths in m unless suffixed (`10mm`).
+`move pose` takes the tool pose in the arm's base frame (or relative to the current tool
+frame with --frame tool): x y z, then roll pitch yaw about fixed axes, R = Rz(yaw) Ry(pitch) Rx(roll).
+"""
+from __future__ import annotations
+
+import getpass
+import json
+import socket
+import sys
+import time
+from typing import Any
+
+import typer
+
+from console import lease_store
+from console.client import DEFAULT_API, ApiClient
+from console.errors import CommandFailed, friendly_errors
+from console.status_view import render_status
+from console.units import UnitError, parse_angle, parse_length
+
+API_OPTION = typer.Option(DEFAULT_API, "--api", help="Daemon API address (tcp:HOST:PORT or unix:PATH).",
+                          envvar="SPACEARM_API")
+TOKEN_OPTION = typer.Option(None, "--token", help="API token, when the daemon is exposed.",
+                            envvar="SPACEARM_TOKEN")
+JSON_OPTION = typer.Option(False, "--json", help="Print the answer as JSON.")
+WAIT_OPTION = typer.Option(True, "--wait/--no-wait", help="Wait until the motion has finished.")
+
+
+def _emit(result: Any, as_json: bool, text: str) -> None:
+    print(json.dumps(result) if as_json else text)
+
+
+def _controlled_call(client: ApiClient, cmd: str, **args: Any) -> Any:
+    """Call a command that needs the control lease, taking the lease if nobody holds it."""
+    key = lease_store.load(client.address)
+    if key is None:
+        key = _take(client)
+    try:
+        return client.call(cmd, lease=key, **args)
+    except CommandFailed as exc:
+        if "no console holds control" not in str(exc):
+            raise
+        # Our stored key is stale (daemon restarted): take control again, once.
+        return client.call(cmd, lease=_take(client), **args)
+
+
+def _take(client: ApiClient) -> str:
+    holder = f"{getpass.getuser()}@{socket.gethostname()}"
+    key = client.call("control.take", holder=holder)["lease"]
+    lease_store.save(client.address, key)
+    return key
+
+
+def _wait_for_motion(client: ApiClient, as_json: bool) -> dict:
+    """Poll status until the arm is back in hold; fail if a protective stop happened."""
+    while True:
+        status = client.call("status")
+        if status["state"] == "stopped":
+            raise CommandFailed(f"protective stop: {status.get('stop_reason')}")
+        if status["state"] != "enabled" or status["mode"] in ("hold", None):
+            return status
+        if not as_json:
+            print(f"\r  {status['mode']}: {100 * status.get('progress', 0):5.1f} %", end="", file=sys.stderr)
+        time.sleep(0.1)
+
+
+def _motion(cmd: str, api: str, token: str | None, as_json: bool, wait: bool, **args: Any) -> None:
+    with ApiClient(api, token) as client:
+        result = _controlled_call(client, cmd, **args)
+        text = f"{result['mode']} started ({result['duration']:.2f} s)"
+        if wait:
+            status = _wait_for_motion(client, as_json)
+            if not as_json:
+                print(file=sys.stderr)
+            result = {**result, "final": status}
+            text = f"{result['mode']} done in {result['duration']:.2f} s"
+        _emit(result, as_json, text)
+
+
+def _angles(values: list[str]) -> list[float]:
+    try:
+        return [parse_angle(v) for v in values]
+    except UnitError as exc:
+        raise CommandFailed(str(exc)) from None
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    @friendly_errors
+    def status(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """Show the arm's state: mode, joints, forces, cycle statistics, stop reason."""
+        with ApiClient(api, token) as client:
+            result = client.call("status")
+        _emit(result, as_json, render_status(result))
+
+    for name, helptext in (("enable", "Enable all joint drives (brakes released, holding position)."),
+                           ("disable", "Hold still, then disable drives and apply brakes."),
+                           ("reset", "Clear a protective stop (motion needs enable afterwards).")):
+        def make(cmd: str):
+            @friendly_errors
+            def simple(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+                with ApiClient(api, token) as client:
+                    result = _controlled_call(client, cmd)
+                _emit({"state": result}, as_json, f"{cmd}: arm is {result}")
+            simple.__doc__ = helptext
+            return simple
+        app.command(name)(make(name))
+
+    @app.command()
+    @friendly_errors
+    def stop(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """Protective stop now (any console may stop the arm, control lease or not)."""
+        with ApiClient(api, token) as client:
+            result = client.call("stop")
+        _emit({"state": result}, as_json, f"stopped: arm is {result}")
+
+    @app.command()
+    @friendly_errors
+    def jog(joint: int = typer.Argument(..., help="Joint number, 1-based."),
+            delta: str = typer.Argument(..., help="Angle to move, e.g. 0.05 (rad) or 3deg."),
+            speed: float = typer.Option(1.0, help="Fraction of the joint limits, (0, 1]."),
+            api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+            wait: bool = WAIT_OPTION) -> None:
+        """Move one joint by DELTA (jerk-limited, within its limits)."""
+        [angle] = _angles([delta])
+        _motion("jog", api, token, as_json, wait, joint=joint, delta=angle, speed=speed)
+
+    move_app = typer.Typer(help="Point-to-point moves in joint or Cartesian space.", no_args_is_help=True)
+
+    @move_app.command("joints")
+    @friendly_errors
+    def move_joints(q: list[str] = typer.Argument(..., help="One angle per joint, e.g. 0 90deg -1.2."),
+                    speed: float = typer.Option(1.0, help="Fraction of the joint limits, (0, 1]."),
+                    api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+                    wait: bool = WAIT_OPTION) -> None:
+        """Move all joints to Q (Ruckig: jerk-limited, all joints finish together)."""
+        _motion("move_joints", api, token, as_json, wait, q=_angles(q), speed=speed)
+
+    @move_app.command("pose")
+    @friendly_errors
+    def move_pose(x: str, y: str, z: str, roll: str, pitch: str, yaw: str,
+                  frame: str = typer.Option("base", help="base: absolute pose in the base frame; "
+                                            "tool: relative to the current tool frame."),
+                  speed: float = typer.Option(1.0, help="Fraction of the Cartesian limits, (0, 1]."),
+                  api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+                  wait: bool = WAIT_OPTION) -> None:
+        """Move the tool in a straight line to x y z (m or mm) roll pitch yaw (rad or deg)."""
+        try:
+            xyz = [parse_length(v) for v in (x, y, z)]
+        except UnitError as exc:
+            raise CommandFailed(str(exc)) from None
+        _motion("move_pose", api, token, as_json, wait, xyz=xyz, rpy=_angles([roll, pitch, yaw]),
+                frame=frame, speed=speed)
+
+    app.add_typer(move_app, name="move")
+
+    control_app = typer.Typer(help="Take or release control of the arm (one console at a time).",
+                              no_args_is_help=True)
+
+    @control_app.command("take")
+    @friendly_errors
+    def control_take(api: str = API_OPTION, token: str = TOKEN_OPTION) -> None:
+        """Take control; refused while another console holds it."""
+        with ApiClient(api, token) as client:
+            _take(client)
+        print("control taken")
+
+    @control_app.command("release")
+    @friendly_errors
+    def control_release(api: str = API_OPTION, token: str = TOKEN_OPTION) -> None:
+        """Release control so another console can take it."""
+        with ApiClient(api, token) as client:
+            client.call("control.release", lease=lease_store.load(client.address))
+        lease_store.forget(api)
+        print("control released")
+
+    app.add_typer(control_app, name="control")
+
+    record_app = typer.Typer(help="Start or stop recording (MCAP + raw CAN trace).", no_args_is_help=True)
+
+    @record_app.command("start")
+    @friendly_errors
+    def record_start(path: str = typer.Argument(None, help="Output .mcap (default: runs/<time>.mcap)."),
+                     api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """Start recording every cycle."""
+        with ApiClient(api, token) as client:
+            result = _controlled_call(client, "record.start", path=path)
+        _emit(result, as_json, f"recording to {result['path']}")
+
+    @record_app.command("stop")
+    @friendly_errors
+    def record_stop(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """Stop recording and close the file."""
+        with ApiClient(api, token) as client:
+            result = _controlled_call(client, "record.stop")
+        _emit(result, as_json, f"recording closed: {result['path']} ({result['cycles']} cycles)")
+
+    app.add_typer(record_app, name="record")
+
+    @app.command()
+    @friendly_errors
+    def watch(api: str = API_OPTION, token: str = TOKEN_OPTION,
+              rate: float = typer.Option(5.0, help="Refreshes per second."),
+              count: int = typer.Option(0, help="Stop after this many refreshes (0: until Ctrl-C).")) -> None:
+        """Live view of joints, forces and cycle statistics, refreshing in the terminal."""
+        from rich.live import Live
+        from console.status_view import status_table
+        shown = 0
+        with ApiClient(api, token) as client, Live(auto_refresh=False) as live:
+            try:
+                while count == 0 or shown < count:
+                    live.update(status_table(client.call("status")), refresh=True)
+                    shown += 1
+                    time.sleep(1.0 / max(rate, 0.1))
+            except KeyboardInterrupt:
+                pass

@@ -1,0 +1,60 @@
+"""Render the daemon's status for people: degrees, millimetres and milliseconds."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from rich.console import Group
+from rich.table import Table
+from rich.text import Text
+
+
+def _deg(value: float | None) -> str:
+    return "-" if value is None else f"{math.degrees(value):9.3f}"
+
+
+def status_lines(status: dict[str, Any]) -> list[str]:
+    stats = status.get("stats") or {}
+    control = status.get("control") or {}
+    lines = [
+        f"state {status['state']}   mode {status.get('mode') or '-'}   "
+        f"t {status.get('time', 0.0):.2f} s   sync {status.get('sync_counter', '-')}",
+    ]
+    if status.get("stop_reason"):
+        lines.append(f"protective stop: {status['stop_reason']}")
+    lines.append(f"control: {control.get('holder') or 'free'}   "
+                 f"recording: {(status.get('recording') or {}).get('path') or 'off'}")
+    if stats:
+        lines.append(
+            f"cycle: period error median {1e3 * stats['period_error_median']:.3f} ms, "
+            f"p99 {1e3 * stats['period_error_p99']:.3f} ms, max {1e3 * stats['period_error_max']:.3f} ms; "
+            f"execution p99 {1e3 * stats['execution_p99']:.3f} ms; overruns {stats['overruns']} "
+            f"[{stats['level']}]")
+    wrench = status.get("wrench")
+    if wrench:
+        lines.append("wrench: F " + " ".join(f"{v:7.2f}" for v in wrench[:3]) + " N   T "
+                     + " ".join(f"{v:6.3f}" for v in wrench[3:]) + " N m")
+    if status.get("end_effector"):
+        lines.append(f"end effector: {status['end_effector']}")
+    return lines
+
+
+def render_status(status: dict[str, Any]) -> str:
+    lines = status_lines(status)
+    lines.append(f"{'joint':<16}{'q deg':>10}{'target deg':>12}{'dq deg/s':>10}{'tau N m':>9}  enabled")
+    for joint in status.get("joints", []):
+        lines.append(f"{joint['name']:<16}{_deg(joint['q']):>10}{_deg(joint.get('q_cmd')):>12}"
+                     f"{_deg(joint['dq']):>10}{joint['tau']:9.2f}  {'yes' if joint['enabled'] else 'no'}")
+    return "\n".join(lines)
+
+
+def status_table(status: dict[str, Any]) -> Group:
+    table = Table(title=None, expand=False)
+    for column in ("joint", "q deg", "target deg", "dq deg/s", "tau N m", "enabled"):
+        table.add_column(column, justify="left" if column == "joint" else "right")
+    for joint in status.get("joints", []):
+        table.add_row(joint["name"], _deg(joint["q"]), _deg(joint.get("q_cmd")), _deg(joint["dq"]),
+                      f"{joint['tau']:.2f}", "yes" if joint["enabled"] else "no")
+    header = Text("\n".join(status_lines(status)),
+                  style="bold red" if status["state"] == "stopped" else "")
+    return Group(header, table)

@@ -1,0 +1,149 @@
+"""Console commands: argument validation, control-lease checks, and dispatch to the cycle.
+
+Arguments are validated here, in the API thread (types, counts, ranges, units are SI);
+whether the command makes sense *now* (state, reachability) is decided inside the cycle
+by ControllerCore. `stop` needs no lease: anyone watching may stop the arm.
+"""
+from __future__ import annotations
+
+import math
+from concurrent.futures import TimeoutError as FutureTimeout
+from typing import Any, Callable, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from controller.config.loader import format_location
+from controller.daemon.command_api import ApiError, Session
+from controller.daemon.core import CommandRefused, ControllerCore
+from controller.daemon.leases import ControlLease, LeaseError
+from controller.daemon.modes import PlannedMode
+from controller.planning.errors import PlanningError
+
+
+class Args(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True)
+    lease: str | None = None
+
+
+class NoArgs(Args):
+    pass
+
+
+class TakeArgs(Args):
+    holder: str = Field(default="console", min_length=1, max_length=128)
+
+
+class JogArgs(Args):
+    joint: int = Field(ge=1, le=12, description="joint number, 1-based")
+    delta: float = Field(ge=-math.pi / 2, le=math.pi / 2, description="rad")
+    speed: float = Field(default=1.0, gt=0.0, le=1.0, description="fraction of the joint limits")
+
+
+class MoveJointsArgs(Args):
+    q: list[float] = Field(min_length=1, max_length=12, description="rad")
+    speed: float = Field(default=1.0, gt=0.0, le=1.0)
+
+
+class MovePoseArgs(Args):
+    xyz: tuple[float, float, float] = Field(description="m")
+    rpy: tuple[float, float, float] = Field(description="rad, R = Rz(yaw) Ry(pitch) Rx(roll)")
+    frame: Literal["base", "tool"] = "base"
+    speed: float = Field(default=1.0, gt=0.0, le=1.0)
+
+
+class RecordArgs(Args):
+    path: str | None = Field(default=None, max_length=4096)
+
+
+def _parse(model: type[Args], args: dict[str, Any]) -> Args:
+    try:
+        return model.model_validate(args)
+    except ValidationError as exc:
+        item = exc.errors()[0]
+        raise ApiError(f"{format_location(item['loc'])}: {item['msg']}") from None
+
+
+class CommandHandlers:
+    """Maps command names to validated calls; the daemon passes `handle` to the server."""
+
+    def __init__(self, core: ControllerCore, lease: ControlLease, planner: Any,
+                 status: Callable[[], dict], recorder_control: Any, dof: int,
+                 cycle_timeout: float = 2.0):
+        self.core = core
+        self.lease = lease
+        self.planner = planner
+        self.status = status
+        self.recorder_control = recorder_control
+        self.dof = dof
+        self.cycle_timeout = cycle_timeout
+        self.table: dict[str, tuple[type[Args], bool, Callable[[Args], Any]]] = {
+            # name: (argument model, needs control lease, action)
+            "ping": (NoArgs, False, lambda a: "pong"),
+            "status": (NoArgs, False, lambda a: self.status()),
+            "control.take": (TakeArgs, False, self._take),
+            "control.release": (NoArgs, True, lambda a: self.lease.release(a.lease) or "released"),
+            "stop": (NoArgs, False, lambda a: self._in_cycle(self.core.cmd_stop)),
+            "enable": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_enable)),
+            "disable": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_disable)),
+            "reset": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_reset)),
+            "jog": (JogArgs, True, self._jog),
+            "move_joints": (MoveJointsArgs, True, self._move_joints),
+            "move_pose": (MovePoseArgs, True, self._move_pose),
+            "record.start": (RecordArgs, True, lambda a: self.recorder_control.start(a.path)),
+            "record.stop": (NoArgs, True, lambda a: self.recorder_control.stop()),
+        }
+
+    def handle(self, session: Session, cmd: str, args: dict[str, Any]) -> Any:
+        entry = self.table.get(cmd)
+        if entry is None:
+            raise ApiError(f"unknown command {cmd!r}; known: {', '.join(sorted(self.table))}")
+        model, needs_lease, action = entry
+        parsed = _parse(model, args)
+        try:
+            if needs_lease:
+                self.lease.require(parsed.lease)
+            return action(parsed)
+        except (LeaseError, CommandRefused) as exc:
+            raise ApiError(str(exc)) from None
+
+    def _in_cycle(self, apply: Callable) -> Any:
+        try:
+            return self.core.submit(apply, timeout=self.cycle_timeout)
+        except FutureTimeout:
+            raise ApiError("the control cycle did not take the command in time") from None
+
+    def _take(self, a: TakeArgs) -> dict:
+        return {"lease": self.lease.take(a.holder)}
+
+    def _start_motion(self, name: str, description: str, plan_from: Callable[[np.ndarray], Any]) -> Any:
+        """Plan in this (API) thread from the cycle's current target, then start in the cycle."""
+        start = self._in_cycle(self.core.motion_start)
+        try:
+            plan = plan_from(start)
+        except PlanningError as exc:
+            raise ApiError(str(exc)) from None
+        mode = PlannedMode(name, plan, 0.0, description)
+        return self._in_cycle(lambda t, m: self.core.start_planned(t, m, mode, start))
+
+    def _jog(self, a: JogArgs) -> Any:
+        if a.joint > self.dof:
+            raise ApiError(f"joint: {a.joint} is not a joint of this {self.dof}-joint arm")
+        return self._start_motion("jog", f"joint {a.joint} by {a.delta:+.4f} rad",
+                                  lambda q0: self.planner.jog(q0, a.joint - 1, a.delta, a.speed))
+
+    def _move_joints(self, a: MoveJointsArgs) -> Any:
+        if len(a.q) != self.dof:
+            raise ApiError(f"q: expected {self.dof} joint values, got {len(a.q)}")
+        goal = np.array(a.q)
+        if not np.all(np.isfinite(goal)):
+            raise ApiError("q: values must be finite")
+        return self._start_motion("move_joints", "to " + ", ".join(f"{v:.4f}" for v in goal) + " rad",
+                                  lambda q0: self.planner.joint_move(q0, goal, a.speed))
+
+    def _move_pose(self, a: MovePoseArgs) -> Any:
+        if not all(math.isfinite(v) for v in (*a.xyz, *a.rpy)):
+            raise ApiError("xyz/rpy: values must be finite")
+        return self._start_motion(
+            "move_pose", f"{a.frame} frame xyz {a.xyz} m rpy {a.rpy} rad",
+            lambda q0: self.planner.pose_move(q0, np.array(a.xyz), np.array(a.rpy), a.frame, a.speed))

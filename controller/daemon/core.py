@@ -1,0 +1,175 @@
+"""The controller's decision logic for one cycle, free of I/O so it can be tested alone.
+
+States:  disabled -> enabling -> enabled (hold or a motion mode) -> disabled
+                       any state -> stopped (protective stop) --reset--> disabled
+`update(measurement)` is called once per cycle and returns the command to write.
+Console commands arrive through `submit()` from other threads and are applied at the
+start of the next cycle, so the cycle alone changes controller state.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from controller.daemon.modes import HoldMode, PlannedMode
+from controller.daemon.state import JointCommand, Measurement
+from controller.daemon.supervision import Finding, Supervisor
+from controller.planning.errors import PlanningError
+
+ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
+
+
+class CommandRefused(Exception):
+    """The command is valid in form but not now (wrong state, unreachable target, ...)."""
+
+
+@dataclass
+class Event:
+    time: float
+    kind: str
+    message: str
+
+
+@dataclass
+class _Pending:
+    apply: Callable[[float, Measurement], Any]
+    future: Future = field(default_factory=Future)
+
+
+class ControllerCore:
+    def __init__(self, supervisor: Supervisor, joint_names: list[str]):
+        self.supervisor = supervisor
+        self.joint_names = joint_names
+        self.state = "disabled"
+        self.mode: HoldMode | PlannedMode | None = None
+        self.stop_reason: Finding | None = None
+        self.events: list[Event] = []           # new events since the last drain
+        self.last_target: np.ndarray | None = None
+        self.last_measurement: Measurement | None = None
+        self._enable_started = 0.0
+        self._pending: "queue.Queue[_Pending]" = queue.Queue()
+        self._lock = threading.Lock()
+
+    # ---- called from the API threads -------------------------------------------------
+    def submit(self, apply: Callable[[float, Measurement], Any], timeout: float = 2.0) -> Any:
+        """Run `apply(t, measurement)` at the start of the next cycle and return its result."""
+        pending = _Pending(apply)
+        self._pending.put(pending)
+        return pending.future.result(timeout=timeout)
+
+    # ---- called by the cycle ----------------------------------------------------------
+    def update(self, m: Measurement) -> JointCommand:
+        self.last_measurement = m
+        self._apply_pending(m)
+        moving = self.state == "enabled" and isinstance(self.mode, PlannedMode)
+        if self.state in ("enabled", "enabling"):
+            findings = self.supervisor.check(m, self.last_target, moving)
+        else:
+            # Disabled or stopped: still watch the nodes, but not motion-related limits.
+            findings = [f for f in self.supervisor.check(m, None, False)
+                        if f.code in ("heartbeat_lost", "emcy", "bootup", "pdo_missing")]
+        if findings and self.state != "stopped":
+            self.protective_stop(m.time, findings[0])
+            for extra in findings[1:]:
+                self._event(m.time, "finding", extra.message)
+        if self.state == "enabling":
+            if np.all(m.joints_enabled):
+                self.state = "enabled"
+                self.mode = HoldMode(m.q.copy())
+                self._event(m.time, "state", "all joints enabled")
+            elif m.time - self._enable_started > ENABLE_TIMEOUT:
+                slow = [n for n, ok in zip(self.joint_names, m.joints_enabled) if not ok]
+                self.protective_stop(m.time, Finding("enable_timeout",
+                                     f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}"))
+        if self.state == "enabled" and self.mode is not None:
+            setpoint = self.mode.setpoint(m.time)
+            if isinstance(self.mode, PlannedMode) and self.mode.finished(m.time):
+                self._event(m.time, "motion", f"{self.mode.name} finished")
+                self.mode = HoldMode(setpoint.q.copy())
+            self.last_target = setpoint.q.copy()
+            return JointCommand(setpoint.q.copy(), setpoint.dq.copy(), enable=True)
+        # Not enabled: targets follow the measurement so enabling never causes a jump.
+        self.last_target = None
+        return JointCommand(m.q.copy(), np.zeros_like(m.q), enable=self.state == "enabling")
+
+    def protective_stop(self, t: float, finding: Finding) -> None:
+        self.state = "stopped"
+        self.mode = None
+        self.stop_reason = finding
+        self._event(t, "protective_stop", finding.message)
+
+    def drain_events(self) -> list[Event]:
+        events, self.events = self.events, []
+        return events
+
+    def _event(self, t: float, kind: str, message: str) -> None:
+        self.events.append(Event(t, kind, message))
+
+    def _apply_pending(self, m: Measurement) -> None:
+        while True:
+            try:
+                pending = self._pending.get_nowait()
+            except queue.Empty:
+                return
+            if not pending.future.set_running_or_notify_cancel():
+                continue
+            try:
+                pending.future.set_result(pending.apply(m.time, m))
+            except (CommandRefused, PlanningError) as exc:
+                pending.future.set_exception(CommandRefused(str(exc)))
+            except Exception as exc:  # a bug in a command must not kill the cycle
+                pending.future.set_exception(CommandRefused(f"internal error: {exc!r}"))
+
+    # ---- commands (run inside the cycle via submit) ------------------------------------
+    def cmd_enable(self, t: float, m: Measurement) -> str:
+        if self.state == "stopped":
+            raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first")
+        if self.state in ("enabling", "enabled"):
+            return self.state
+        self.state = "enabling"
+        self._enable_started = t
+        self._event(t, "state", "enabling joints")
+        return "enabling"
+
+    def cmd_disable(self, t: float, m: Measurement) -> str:
+        if self.state != "stopped":
+            self.state = "disabled"
+            self.mode = None
+            self._event(t, "state", "disabled, brakes on")
+        return self.state
+
+    def cmd_stop(self, t: float, m: Measurement) -> str:
+        self.protective_stop(t, Finding("operator_stop", "stop commanded by the operator"))
+        return self.state
+
+    def cmd_reset(self, t: float, m: Measurement) -> str:
+        if self.state != "stopped":
+            return self.state
+        self.state = "disabled"
+        self._event(t, "reset", f"reset after: {self.stop_reason}")
+        self.stop_reason = None
+        return self.state
+
+    def motion_start(self, t: float, m: Measurement) -> np.ndarray:
+        """Where the next motion must start: the current target. Refuses if not ready."""
+        if self.state != "enabled":
+            raise CommandRefused(f"arm is {self.state}; enable it first" if self.state != "stopped"
+                                 else f"protective stop active ({self.stop_reason}); reset first")
+        if isinstance(self.mode, PlannedMode) and not self.mode.finished(t):
+            raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait")
+        return (self.last_target if self.last_target is not None else m.q).copy()
+
+    def start_planned(self, t: float, m: Measurement, mode: PlannedMode, planned_from: np.ndarray) -> dict:
+        """Start a motion planned outside the cycle from `planned_from`, if still valid."""
+        start = self.motion_start(t, m)
+        if not np.allclose(start, planned_from, atol=1e-9, rtol=0):
+            raise CommandRefused("the arm moved while the motion was being planned; send it again")
+        mode.start = t
+        self.mode = mode
+        self._event(t, "motion", f"{mode.name} started: {mode.description}")
+        return {"mode": mode.name, "duration": mode.plan.duration}
