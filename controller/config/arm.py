@@ -98,6 +98,14 @@ class Sensors(Strict):
                                      description="rad (25 arcsec by default)")
 
 
+class CartesianLimits(Strict):
+    """Limits of straight-line tool moves (the tool frame's origin and orientation)."""
+    linear_velocity: float = Field(default=0.05, gt=0.0, le=2.0, description="m/s")
+    linear_acceleration: float = Field(default=0.1, gt=0.0, le=10.0, description="m/s^2")
+    angular_velocity: float = Field(default=0.1, gt=0.0, le=3.0, description="rad/s")
+    angular_acceleration: float = Field(default=0.2, gt=0.0, le=30.0, description="rad/s^2")
+
+
 class ArmInfo(Strict):
     name: str = Field(min_length=1)
     description: str = ""
@@ -113,7 +121,10 @@ class ArmConfig(Strict):
     base: FixedFrame = FixedFrame()
     tool: FixedFrame = FixedFrame()
     sensors: Sensors = Sensors()
+    cartesian: CartesianLimits = CartesianLimits()
     plane: Plane | None = None
+    postures: dict[str, list[float]] = Field(default_factory=dict,
+                                             description="named joint postures, rad")
 
     @model_validator(mode="after")
     def _unique_names(self) -> "ArmConfig":
@@ -121,6 +132,13 @@ class ArmConfig(Strict):
         duplicates = sorted({n for n in names if names.count(n) > 1})
         if duplicates:
             raise ValueError(f"joint names must be unique; repeated: {', '.join(duplicates)}")
+        for name, q in self.postures.items():
+            if len(q) != len(self.joints):
+                raise ValueError(f"posture {name!r} has {len(q)} values, the arm has {len(self.joints)} joints")
+            for joint, value in zip(self.joints, q):
+                if not joint.limits.lower <= value <= joint.limits.upper:
+                    raise ValueError(f"posture {name!r}: {joint.name} = {value} is outside "
+                                     f"[{joint.limits.lower}, {joint.limits.upper}]")
         return self
 
 

@@ -12,21 +12,14 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from controller.kinematics.pose_error import twist_error as pose_error
 from controller.planning.cartesian_path import CartesianPath
 from controller.planning.errors import PlanningError
 from controller.planning.joint_move import JointLimits, JointSetpoint
 
 Forward = Callable[[np.ndarray], np.ndarray]     # q -> 4x4 tool pose
 Jacobian = Callable[[np.ndarray], np.ndarray]    # q -> 6 x n geometric Jacobian
-
-
-def pose_error(target: np.ndarray, actual: np.ndarray) -> np.ndarray:
-    """6-vector (position, rotation vector) taking `actual` to `target`, base frame."""
-    dp = target[:3, 3] - actual[:3, 3]
-    dr = Rotation.from_matrix(target[:3, :3] @ actual[:3, :3].T).as_rotvec()
-    return np.concatenate([dp, dr])
 
 
 def damped_pinv(J: np.ndarray, damping: float) -> np.ndarray:
