@@ -20,7 +20,7 @@ class UnitError(ValueError):
 def _parse(text: str, units: dict[str, float], kind: str) -> float:
     match = _NUMBER.match(text)
     if not match:
-        raise UnitError(f"{text!r} is not a {kind} (e.g. {'5deg' if kind == 'angle' else '10mm'})")
+        raise UnitError(f"{text!r} is not {'an' if kind == 'angle' else 'a'} {kind} (e.g. {'5deg' if kind == 'angle' else '10mm'})")
     value, unit = float(match.group(1)), match.group(2)
     if unit not in units:
         raise UnitError(f"{text!r}: unknown {kind} unit {unit!r} (use {', '.join(u for u in units if u)})")

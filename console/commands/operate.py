@@ -89,6 +89,10 @@ def _angles(values: list[str]) -> list[float]:
         raise CommandFailed(str(exc)) from None
 
 
+# Let negative numbers through as arguments (click would read "-0.5" as an option).
+NUMERIC_ARGS = {"ignore_unknown_options": True}
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     @friendly_errors
@@ -119,7 +123,7 @@ def register(app: typer.Typer) -> None:
             result = client.call("stop")
         _emit({"state": result}, as_json, f"stopped: arm is {result}")
 
-    @app.command()
+    @app.command(context_settings=NUMERIC_ARGS)
     @friendly_errors
     def jog(joint: int = typer.Argument(..., help="Joint number, 1-based."),
             delta: str = typer.Argument(..., help="Angle to move, e.g. 0.05 (rad) or 3deg."),
@@ -132,7 +136,7 @@ def register(app: typer.Typer) -> None:
 
     move_app = typer.Typer(help="Point-to-point moves in joint or Cartesian space.", no_args_is_help=True)
 
-    @move_app.command("joints")
+    @move_app.command("joints", context_settings=NUMERIC_ARGS)
     @friendly_errors
     def move_joints(q: list[str] = typer.Argument(..., help="One angle per joint, e.g. 0 90deg -1.2."),
                     speed: float = typer.Option(1.0, help="Fraction of the joint limits, (0, 1]."),
@@ -141,7 +145,7 @@ def register(app: typer.Typer) -> None:
         """Move all joints to Q (Ruckig: jerk-limited, all joints finish together)."""
         _motion("move_joints", api, token, as_json, wait, q=_angles(q), speed=speed)
 
-    @move_app.command("pose")
+    @move_app.command("pose", context_settings=NUMERIC_ARGS)
     @friendly_errors
     def move_pose(x: str, y: str, z: str, roll: str, pitch: str, yaw: str,
                   frame: str = typer.Option("base", help="base: absolute pose in the base frame; "

@@ -18,7 +18,8 @@ def planner():
     return MotionPlanner(load_model(ROOT / "configs/arm/oru_testbed_6dof.toml"), 0.02)
 
 
-READY = np.array([1.0, 1.4707963267948966, -0.47079632679489656, 1.2, -1.8707963267948966, -1.1])
+READY = np.array([-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648103310305,
+                  -0.22888135613941607, 1.2827321288823015])
 
 
 def working_posture(planner):
