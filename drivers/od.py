@@ -131,6 +131,22 @@ FT_OVERLOAD_LIMIT = 0x2205   # sub 1 force N, sub 2 torque N m (UNSIGNED16)
 FT_STATUS_OVERLOAD = 0x01
 FT_STATUS_TARED = 0x02
 
+# --- Simulation fault-injection unit (test rig node, only in `spacearm sim --control-node ID`)
+SIM_TARGET_NODE = 0x2F00       # UNSIGNED8: node ID the following objects act on
+SIM_SILENT = 0x2F01            # UNSIGNED8: 1 = node sends nothing and ignores the bus
+SIM_HEARTBEAT_STOPPED = 0x2F02 # UNSIGNED8: 1 = heartbeat producer stops
+SIM_SDO_ABORT = 0x2F03         # UNSIGNED32: abort every SDO with this code (0 = off)
+SIM_DROP_TPDOS = 0x2F04        # UNSIGNED16: drop the next N TPDOs
+SIM_CORRUPT_TPDOS = 0x2F05     # UNSIGNED16: truncate the next N TPDOs by one byte
+SIM_RAISE_FAULT = 0x2F06       # UNSIGNED16: the device detects a fault with this EMCY code
+SIM_STALL = 0x2F07             # UNSIGNED8: 1 = joint mechanism jammed
+SIM_TEMPERATURE = 0x2F08       # INTEGER16: drive temperature, 0.1 degC
+SIM_POWER_CYCLE = 0x2F09       # UNSIGNED8: write 1 = node reboots
+SIM_EE_TARGET_PRESENT = 0x2F0A # UNSIGNED8: an ORU interface is in the end-effector grip
+SIM_WRENCH = 0x2F0B            # ARRAY of INTEGER32, sub 1..6: wrench at the F/T sensor, mN / mN m
+SIM_IGNORE_SYNC = 0x2F0C       # UNSIGNED8: 1 = node stops sending TPDOs
+SIM_CONTROL_NODE_DEFAULT = 126
+
 # NMT
 NMT_START = 0x01
 NMT_STOP = 0x02

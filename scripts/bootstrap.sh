@@ -12,6 +12,17 @@ command -v python3 >/dev/null 2>&1 || need_apt+=(python3 python3-venv python3-pi
 if command -v python3 >/dev/null 2>&1 && ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then
     need_apt+=(python3-venv)
 fi
+# The vcan HIL suite (hil_tests/vm): where the kernel has no CAN support it boots Debian's
+# stock kernel (ships vcan.ko) under QEMU with virtme-ng; modprobe and ip run inside the VM
+# from the host's (shared, read-only) filesystem. Each is installed only when missing.
+if [ "$(uname -s)" = Linux ] && [ "$(uname -m)" = x86_64 ] && [ "${SPACEARM_NO_VM:-0}" != 1 ]; then
+    command -v qemu-system-x86_64 >/dev/null 2>&1 || need_apt+=(qemu-system-x86)
+    dpkg -s busybox-static >/dev/null 2>&1 || need_apt+=(busybox-static)
+    command -v modprobe >/dev/null 2>&1 || need_apt+=(kmod)
+    command -v ip >/dev/null 2>&1 || need_apt+=(iproute2)
+    compgen -G "/lib/modules/*/kernel/drivers/net/can/vcan.ko*" >/dev/null && compgen -G "/boot/vmlinuz-*" >/dev/null \
+        || need_apt+=(linux-image-amd64)
+fi
 for extra in ${SPACEARM_APT_EXTRA:-}; do need_apt+=("$extra"); done
 if ((${#need_apt[@]})); then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"

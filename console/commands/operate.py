@@ -56,14 +56,16 @@ def _take(client: ApiClient) -> str:
     return key
 
 
-def _wait_for_motion(client: ApiClient, as_json: bool) -> dict:
-    """Poll status until the arm is back in hold; fail if a protective stop happened."""
+def _wait_for_motion(client: ApiClient, motion: int, as_json: bool) -> dict:
+    """Poll status until motion number `motion` has finished; fail on a protective stop."""
     while True:
         status = client.call("status")
         if status["state"] == "stopped":
             raise CommandFailed(f"protective stop: {status.get('stop_reason')}")
-        if status["state"] != "enabled" or status["mode"] in ("hold", None):
+        if status.get("motions_finished", 0) >= motion:
             return status
+        if status["state"] != "enabled":
+            raise CommandFailed(f"motion ended early: arm is {status['state']}")
         if not as_json:
             print(f"\r  {status['mode']}: {100 * status.get('progress', 0):5.1f} %", end="", file=sys.stderr)
         time.sleep(0.1)
@@ -74,7 +76,7 @@ def _motion(cmd: str, api: str, token: str | None, as_json: bool, wait: bool, **
         result = _controlled_call(client, cmd, **args)
         text = f"{result['mode']} started ({result['duration']:.2f} s)"
         if wait:
-            status = _wait_for_motion(client, as_json)
+            status = _wait_for_motion(client, result["motion"], as_json)
             if not as_json:
                 print(file=sys.stderr)
             result = {**result, "final": status}

@@ -20,15 +20,15 @@ READY_LINE = "spacearm sim: {n} nodes ready on {bus}"
 
 
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
-            duration: Optional[float] = None, stats: bool = False) -> int:
+            duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None) -> int:
     from controller.config.errors import ConfigError
     from drivers.transport import BusSpecError
     from firmware_sim.runner import Simulator
 
     try:
-        sim = Simulator(bus, bus_config, plant)
+        sim = Simulator(bus, bus_config, plant, control_node)
         sim.start()
-    except (ConfigError, BusSpecError) as exc:
+    except (ConfigError, BusSpecError, ValueError) as exc:
         typer.echo(f"spacearm sim: {exc}", err=True)
         return 2
     except Exception as exc:  # bus cannot be opened etc.
@@ -39,14 +39,17 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
     def _stop(signum, frame):
         stop.set()
 
+    previous = {}
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGTERM, _stop)
-        signal.signal(signal.SIGINT, _stop)
+        for sig in (signal.SIGTERM, signal.SIGINT):
+            previous[sig] = signal.signal(sig, _stop)
     typer.echo(READY_LINE.format(n=len(sim.nodes), bus=bus))
     try:
         stop.wait(duration)
     finally:
         sim.stop()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     if stats:
         typer.echo(f"spacearm sim: {sim.stats}")
     return 0
@@ -60,6 +63,9 @@ def register(app: typer.Typer) -> None:
         bus_config: Path = typer.Option(DEFAULT_BUS_CONFIG, "--bus-config", help="bus TOML (nodes, heartbeats)"),
         duration: Optional[float] = typer.Option(None, "--duration", help="exit after this many seconds"),
         stats: bool = typer.Option(False, "--stats", help="print frame counters on exit"),
+        control_node: Optional[int] = typer.Option(
+            None, "--control-node", min=1, max=127,
+            help="also serve the fault-injection unit (configs/eds/sim_control.eds) at this node ID (tests)"),
     ) -> None:
         """Run the simulated CANopen nodes (6 joint drives, end effector, F/T sensor)."""
-        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats))
+        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node))

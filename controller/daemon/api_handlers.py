@@ -46,8 +46,8 @@ class MoveJointsArgs(Args):
 
 
 class MovePoseArgs(Args):
-    xyz: tuple[float, float, float] = Field(description="m")
-    rpy: tuple[float, float, float] = Field(description="rad, R = Rz(yaw) Ry(pitch) Rx(roll)")
+    xyz: list[float] = Field(min_length=3, max_length=3, description="m")
+    rpy: list[float] = Field(min_length=3, max_length=3, description="rad, R = Rz(yaw) Ry(pitch) Rx(roll)")
     frame: Literal["base", "tool"] = "base"
     speed: float = Field(default=1.0, gt=0.0, le=1.0)
 

@@ -42,8 +42,16 @@ class _Pending:
 
 
 class ControllerCore:
-    def __init__(self, supervisor: Supervisor, joint_names: list[str]):
+    def __init__(self, supervisor: Supervisor, joint_names: list[str], period: float):
         self.supervisor = supervisor
+        self.period = period
+        # Motions are sampled on their own clock, one period per executed cycle: after an
+        # overrun (skipped cycles) a motion continues where it was instead of jumping ahead.
+        self.motion_time = 0.0
+        # Motion numbers let a console wait for *its* motion: started counts up when a motion
+        # is accepted, finished is set when that motion ends normally.
+        self.motions_started = 0
+        self.motions_finished = 0
         self.joint_names = joint_names
         self.state = "disabled"
         self.mode: HoldMode | PlannedMode | None = None
@@ -86,10 +94,16 @@ class ControllerCore:
                 slow = [n for n, ok in zip(self.joint_names, m.joints_enabled) if not ok]
                 self.protective_stop(m.time, Finding("enable_timeout",
                                      f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}"))
+        command = self._command(m)
+        self.motion_time += self.period
+        return command
+
+    def _command(self, m: Measurement) -> JointCommand:
         if self.state == "enabled" and self.mode is not None:
-            setpoint = self.mode.setpoint(m.time)
-            if isinstance(self.mode, PlannedMode) and self.mode.finished(m.time):
+            setpoint = self.mode.setpoint(self.motion_time)
+            if isinstance(self.mode, PlannedMode) and self.mode.finished(self.motion_time):
                 self._event(m.time, "motion", f"{self.mode.name} finished")
+                self.motions_finished = self.motions_started
                 self.mode = HoldMode(setpoint.q.copy())
             self.last_target = setpoint.q.copy()
             return JointCommand(setpoint.q.copy(), setpoint.dq.copy(), enable=True)
@@ -160,7 +174,7 @@ class ControllerCore:
         if self.state != "enabled":
             raise CommandRefused(f"arm is {self.state}; enable it first" if self.state != "stopped"
                                  else f"protective stop active ({self.stop_reason}); reset first")
-        if isinstance(self.mode, PlannedMode) and not self.mode.finished(t):
+        if isinstance(self.mode, PlannedMode) and not self.mode.finished(self.motion_time):
             raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait")
         return (self.last_target if self.last_target is not None else m.q).copy()
 
@@ -169,7 +183,8 @@ class ControllerCore:
         start = self.motion_start(t, m)
         if not np.allclose(start, planned_from, atol=1e-9, rtol=0):
             raise CommandRefused("the arm moved while the motion was being planned; send it again")
-        mode.start = t
+        mode.start = self.motion_time
         self.mode = mode
+        self.motions_started += 1
         self._event(t, "motion", f"{mode.name} started: {mode.description}")
-        return {"mode": mode.name, "duration": mode.plan.duration}
+        return {"mode": mode.name, "duration": mode.plan.duration, "motion": self.motions_started}

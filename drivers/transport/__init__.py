@@ -1,24 +1,124 @@
 """One factory for CAN buses, named by a string (as python-can does with interfaces).
 
-    virtual:NAME       python-can's in-process virtual bus (the embedded default)
-    socketcan:CHANNEL  Linux SocketCAN (vcan0 in tests, can0 on hardware)
+    virtual:NAME                 python-can's in-process virtual bus (the embedded default)
+    loopback:NAME                multi-process bus through the loopback hub on 127.0.0.1:29536
+                                 (or $SPACEARM_HUB); the first client starts the hub if none runs
+    loopback:HOST:PORT           channel "default" on the hub at HOST:PORT
+    loopback:NAME@HOST:PORT      channel NAME on the hub at HOST:PORT
+    socketcan:CHANNEL            Linux SocketCAN (vcan0 in tests, can0 on hardware)
+
+No transport delivers a node's own frames back to it (receive_own_messages=False), like a
+real CAN controller.
 """
 from __future__ import annotations
 
+import sys
+
 import can
+
+TRANSPORTS = ("virtual", "loopback", "socketcan")
 
 
 class BusSpecError(ValueError):
     """The --bus string does not name a known transport."""
 
 
-def open_bus(spec: str, **kwargs) -> can.BusABC:
-    kind, sep, rest = spec.partition(":")
+def parse_bus_spec(spec: str) -> tuple[str, str]:
+    """Split 'KIND:REST' and check KIND; raises BusSpecError."""
+    if not isinstance(spec, str):
+        raise BusSpecError(f"bus spec must be a string, got {type(spec).__name__}")
+    kind, sep, rest = spec.strip().partition(":")
     if not sep or not rest:
-        raise BusSpecError(f"bus '{spec}': expected KIND:NAME, e.g. virtual:arm or socketcan:vcan0")
+        raise BusSpecError(f"bus '{spec}': expected KIND:NAME, e.g. virtual:arm, loopback:arm or socketcan:vcan0")
+    if kind not in TRANSPORTS:
+        raise BusSpecError(f"bus '{spec}': unknown transport '{kind}' (known: {', '.join(TRANSPORTS)})")
+    return kind, rest
+
+
+def _checked(base: type) -> type:
+    """A subclass of a python-can bus whose send() refuses frames no CAN controller could put
+    on the wire (python-can's virtual bus accepts anything), with a can.CanOperationError."""
+
+    class Checked(base):
+        def send(self, msg: can.Message, timeout: float | None = None) -> None:
+            from .wire import encode_frame
+
+            try:
+                encode_frame(msg)
+            except ValueError as exc:
+                raise can.CanOperationError(f"cannot send {msg!r}: {exc}") from exc
+            super().send(msg, timeout)
+
+    Checked.__name__ = Checked.__qualname__ = "Checked" + base.__name__
+    return Checked
+
+
+# A burst of frames arriving while the application is busy must not overflow the kernel's
+# per-socket receive queue (the default ~200 KiB holds only a few hundred CAN skbs).
+SOCKETCAN_RCVBUF = 8 * 1024 * 1024
+
+
+def _enlarge_rcvbuf(bus: can.BusABC, size: int = SOCKETCAN_RCVBUF) -> None:
+    import socket
+
+    sock = getattr(bus, "socket", None)
+    if sock is None:
+        return
+    # SO_RCVBUFFORCE (33 on Linux; Python's socket module does not name it) needs
+    # CAP_NET_ADMIN; otherwise SO_RCVBUF is capped by net.core.rmem_max (~555 frames by default).
+    force = getattr(socket, "SO_RCVBUFFORCE", 33 if sys.platform.startswith("linux") else None)
+    for opt in (force, socket.SO_RCVBUF):
+        if opt is None:
+            continue
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, opt, size)
+            return
+        except OSError:
+            continue
+
+
+_CHECKED: dict[str, type] = {}
+
+
+def _bus_class(kind: str) -> type:
+    if kind not in _CHECKED:
+        if kind == "virtual":
+            from can.interfaces.virtual import VirtualBus as base
+        else:
+            from can.interfaces.socketcan import SocketcanBus as base
+        _CHECKED[kind] = _checked(base)
+    return _CHECKED[kind]
+
+
+def open_bus(spec: str, **kwargs) -> can.BusABC:
+    """Open the bus named by `spec`; extra keyword arguments go to the python-can bus.
+
+    Raises BusSpecError for a malformed spec, and a can.CanInitializationError subclass when
+    the transport is fine but cannot be opened (no hub, no such interface, no kernel CAN).
+    """
+    kind, rest = parse_bus_spec(spec)
     if kind == "virtual":
         # receive_own_messages=False: like a real controller, a node does not see its own frames.
-        return can.Bus(interface="virtual", channel=rest, **kwargs)
-    if kind == "socketcan":
-        return can.Bus(interface="socketcan", channel=rest, **kwargs)
-    raise BusSpecError(f"bus '{spec}': unknown transport '{kind}' (known: virtual, socketcan)")
+        return _bus_class("virtual")(channel=rest, **kwargs)
+    if kind == "loopback":
+        from .loopback import LoopbackBus, parse_spec
+
+        try:
+            name, host, port = parse_spec(rest)
+        except ValueError as exc:
+            raise BusSpecError(f"bus '{spec}': {exc}") from exc
+        return LoopbackBus(channel=name, host=host, port=port, **kwargs)
+    # socketcan
+    if "/" in rest or len(rest) > 15 or any(c.isspace() for c in rest):
+        raise BusSpecError(f"bus '{spec}': '{rest}' is not a network interface name")
+    try:
+        bus = _bus_class("socketcan")(channel=rest, **kwargs)
+        _enlarge_rcvbuf(bus)
+        return bus
+    except can.CanInitializationError:
+        raise
+    except OSError as exc:
+        raise can.CanInitializationError(
+            f"bus '{spec}': cannot open SocketCAN interface '{rest}': {exc} "
+            f"(does it exist? `ip link show {rest}`; for tests: `modprobe vcan && "
+            f"ip link add dev {rest} type vcan && ip link set up {rest}`)") from exc

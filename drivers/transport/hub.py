@@ -15,12 +15,16 @@ import argparse
 import errno
 import logging
 import os
+import re
 import selectors
 import signal
 import socket
+import subprocess
 import sys
 import threading
 import time
+import uuid
+from pathlib import Path
 
 from . import wire
 
@@ -124,7 +128,7 @@ class LoopbackHub:
                 for client in [c for c in self._clients.values() if c.channel is None]:
                     if now > client.hello_deadline:
                         self._drop(client, "no hello within %.0f s" % HELLO_TIMEOUT)
-                if self._clients:
+                if self._channels:  # only clients that said hello count as activity
                     idle_since = now
                 elif self.idle_exit and now - idle_since > self.idle_exit:
                     log.info("hub idle for %.0f s, exiting", self.idle_exit)
@@ -258,6 +262,53 @@ class LoopbackHub:
             client.writing = want_write
             events = selectors.EVENT_READ | (selectors.EVENT_WRITE if want_write else 0)
             self._sel.modify(client.sock, events, client)
+
+
+class HubProcess:
+    """A hub in its own process on a free 127.0.0.1 port (for the session or one test)."""
+
+    def __init__(self, port: int = 0, ready_timeout: float = 15.0):
+        root = Path(__file__).resolve().parents[2]
+        env = dict(os.environ)
+        env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "drivers.transport.hub", "--host", "127.0.0.1", "--port", str(port)],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(root), env=env)
+        line: list[str] = []
+        t = threading.Thread(target=lambda: line.append(self.proc.stdout.readline()), daemon=True)
+        t.start()
+        t.join(ready_timeout)
+        m = re.search(r"listening on ([\d.]+):(\d+)", line[0] if line else "")
+        if not m:
+            self.stop()
+            err = self.proc.stderr.read() if self.proc.stderr else ""
+            raise RuntimeError(f"loopback hub did not start: {line!r} {err[-2000:]}")
+        self.host, self.port = m.group(1), int(m.group(2))
+        # keep draining its stderr (logging) so the pipe never fills
+        threading.Thread(target=self._drain, daemon=True).start()
+
+    def _drain(self):
+        try:
+            for _ in self.proc.stderr:
+                pass
+        except (OSError, ValueError):
+            pass
+
+    @property
+    def address(self) -> str:
+        return f"{self.host}:{self.port}"
+
+    def spec(self, name: str | None = None) -> str:
+        return f"loopback:{name or 'hil-' + uuid.uuid4().hex[:10]}@{self.address}"
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5)
 
 
 def main(argv: list[str] | None = None) -> int:

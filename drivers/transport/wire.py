@@ -106,6 +106,45 @@ def decode_frame(body: bytes | memoryview, timestamp: float, channel: str | None
     )
 
 
+_Message = can.Message
+
+
+def decode_stream(buf: bytearray, timestamp: float, channel: str | None) -> list[can.Message]:
+    """Decode every complete FRAME record at the start of buf (removing them) in one pass.
+    Raises ProtocolError on anything that is not a well-formed FRAME record."""
+    out = []
+    pos = 0
+    n = len(buf)
+    while pos < n:
+        length = buf[pos]
+        end = pos + 1 + length
+        if end > n:
+            break
+        if length < 7 or buf[pos + 1] != T_FRAME:
+            raise ProtocolError(f"unexpected record (type {buf[pos + 1] if length else None}, length {length})")
+        flags = buf[pos + 2]
+        ndata = length - 7
+        if flags & ~_KNOWN_FLAGS or ndata > (64 if flags & F_FD else 8):
+            raise ProtocolError(f"malformed frame record (flags 0x{flags:02X}, {ndata} data bytes)")
+        out.append(_Message(
+            timestamp=timestamp,
+            arbitration_id=int.from_bytes(buf[pos + 3:pos + 7], "big"),
+            is_extended_id=bool(flags & F_EXTENDED),
+            is_remote_frame=bool(flags & F_REMOTE),
+            is_error_frame=bool(flags & F_ERROR),
+            is_fd=bool(flags & F_FD),
+            bitrate_switch=bool(flags & F_BRS),
+            error_state_indicator=bool(flags & F_ESI),
+            dlc=buf[pos + 7],
+            data=bytes(buf[pos + 8:end]),
+            channel=channel,
+        ))
+        pos = end
+    if pos:
+        del buf[:pos]
+    return out
+
+
 def encode_hello(channel: str, receive_own: bool) -> bytes:
     name = channel.encode("utf-8")
     if not name or len(name) > MAX_CHANNEL_NAME:

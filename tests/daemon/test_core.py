@@ -27,7 +27,7 @@ def measurement(t, q=None, enabled=True, **kw):
 @pytest.fixture
 def core():
     sup = Supervisor(SupervisionLimits(LIMITS.q_min, LIMITS.q_max, LIMITS.v_max), NAMES)
-    return ControllerCore(sup, NAMES)
+    return ControllerCore(sup, NAMES, 0.02)
 
 
 def run_command(core, t, apply, m=None):
@@ -136,3 +136,12 @@ def test_plan_made_from_a_stale_start_is_refused(core):
     mode = PlannedMode("move_joints", JointMove.plan(q0 + 0.01, q0 + 0.2, LIMITS), 0.0)
     refused, _ = run_command(core, 0.06, lambda t, m: core.start_planned(t, m, mode, q0 + 0.01))
     assert isinstance(refused, CommandRefused) and "moved while" in str(refused)
+
+
+def test_skipped_cycles_slow_a_motion_down_instead_of_jumping_ahead(core):
+    enable(core)
+    start(core, 0.04, lambda q0: q0 + 0.5)
+    first = core.update(measurement(0.08)).q.copy()
+    # The next cycle comes 10 periods late (overrun): the target advances by one period only.
+    late = core.update(measurement(0.30, q=first)).q
+    assert np.max(np.abs(late - first)) <= LIMITS.v_max[0] * 0.02 * 1.01

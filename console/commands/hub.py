@@ -1,0 +1,29 @@
+"""`spacearm hub`: run the loopback CAN hub for `--bus loopback:...` in the foreground.
+
+    spacearm hub [--host 127.0.0.1] [--port 29536] [--idle-exit SECONDS]
+
+Optional: the first `loopback:` client on this machine starts a hub by itself when none
+answers (it exits after 30 s without clients). Run it explicitly to keep one up, to see its
+log, or with SPACEARM_HUB_AUTOSTART=0 on the clients. Prints one line
+"spacearm hub listening on HOST:PORT (pid N)" when ready.
+"""
+from __future__ import annotations
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    from drivers.transport.hub import DEFAULT_HOST, DEFAULT_PORT
+
+    @app.command("hub")
+    def hub(
+        host: str = typer.Option(DEFAULT_HOST, "--host", help="address to bind (default loopback only)"),
+        port: int = typer.Option(DEFAULT_PORT, "--port", min=0, max=65535, help="TCP port (0 = any free port)"),
+        idle_exit: float = typer.Option(0.0, "--idle-exit", min=0.0,
+                                        help="exit after this many seconds without clients (0 = never)"),
+        verbose: bool = typer.Option(False, "--verbose", "-v", help="log every client join/leave at debug level"),
+    ) -> None:
+        """Run the loopback CAN hub (multi-process bus on one machine, 127.0.0.1 by default)."""
+        from drivers.transport.hub import run
+
+        raise typer.Exit(run(host, port, idle_exit, verbose=verbose))

@@ -1,0 +1,28 @@
+"""Kinematic identification core: error model, residuals, identifiability, solvers, design, validation.
+
+Typical use::
+
+    em = ErrorModel.from_kinematics(load_model("configs/arm/ssrms_7dof.toml"))
+    pr = Problem(em, "pose", Q, measured_poses, em.dh_names(with_beta=False), sigma=sig)
+    rep = find_identifiable(pr)                    # kept / dropped with reasons
+    res = lm(Problem(..., free=rep.kept, ...))     # or lse(...), ekf(..., EKFTuning.paper(pr))
+    stats = compare_poses(T_true, em.poses(res.x[:em.n_params], Q_valid))
+"""
+from controller.calibration.errormodel import ErrorModel
+from controller.calibration.identifiability import (Dropped, IdentifiabilityReport,
+                                                    find_identifiable)
+from controller.calibration.observability import (Selection, board_in_view, configuration_blocks,
+                                                  laser_ok, observability, random_subsets_best,
+                                                  select_configurations)
+from controller.calibration.residuals import PlaneTarget, Problem, laser_distance, rotvec_batch
+from controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
+from controller.calibration.validation import ValidationStats, compare_poses, mean_stats
+
+__all__ = [
+    "ErrorModel", "Problem", "PlaneTarget", "laser_distance", "rotvec_batch",
+    "find_identifiable", "IdentifiabilityReport", "Dropped",
+    "lse", "lm", "ekf", "EKFTuning", "CalibrationResult",
+    "observability", "select_configurations", "random_subsets_best", "configuration_blocks",
+    "laser_ok", "board_in_view", "Selection",
+    "compare_poses", "ValidationStats", "mean_stats",
+]

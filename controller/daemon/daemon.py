@@ -1,0 +1,232 @@
+"""The controller daemon: owns the CANopen master and runs the control cycle.
+
+Each cycle: wait for the clock, read (SYNC, this SYNC's TPDOs), update (supervision and
+the active mode, in ControllerCore), write (drive requests and RPDOs), record. The command
+API runs on its own threads and only reads the published snapshot or queues commands.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controller.config.arm import ArmConfig, load_arm_config
+from controller.daemon.api_handlers import CommandHandlers
+from controller.daemon.clock import LockstepClock, RealTimeClock, Tick
+from controller.daemon.command_api import ApiAddress, CommandServer, Session
+from controller.daemon.core import ControllerCore, Event
+from controller.daemon.cycle_stats import CycleStats, CycleThresholds
+from controller.daemon.hardware import CanopenHardware, with_drive_limits
+from controller.daemon.leases import ControlLease
+from controller.daemon.modes import PlannedMode
+from controller.daemon.recorder_thread import RecorderThread
+from controller.daemon.state import JointCommand, Measurement
+from controller.daemon.supervision import SupervisionLimits, Supervisor
+from controller.kinematics.model import KinematicModel
+from controller.planning.motion_planner import MotionPlanner
+from drivers.bus_config import DEFAULT_BUS_CONFIG, load_bus_config
+from drivers.network import ArmNetwork
+
+
+@dataclass
+class DaemonOptions:
+    bus: str = "virtual:spacearm"
+    arm: Path = Path("configs/arm/oru_testbed_6dof.toml")
+    bus_config: Path = DEFAULT_BUS_CONFIG
+    clock: str = "realtime"                      # "realtime" | "lockstep"
+    period: float = 0.02                         # s
+    api: str | None = "tcp:127.0.0.1:7440"       # None: no command API (in-process use)
+    expose: bool = False
+    token: str | None = None
+    record_dir: Path | None = Path("runs")       # None: do not record
+    thresholds: CycleThresholds = field(default_factory=CycleThresholds)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the API shows; replaced whole every cycle, never mutated."""
+    tick: Tick
+    measurement: Measurement
+    command: JointCommand
+    state: str
+    mode: str | None
+    progress: float
+    stop_reason: str | None
+    motions_finished: int
+
+
+class Daemon:
+    def __init__(self, options: DaemonOptions):
+        self.options = options
+        self.arm: ArmConfig = load_arm_config(options.arm)
+        self.model = KinematicModel.from_config(self.arm)
+        self.planner = MotionPlanner(self.model, options.period, self.arm.cartesian)
+        names = list(self.model.joint_names)
+        self.supervisor = Supervisor(SupervisionLimits(
+            np.array(self.model.q_min), np.array(self.model.q_max), np.array(self.model.v_max)), names)
+        self.core = ControllerCore(self.supervisor, names, options.period)
+        self.lease = ControlLease()
+        self.stats = CycleStats(options.thresholds)
+        bus_config = with_drive_limits(load_bus_config(options.bus_config), self.model.q_min, self.model.q_max)
+        self.network = ArmNetwork(options.bus, bus_config)
+        if len(self.network.joints) != self.model.nq:
+            raise ValueError(f"bus config {options.bus_config} has {len(self.network.joints)} joint drives, "
+                             f"arm {options.arm} has {self.model.nq} joints")
+        lockstep = options.clock == "lockstep"
+        self.hardware = CanopenHardware(self.network, lockstep=lockstep)
+        self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
+        self.recorder: RecorderThread | None = None
+        self.snapshot: Snapshot | None = None
+        self.event_log: list[dict[str, Any]] = []    # last events, for status
+        self._stop = threading.Event()
+        self._last_stats_time = -1.0
+        self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
+                                        RecordingControl(self), self.model.nq)
+        self.server: CommandServer | None = None
+        if options.api:
+            self.server = CommandServer(ApiAddress.parse(options.api), self.handlers.handle,
+                                        self._session_closed, options.expose, options.token)
+
+    # ---- life cycle --------------------------------------------------------------------
+    def start(self) -> None:
+        """Boot the CAN network (all nodes configured and operational), start recording and
+        the command API. The arm comes up disabled with brakes on."""
+        self.hardware.start()
+        if self.options.record_dir is not None:
+            self.start_recording(None)
+        # One cycle so status has something to show before the API accepts requests.
+        self.cycle_once()
+        if self.server is not None:
+            self.server.start()
+
+    def run(self, max_cycles: int | None = None) -> None:
+        cycles = 0
+        while not self._stop.is_set() and (max_cycles is None or cycles < max_cycles):
+            self.cycle_once()
+            cycles += 1
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def shutdown(self) -> None:
+        """Disable the drives (brakes on), stop the network, close the recording and API."""
+        if self.server is not None:
+            self.server.stop()
+        try:
+            self.hardware.stop()
+        finally:
+            if self.recorder is not None:
+                self.recorder.close()
+                self.recorder = None
+
+    # ---- the cycle ---------------------------------------------------------------------
+    def cycle_once(self) -> Snapshot:
+        tick = self.clock.next_tick()
+        measurement = self.hardware.read(tick.time)
+        command = self.core.update(measurement)
+        self.hardware.write(command, protective_stop=self.core.state == "stopped")
+        events = self.core.drain_events()
+        if any(e.kind == "reset" for e in events):
+            self.network.fault_reset()
+        execution = time.monotonic() - tick.woke_at
+        self.stats.add(tick.period_error, execution, tick.skipped)
+        mode = self.core.mode
+        snapshot = Snapshot(tick, measurement, command, self.core.state,
+                            mode.name if mode is not None else None,
+                            mode.progress(self.core.motion_time) if mode is not None else 0.0,
+                            self.core.stop_reason.message if self.core.stop_reason else None,
+                            self.core.motions_finished)
+        self.snapshot = snapshot
+        self._record(snapshot, execution, events)
+        return snapshot
+
+    def _record(self, s: Snapshot, execution: float, events: list[Event]) -> None:
+        for event in events:
+            entry = {"t": event.time, "kind": event.kind, "message": event.message}
+            self.event_log = (self.event_log + [entry])[-20:]
+        recorder = self.recorder  # one file per cycle even if record start/stop swaps it now
+        if recorder is None:
+            return
+        m = s.measurement
+        recorder.put("/cycle", s.tick.time, {
+            "t": s.tick.time, "sync": m.sync_counter, "cycle": s.tick.cycle,
+            "q_cmd": s.command.q.tolist(), "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
+            "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
+            "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution})
+        for event in events:
+            recorder.put("/events", event.time, {"t": event.time, "kind": event.kind,
+                                                      "message": event.message})
+        if s.tick.time - self._last_stats_time >= 1.0:
+            self._last_stats_time = s.tick.time
+            recorder.put("/stats", s.tick.time, self.stats.summary().as_dict())
+
+    # ---- recording ---------------------------------------------------------------------
+    def start_recording(self, path: str | None) -> dict:
+        """Start a new recording file; the previous one (if any) is closed complete.
+
+        Called from API threads: the new recorder replaces the old in one assignment, so each
+        cycle goes wholly to one file or the other."""
+        if path is None:
+            stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
+            path = str(Path(self.options.record_dir or "runs") / f"{stamp}.mcap")
+        new = RecorderThread(Path(path), {
+            "arm": str(self.options.arm), "bus": self.options.bus, "clock": self.options.clock,
+            "period": repr(self.options.period), "joints": ",".join(self.model.joint_names)},
+            bus_spec=self.options.bus)
+        old, self.recorder = self.recorder, new
+        if old is not None:
+            old.close(grace=2 * self.options.period)
+        return {"path": str(new.path), "can_log": str(new.can_log)}
+
+    def stop_recording(self) -> dict:
+        old, self.recorder = self.recorder, None
+        if old is None:
+            raise ValueError("not recording")
+        return vars(old.close(grace=2 * self.options.period))
+
+    # ---- status --------------------------------------------------------------------------
+    def status(self) -> dict[str, Any]:
+        s = self.snapshot
+        if s is None:
+            return {"state": "starting"}
+        m = s.measurement
+        return {
+            "state": s.state, "mode": s.mode, "progress": s.progress, "stop_reason": s.stop_reason,
+            "motions_finished": s.motions_finished,
+            "time": s.tick.time, "cycle": s.tick.cycle, "sync_counter": m.sync_counter,
+            "clock": self.options.clock, "period": self.options.period, "bus": self.options.bus,
+            "arm": self.model.name,
+            "joints": [{"name": name, "q": float(m.q[i]), "q_cmd": float(s.command.q[i]),
+                        "dq": float(m.dq[i]), "tau": float(m.tau[i]),
+                        "enabled": bool(m.joints_enabled[i]), "fault": bool(m.joints_faulted[i])}
+                       for i, name in enumerate(self.model.joint_names)],
+            "wrench": m.wrench.tolist(), "end_effector": m.end_effector,
+            "stats": self.stats.summary().as_dict(),
+            "control": {"held": self.lease.held, "holder": self.lease.holder},
+            "recording": vars(recorder.info()) if (recorder := self.recorder) else None,
+            "events": list(self.event_log),
+            "network": vars(self.network.stats),
+        }
+
+    def _session_closed(self, session: Session) -> None:
+        pass  # the control lease is keyed, not tied to a connection (see leases.py)
+
+
+class RecordingControl:
+    def __init__(self, daemon: Daemon):
+        self.daemon = daemon
+
+    def start(self, path: str | None) -> dict:
+        return self.daemon.start_recording(path)
+
+    def stop(self) -> dict:
+        try:
+            return self.daemon.stop_recording()
+        except ValueError as exc:
+            from controller.daemon.command_api import ApiError
+            raise ApiError(str(exc)) from None

@@ -1,0 +1,107 @@
+"""The daemon's hardware interface: CANopen network in, plain measurements out, and back.
+
+Like a ros2_control hardware interface, it is the only part of the daemon that knows
+about the drivers: `read()` sends this cycle's SYNC and collects its TPDOs (waiting for
+every node in lockstep, or up to a small budget in real time), `write()` turns the
+controller's command into drive state-machine requests and RPDOs.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from controller.daemon.state import DeviceEvent, JointCommand, Measurement
+from drivers.bus_config import BusConfig, JointSettings
+from drivers.network import ArmCommand, ArmNetwork, ArmState
+
+# The drives' own position limits (607Dh) sit this far outside the arm file's limits, beyond
+# the controller's supervision margin, so the controller always stops first and the drive
+# limit is the independent backstop.
+DRIVE_LIMIT_MARGIN = 0.05  # rad
+
+# Network event kinds the supervisor treats as faults (others are informational).
+FAULT_EVENTS = {"heartbeat_lost": "heartbeat_lost", "bootup": "bootup", "emcy": "emcy",
+                "fault_reset_failed": "fault"}
+
+
+def with_drive_limits(bus: BusConfig, q_min, q_max) -> BusConfig:
+    """The bus configuration with each joint drive's 607Dh limits taken from the arm file."""
+    nodes, joint = [], 0
+    for node in bus.nodes:
+        if node.device == "joint_drive":
+            limits = {"lower": float(q_min[joint]) - DRIVE_LIMIT_MARGIN,
+                      "upper": float(q_max[joint]) + DRIVE_LIMIT_MARGIN}
+            settings = node.joint or JointSettings()
+            node = node.model_copy(update={"joint": settings.model_copy(update=limits)})
+            joint += 1
+        nodes.append(node)
+    return bus.model_copy(update={"nodes": nodes})
+
+
+class CanopenHardware:
+    def __init__(self, network: ArmNetwork, lockstep: bool, realtime_budget: float = 0.005):
+        self.network = network
+        self.lockstep = lockstep
+        self.realtime_budget = realtime_budget
+        self._enabled = False
+        self.info_events: list[str] = []
+
+    @property
+    def dof(self) -> int:
+        return len(self.network.joints)
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [j.name for j in self.network.joints]
+
+    def start(self, boot_timeout: float | None = None) -> None:
+        self.network.boot(boot_timeout)
+
+    def read(self, time: float) -> Measurement:
+        sync = self.network.send_sync()
+        timeout = None if self.lockstep else self.realtime_budget
+        complete = self.network.wait_all_tpdos(timeout)
+        state = self.network.read(complete)
+        events = []
+        for event in self.network.poll_events():
+            kind = FAULT_EVENTS.get(event.kind)
+            if kind is None:
+                self.info_events.append(str(event))
+            else:
+                events.append(DeviceEvent(event.node, kind, event.message))
+        return self._measurement(time, sync, state, tuple(events))
+
+    def _measurement(self, time: float, sync: int, state: ArmState,
+                     events: tuple[DeviceEvent, ...]) -> Measurement:
+        joints = state.joints
+        missing: tuple[str, ...] = ()
+        if not state.complete:
+            missing = tuple(name for name, health in state.nodes.items() if not health.alive)
+            missing = missing or ("bus",)
+        ft = state.ft
+        wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
+        return Measurement(
+            time=time, sync_counter=sync,
+            q=np.array([j.position for j in joints]),
+            dq=np.array([j.velocity for j in joints]),
+            tau=np.array([j.torque for j in joints]),
+            joints_enabled=np.array([j.enabled for j in joints]),
+            joints_faulted=np.array([j.fault for j in joints]),
+            wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
+            end_effector=state.end_effector.state.name.lower() if state.end_effector else "none",
+            events=events, missing=missing)
+
+    def write(self, command: JointCommand, protective_stop: bool) -> None:
+        if command.enable and not self._enabled:
+            for joint in self.network.joints:
+                joint.axis.enable()
+        elif not command.enable and self._enabled:
+            if protective_stop:
+                self.network.quick_stop()
+            else:
+                self.network.disable_all()
+        self._enabled = command.enable
+        self.network.write(ArmCommand(joint_positions=list(command.q),
+                                      joint_velocities=list(command.dq) if len(command.dq) else None))
+
+    def stop(self) -> None:
+        self.network.shutdown()

@@ -1,0 +1,98 @@
+"""Recording off the control thread: the cycle hands over plain values, a writer thread
+encodes them into MCAP and flushes once per second, so disk stalls never delay a cycle.
+
+A raw CAN trace (candump .log) is taken by a passive tap: a second bus handle on the same
+bus sees every frame, the controller's own included, exactly as candump would.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import can
+
+from controller.recording.channels import CHANNELS
+from controller.recording.mcap_recorder import McapRecorder
+from drivers.transport import open_bus
+
+QUEUE_LIMIT = 10_000  # cycles buffered if the disk stalls (200 s at 50 Hz) before dropping
+
+
+@dataclass
+class RecordingInfo:
+    path: str
+    can_log: str
+    cycles: int
+    dropped: int
+
+
+class RecorderThread:
+    def __init__(self, path: Path, metadata: dict[str, str], bus_spec: str | None):
+        self.path = Path(path)
+        self.can_log = self.path.with_suffix(".can.log")
+        self._recorder = McapRecorder(self.path, metadata=metadata)
+        for topic, schema in CHANNELS.items():
+            self._recorder.add_channel(topic, schema)
+        self._queue: "queue.Queue[tuple[str, float, dict[str, Any]] | None]" = queue.Queue(QUEUE_LIMIT)
+        self.cycles = 0
+        self.dropped = 0
+        self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
+        self._thread.start()
+        self._tap: can.BusABC | None = None
+        self._notifier: can.Notifier | None = None
+        self._can_writer: can.CanutilsLogWriter | None = None
+        if bus_spec is not None:
+            self._start_can_trace(bus_spec)
+
+    def _start_can_trace(self, bus_spec: str) -> None:
+        try:
+            self._tap = open_bus(bus_spec)
+        except Exception as exc:  # a trace is a bonus; the MCAP recording must not depend on it
+            self.put("/events", 0.0, {"t": 0.0, "kind": "recording",
+                                                   "message": f"no raw CAN trace: {exc}"})
+            return
+        self._can_writer = can.CanutilsLogWriter(str(self.can_log), channel="can0", append=False)
+        self._notifier = can.Notifier(self._tap, [self._can_writer], timeout=0.1)
+
+    def put(self, topic: str, t: float, message: dict[str, Any]) -> None:
+        try:
+            self._queue.put_nowait((topic, t, message))
+            if topic == "/cycle":
+                self.cycles += 1
+        except queue.Full:
+            self.dropped += 1
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                break
+            self._recorder.write(*item)
+        # A cycle that picked this recorder just before it was swapped out may still put
+        # its message after the sentinel: write those too.
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                return
+            if item is not None:
+                self._recorder.write(*item)
+
+    def info(self) -> RecordingInfo:
+        return RecordingInfo(str(self.path), str(self.can_log), self.cycles, self.dropped)
+
+    def close(self, grace: float = 0.0) -> RecordingInfo:
+        """Finish the file. `grace`: time for a cycle still holding this recorder to finish."""
+        if grace:
+            threading.Event().wait(grace)
+        self._queue.put(None)
+        self._thread.join(timeout=30)
+        self._recorder.close()
+        if self._notifier is not None:
+            self._notifier.stop()
+            self._tap.shutdown()
+            self._can_writer.stop()
+        return self.info()

@@ -1,0 +1,327 @@
+"""Per-device drivers: configuration by SDO, TPDO decoding and RPDO encoding in SI units.
+
+Nothing outside drivers/ sees a COB-ID or an index: these classes turn PDO bytes into the
+dataclasses below and commands in SI units back into PDO bytes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+import canopen
+
+from drivers import od
+from drivers.bus_config import BusSettings, NodeConfig
+from drivers.cia402 import Cia402Axis
+from drivers.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
+                                 SW_TARGET_REACHED, State,
+                                 decode_statusword)
+from drivers.pdo_maps import PDO_MAPS
+
+
+class EeCommand(IntEnum):
+    NONE = 0
+    CLAMP = 1        # close the grip, then screw until locked
+    RELEASE = 2      # unscrew, then open the grip
+    STOP = 3
+    FAULT_RESET = 4
+
+
+class EeState(IntEnum):
+    UNKNOWN = 0
+    OPEN = 1
+    CLOSING = 2
+    LOCKING = 3
+    LOCKED = 4       # clamped and locked
+    UNLOCKING = 5
+    OPENING = 6      # releasing
+    STOPPED = 7
+    FAULT = 8
+
+
+@dataclass
+class JointState:
+    name: str
+    node_id: int
+    state: State = State.NOT_READY_TO_SWITCH_ON
+    statusword: int = 0
+    position: float = 0.0          # rad
+    velocity: float = 0.0          # rad/s
+    torque: float = 0.0            # N m at the joint (motor torque x gear ratio)
+    following_error: float = 0.0   # rad
+    temperature: float = 0.0       # degC
+    brake_engaged: bool = True
+    error_code: int = 0
+    mode: int = 0
+
+    @property
+    def enabled(self) -> bool:
+        return self.state == State.OPERATION_ENABLED
+
+    @property
+    def fault(self) -> bool:
+        return self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE)
+
+    @property
+    def limit_active(self) -> bool:
+        """Statusword bit 11: the drive clamped the target (position or velocity limit)."""
+        return bool(self.statusword & SW_INTERNAL_LIMIT)
+
+    @property
+    def target_reached(self) -> bool:
+        """Statusword bit 10 (profile position: the last set-point is reached)."""
+        return bool(self.statusword & SW_TARGET_REACHED)
+
+
+@dataclass
+class EndEffectorState:
+    name: str
+    node_id: int
+    state: EeState = EeState.UNKNOWN
+    grip: float = 0.0              # 0 open .. 1 closed
+    screw_torque: float = 0.0      # N m
+    screw_turns: float = 0.0       # turns
+    fault_code: int = 0
+
+
+@dataclass
+class FtState:
+    name: str
+    node_id: int
+    force: tuple[float, float, float] = (0.0, 0.0, 0.0)    # N
+    torque: tuple[float, float, float] = (0.0, 0.0, 0.0)   # N m
+    overload: bool = False
+    tared: bool = False
+
+
+@dataclass
+class _PdoSpec:
+    cob_id: int
+    entries: list[tuple[int, int, int, object]] = field(default_factory=list)  # index, sub, bytes, ODVariable
+
+    @property
+    def length(self) -> int:
+        return sum(e[2] for e in self.entries)
+
+
+class DeviceDriver:
+    device = ""
+
+    def __init__(self, cfg: NodeConfig, bus: BusSettings, object_dictionary: canopen.ObjectDictionary):
+        self.cfg = cfg
+        self.bus = bus
+        self.od = object_dictionary
+        self.name, self.node_id, self.label = cfg.name, cfg.node_id, cfg.label
+        maps = PDO_MAPS[self.device]
+        self.rpdos = [self._spec(od.RPDO_BASE[n], m) for n, m in enumerate(maps["rpdo"])]
+        self.tpdos = [self._spec(od.TPDO_BASE[n], m) for n, m in enumerate(maps["tpdo"])]
+        self.values: dict[tuple[int, int], int] = {}
+        self.rpdo_values: dict[tuple[int, int], int] = {}
+
+    def _spec(self, base: int, mapping) -> _PdoSpec:
+        entries = []
+        for index, sub, bits in mapping:
+            var = self.od[index] if sub == 0 and not hasattr(self.od[index], "subindices") else self.od[index][sub]
+            entries.append((index, sub, bits // 8, var))
+        return _PdoSpec(base + self.node_id, entries)
+
+    # bring-up -------------------------------------------------------------------
+    def config_writes(self) -> list[tuple[int, int, int]]:
+        """(index, sub, value) written by SDO before PDO mapping; device specific."""
+        return []
+
+    def pdo_writes(self) -> list[tuple[int, int, int]]:
+        writes = []
+        maps = PDO_MAPS[self.device]
+        for kind, comm, mapi, bases in (("rpdo", od.RPDO_COMM, od.RPDO_MAP, od.RPDO_BASE),
+                                        ("tpdo", od.TPDO_COMM, od.TPDO_MAP, od.TPDO_BASE)):
+            for n in range(od.N_PDOS):
+                cob = bases[n] + self.node_id
+                writes.append((comm + n, od.PDO_COB_ID, cob | od.PDO_COB_ID_INVALID))
+                if n >= len(maps[kind]):
+                    continue
+                mapping = maps[kind][n]
+                writes.append((mapi + n, 0, 0))
+                for i, (index, sub, bits) in enumerate(mapping, start=1):
+                    writes.append((mapi + n, i, (index << 16) | (sub << 8) | bits))
+                writes.append((mapi + n, 0, len(mapping)))
+                writes.append((comm + n, od.PDO_TRANSMISSION_TYPE, od.TRANSMISSION_SYNC))
+                writes.append((comm + n, od.PDO_COB_ID, cob))
+        return writes
+
+    # cycle ------------------------------------------------------------------------
+    def decode(self, spec: _PdoSpec, data: bytes) -> None:
+        offset = 0
+        for index, sub, size, var in spec.entries:
+            self.values[(index, sub)] = var.decode_raw(data[offset:offset + size])
+            offset += size
+
+    def value(self, index: int, sub: int = 0, default=0):
+        return self.values.get((index, sub), default)
+
+    def step(self) -> None:
+        """Once per cycle after this SYNC's TPDOs: advance internal state machines."""
+
+    def rpdo_frames(self) -> list[tuple[int, bytes]]:
+        frames = []
+        for spec in self.rpdos:
+            data = b"".join(var.encode_raw(self.rpdo_values.get((index, sub), 0))
+                            for index, sub, _, var in spec.entries)
+            frames.append((spec.cob_id, data))
+        return frames
+
+
+class JointDriver(DeviceDriver):
+    device = "joint_drive"
+
+    def __init__(self, cfg, bus, object_dictionary):
+        super().__init__(cfg, bus, object_dictionary)
+        self.settings = cfg.joint
+        self.k = self.settings.increments_per_rad
+        self.axis = Cia402Axis(cfg.label)
+        self.target: float | None = None        # rad, CSP target requested by the caller
+        self.velocity_ff = 0.0                   # rad/s
+        self.torque_ff = 0.0                     # N m at the joint
+        self._hold: float | None = None
+        self.mode = od.MODE_CSP
+        self._pp_pending = False                 # profile position: set-point sent, not yet acknowledged
+        self._pp_sent: float | None = None
+        self.rpdo_values[(od.MODES_OF_OPERATION, 0)] = od.MODE_CSP
+
+    def set_mode(self, mode: int) -> None:
+        """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
+        if mode not in (od.MODE_CSP, od.MODE_PROFILE_POSITION):
+            raise ValueError(f"{self.label}: unsupported mode {mode}")
+        self.mode = mode
+        self.target = None
+        self._hold = None                        # hold where the joint is now
+        self._pp_pending, self._pp_sent = False, None
+        self.rpdo_values[(od.MODES_OF_OPERATION, 0)] = mode
+
+    def config_writes(self):
+        s, k = self.settings, self.k
+        return [
+            (od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments),
+            (od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions),
+            (od.GEAR_RATIO, 1, s.gear_motor_revolutions),
+            (od.GEAR_RATIO, 2, s.gear_shaft_revolutions),
+            (od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000)),
+            (od.MAX_TORQUE, 0, round(s.max_torque * 1000)),
+            (od.FOLLOWING_ERROR_WINDOW, 0, round(s.following_error_window * k)),
+            (od.FOLLOWING_ERROR_TIMEOUT, 0, round(s.following_error_timeout * 1000)),
+            (od.SOFTWARE_POSITION_LIMIT, 1, _clamp32(round(s.lower * k))),
+            (od.SOFTWARE_POSITION_LIMIT, 2, _clamp32(round(s.upper * k))),
+            (od.MAX_PROFILE_VELOCITY, 0, round(s.max_velocity * k)),
+            (od.PROFILE_VELOCITY, 0, round(s.profile_velocity * k)),
+            (od.PROFILE_ACCELERATION, 0, round(s.profile_acceleration * k)),
+            (od.PROFILE_DECELERATION, 0, round(s.profile_acceleration * k)),
+            (od.QUICK_STOP_DECELERATION, 0, round(s.quick_stop_deceleration * k)),
+            (od.QUICK_STOP_OPTION, 0, s.quick_stop_option),
+            (od.INTERPOLATION_TIME_PERIOD, 1, round(self.bus.sync_period * 1000)),
+            (od.INTERPOLATION_TIME_PERIOD, 2, -3),
+            (od.MODES_OF_OPERATION, 0, od.MODE_CSP),
+        ]
+
+    @property
+    def position(self) -> float:
+        return self.value(od.POSITION_ACTUAL) / self.k
+
+    def step(self) -> None:
+        cw = self.axis.step(self.value(od.STATUSWORD))
+        if self.axis.state != State.OPERATION_ENABLED:
+            # not enabled: command the actual position so enabling never jumps
+            self._hold = self.position
+            self.target = None
+            target = self._hold
+        else:
+            if self._hold is None:
+                self._hold = self.position
+            target = self.target if self.target is not None else self._hold
+        if self.mode == od.MODE_PROFILE_POSITION:
+            # set-point handshake: bit 4 high until the drive acknowledges (statusword bit 12)
+            statusword = self.value(od.STATUSWORD)
+            if self._pp_pending and statusword & SW_OP_MODE_12:
+                self._pp_pending = False
+            elif (not self._pp_pending and self.axis.state == State.OPERATION_ENABLED and self.target is not None
+                  and self.target != self._pp_sent and not statusword & SW_OP_MODE_12):
+                self._pp_pending, self._pp_sent = True, self.target
+            if self._pp_pending:
+                cw |= CW_NEW_SETPOINT | CW_CHANGE_IMMEDIATELY
+                target = self._pp_sent
+            elif self._pp_sent is not None:
+                target = self._pp_sent
+        self.rpdo_values[(od.CONTROLWORD, 0)] = cw
+        self.rpdo_values[(od.TARGET_POSITION, 0)] = _clamp32(round(target * self.k))
+        self.rpdo_values[(od.VELOCITY_OFFSET, 0)] = _clamp32(round(self.velocity_ff * self.k))
+        ratio = self.settings.rated_joint_torque
+        self.rpdo_values[(od.TORQUE_OFFSET, 0)] = max(-32768, min(32767, round(self.torque_ff / ratio * 1000)))
+
+    def state(self) -> JointState:
+        k = self.k
+        return JointState(
+            name=self.name, node_id=self.node_id,
+            state=decode_statusword(self.value(od.STATUSWORD)), statusword=self.value(od.STATUSWORD),
+            position=self.value(od.POSITION_ACTUAL) / k,
+            velocity=self.value(od.VELOCITY_ACTUAL) / k,
+            torque=self.value(od.TORQUE_ACTUAL) / 1000.0 * self.settings.rated_joint_torque,
+            following_error=self.value(od.FOLLOWING_ERROR_ACTUAL) / k,
+            temperature=self.value(od.DRIVE_TEMPERATURE) / 10.0,
+            brake_engaged=bool(self.value(od.BRAKE_STATUS, default=1)),
+            error_code=self.value(od.ERROR_CODE),
+            mode=self.value(od.MODES_OF_OPERATION_DISPLAY),
+        )
+
+
+class EndEffectorDriver(DeviceDriver):
+    device = "end_effector"
+
+    def config_writes(self):
+        s = self.cfg.end_effector
+        return [(od.EE_SCREW_TORQUE_LIMIT, 0, round(s.lock_torque * 1000)),
+                (od.EE_LOCK_TURNS, 0, round(s.lock_turns * 1000))]
+
+    def command(self, command: EeCommand) -> None:
+        """Held in the cyclic RPDO; the device acts when the value changes."""
+        self.rpdo_values[(od.EE_COMMAND, 0)] = int(command)
+
+    def state(self) -> EndEffectorState:
+        raw = self.value(od.EE_STATE)
+        return EndEffectorState(
+            name=self.name, node_id=self.node_id,
+            state=EeState(raw) if raw in EeState._value2member_map_ else EeState.UNKNOWN,
+            grip=self.value(od.EE_GRIP_POSITION) / 1000.0,
+            screw_torque=self.value(od.EE_SCREW_TORQUE) / 1000.0,
+            screw_turns=self.value(od.EE_SCREW_TURNS) / 1000.0,
+            fault_code=self.value(od.EE_FAULT_CODE))
+
+
+class FtDriver(DeviceDriver):
+    device = "ft_sensor"
+
+    def config_writes(self):
+        s = self.cfg.ft
+        return [(od.FT_FORCE_COUNTS_PER_N, 0, s.force_counts_per_n),
+                (od.FT_TORQUE_COUNTS_PER_NM, 0, s.torque_counts_per_nm),
+                (od.FT_OVERLOAD_LIMIT, 1, s.force_limit),
+                (od.FT_OVERLOAD_LIMIT, 2, s.torque_limit)]
+
+    def state(self) -> FtState:
+        s = self.cfg.ft
+        v = [self.value(od.FT_VALUES, i) for i in range(1, 7)]
+        status = self.value(od.FT_STATUS)
+        return FtState(
+            name=self.name, node_id=self.node_id,
+            force=tuple(x / s.force_counts_per_n for x in v[:3]),
+            torque=tuple(x / s.torque_counts_per_nm for x in v[3:]),
+            overload=bool(status & od.FT_STATUS_OVERLOAD), tared=bool(status & od.FT_STATUS_TARED))
+
+
+DRIVERS = {"joint_drive": JointDriver, "end_effector": EndEffectorDriver, "ft_sensor": FtDriver}
+
+
+def _clamp32(value: int) -> int:
+    return max(-2**31, min(2**31 - 1, value))
+
+
+__all__ = ["EeCommand", "EeState", "JointState", "EndEffectorState", "FtState", "JointDriver",
+           "EndEffectorDriver", "FtDriver", "DRIVERS"]

@@ -1,0 +1,62 @@
+"""Simulated six-axis force/torque sensor: samples the plant's wrench at every SYNC.
+
+Fx..Tz (2200h.1..6, INTEGER16) in counts of 2201h (per N) and 2202h (per N m), status
+2203h (bit 0 overload, bit 1 tared), tare command 2204h (1 tare, 2 clear bias; an SDO
+write always executes, an RPDO executes when the value changes). Overload (any axis
+above 2205h limits or saturated) raises an EMCY once per occurrence.
+"""
+from __future__ import annotations
+
+from drivers import od
+from firmware_sim.node import SimNode
+
+
+class FtSensorNode(SimNode):
+    device_type = "ft_sensor"
+
+    def reset_application(self) -> None:
+        self.bias = [0.0] * 6
+        self.tared = False
+        self.overload = False
+        self.pending_tare: int | None = None
+        self.last_rpdo_tare = 0
+        self._sample()
+
+    def on_write(self, index: int, subindex: int, data: bytes) -> None:
+        if index == od.FT_TARE:
+            value = data[0] if data else 0
+            if self.in_rpdo:
+                if value == self.last_rpdo_tare:
+                    return
+                self.last_rpdo_tare = value
+            if value in (1, 2):
+                self.pending_tare = value
+
+    def on_sync_end(self, dt: float) -> None:
+        self._sample()
+
+    def _sample(self) -> None:
+        raw = self.plant.ft_reading()
+        if self.pending_tare == 1:
+            self.bias, self.tared = list(raw), True
+        elif self.pending_tare == 2:
+            self.bias, self.tared = [0.0] * 6, False
+        self.pending_tare = None
+        kf = self.get(od.FT_FORCE_COUNTS_PER_N)
+        kt = self.get(od.FT_TORQUE_COUNTS_PER_NM)
+        flim = self.get(od.FT_OVERLOAD_LIMIT, 1)
+        tlim = self.get(od.FT_OVERLOAD_LIMIT, 2)
+        overload = False
+        for i, value in enumerate(raw):
+            value -= self.bias[i]
+            scale, limit = (kf, flim) if i < 3 else (kt, tlim)
+            counts = round(value * scale)
+            if abs(value) > limit or not -32768 <= counts <= 32767:
+                overload = True
+            self.put(od.FT_VALUES, i + 1, max(-32768, min(32767, counts)))
+        if overload and not self.overload:
+            self.emcy(od.EMCY_FT_OVERLOAD, od.ERR_REG_MANUFACTURER)
+        elif self.overload and not overload:
+            self.emcy(od.EMCY_NO_ERROR)
+        self.overload = overload
+        self.put(od.FT_STATUS, 0, (od.FT_STATUS_OVERLOAD if overload else 0) | (od.FT_STATUS_TARED if self.tared else 0))

@@ -1,0 +1,297 @@
+"""Simulated CiA 402 joint drive: power state machine, CSP and profile position modes,
+servo loop on the shared plant joint, following-error window, software position and
+velocity limits, torque limit, holding brake, drive temperature.
+
+Controlword/target values are latched at SYNC (synchronous RPDOs, CiA 301 transmission
+type 1); then the plant advances one SYNC period with this drive's servo loop running at
+the plant's sub-step rate; then the actual values are written to the OD and sampled
+into the TPDOs.
+"""
+from __future__ import annotations
+
+import math
+
+from drivers import od
+from drivers.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_FAULT_RESET, CW_HALT, CW_NEW_SETPOINT, CW_RELATIVE,
+                                 STATE_BITS, SW_FOLLOWING_ERROR, SW_INTERNAL_LIMIT, SW_OP_MODE_12, SW_REMOTE,
+                                 SW_TARGET_REACHED, SW_WARNING, Command, State, decode_controlword)
+from canopen.sdo import SdoAbortedError
+
+from firmware_sim.node import SimNode
+
+OVER_TEMPERATURE = 85.0   # degC: drive faults above this
+WARN_TEMPERATURE = 75.0
+
+ENERGISED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+
+
+class JointDriveNode(SimNode):
+    device_type = "joint_drive"
+
+    def __init__(self, node_id, eds_path, name, plant, joint_index: int):
+        self.joint = plant.joints[joint_index]
+        super().__init__(node_id, eds_path, name, plant)
+        self.joint.controller = self._servo
+
+    # ------------------------------------------------------------------ state
+    def reset_application(self) -> None:
+        self.state = State.SWITCH_ON_DISABLED   # transition 1 happens by itself
+        self.prev_cw = 0
+        self.error_code = 0
+        self.q_ref = self.joint.q_measured      # reference at the end of the period (rad)
+        self.q_start = self.q_ref
+        self.v_ref = 0.0
+        self.v_ff = 0.0
+        self.limit_active = False
+        self.fe_time = 0.0
+        self.following_error = False
+        self.pp_target = None
+        self.pp_ack = False
+        self.target_reached = True
+        self.mode = od.MODE_CSP
+        self.prev_cw_setpoint = False
+        self.pp_halt = False
+        self.q_end = self.q_ref
+        self.torque_ff = 0.0
+        self.joint.brake_engaged = True
+        self._update_od()
+
+    def on_write(self, index: int, subindex: int, data: bytes) -> None:
+        if index == od.MODES_OF_OPERATION and int.from_bytes(data, "little", signed=True) not in (
+                od.MODE_CSP, od.MODE_PROFILE_POSITION):
+            raise SdoAbortedError(0x06090030)      # value range: only CSP (8) and PP (1) supported
+
+    def on_heartbeat_lost(self, producer: int) -> None:
+        """Controller lost: fault reaction (quick-stop ramp, then brake)."""
+        self._fault(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, emcy=False)
+
+    def inject_fault(self, code: int = od.EMCY_GENERIC, register_bits: int = 0) -> None:
+        """Fault injection: the drive detects an error of this EMCY code."""
+        self._fault(code, register_bits)
+
+    # ------------------------------------------------------------------ scaling
+    def _scale(self) -> float:
+        """Increments per joint radian from 608Fh and 6091h."""
+        enc = self.get(od.POSITION_ENCODER_RESOLUTION, 1) / self.get(od.POSITION_ENCODER_RESOLUTION, 2)
+        gear = self.get(od.GEAR_RATIO, 1) / self.get(od.GEAR_RATIO, 2)
+        return enc * gear / (2.0 * math.pi)
+
+    def _rated_torque(self) -> float:
+        return self.get(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)
+
+    # ------------------------------------------------------------------ SYNC
+    def on_sync_begin(self, dt: float) -> None:
+        self._dt = dt
+        self._h = dt / self.plant.config.substeps
+        self._k = self._scale()
+        k = self._k
+        cw = self.get(od.CONTROLWORD)
+        self._apply_controlword(cw)
+        mode = self.get(od.MODES_OF_OPERATION)
+        if mode in (od.MODE_CSP, od.MODE_PROFILE_POSITION) and mode != self.mode:
+            self.mode = mode
+            self.q_ref = self.q_start = self.joint.q_measured
+            self.v_ref = 0.0
+            self.pp_target = None
+        self.joint.max_motor_torque = self.get(od.MAX_TORQUE) / 1000.0 * self._rated_torque()
+        self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * self._rated_torque()
+        self.limit_active = False
+        self.q_start = self.q_ref
+        if self.state == State.OPERATION_ENABLED:
+            lo = self.get(od.SOFTWARE_POSITION_LIMIT, 1) / k
+            hi = self.get(od.SOFTWARE_POSITION_LIMIT, 2) / k
+            vmax = self.get(od.MAX_PROFILE_VELOCITY) / k
+            if self.mode == od.MODE_CSP:
+                target = self.get(od.TARGET_POSITION) / k
+                clamped = min(hi, max(lo, target))
+                step = clamped - self.q_start
+                if abs(step) > vmax * dt:
+                    step = math.copysign(vmax * dt, step)
+                self.limit_active = clamped != target or self.q_start + step != clamped
+                self.q_end = self.q_start + step
+                self.v_ff = step / dt + self.get(od.VELOCITY_OFFSET) / k
+            else:  # profile position
+                new_sp = cw & CW_NEW_SETPOINT and not self.prev_cw_setpoint
+                if new_sp and (self.pp_target is None or self.target_reached or cw & CW_CHANGE_IMMEDIATELY):
+                    target = self.get(od.TARGET_POSITION) / k
+                    if cw & CW_RELATIVE:
+                        target += self.pp_target if self.pp_target is not None else self.q_ref
+                    self.pp_target = min(hi, max(lo, target))
+                    self.limit_active = self.pp_target != target
+                    self.target_reached = False
+                    self.pp_ack = True
+                if not cw & CW_NEW_SETPOINT:
+                    self.pp_ack = False
+                self.pp_halt = bool(cw & CW_HALT)
+                self.pp_v = min(vmax, self.get(od.PROFILE_VELOCITY) / k)
+                self.pp_a = self.get(od.PROFILE_ACCELERATION) / k
+                self.pp_d = self.get(od.PROFILE_DECELERATION) / k
+        self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
+        self.qs_dec = self.get(od.QUICK_STOP_DECELERATION) / k
+        self.joint.brake_engaged = self.state not in ENERGISED
+
+    def _servo(self, s: float, q_meas: float, qd: float) -> float:
+        """Position loop at the sub-step rate; returns motor torque (N m)."""
+        if self.state not in ENERGISED:
+            self.q_ref = q_meas
+            self.v_ref = 0.0
+            return 0.0
+        h = self._h
+        if self.state in (State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE) or \
+                (self.mode == od.MODE_PROFILE_POSITION and self.pp_halt):
+            dv = self.qs_dec * h if self.state != State.OPERATION_ENABLED else self.pp_d * h
+            self.v_ref = 0.0 if abs(self.v_ref) <= dv else self.v_ref - math.copysign(dv, self.v_ref)
+            self.q_ref += self.v_ref * h
+        elif self.mode == od.MODE_CSP:
+            self.q_ref = self.q_start + s * (self.q_end - self.q_start)
+            self.v_ref = self.v_ff
+        else:
+            if self.pp_target is not None:
+                rem = self.pp_target - self.q_ref
+                a = self.pp_a if abs(self.v_ref) < 1e-12 or rem * self.v_ref > 0 else self.pp_d
+                v_des = math.copysign(min(self.pp_v, math.sqrt(2.0 * self.pp_d * abs(rem))), rem)
+                dv = max(-a * h, min(a * h, v_des - self.v_ref))
+                self.v_ref += dv
+                if abs(rem) <= abs(self.v_ref) * h or abs(rem) < 1e-9:
+                    self.q_ref, self.v_ref = self.pp_target, 0.0
+                else:
+                    self.q_ref += self.v_ref * h
+        j = self.joint
+        w = 2.0 * math.pi * j.params.servo_bandwidth_hz
+        inertia = j.effective_inertia
+        tau_joint = inertia * (w * w * (self.q_ref - q_meas) + 2.0 * j.params.servo_damping * w * (self.v_ref - qd))
+        return tau_joint / j.params.gear_ratio + self.torque_ff
+
+    def on_sync_end(self, dt: float) -> None:
+        j = self.joint
+        if self.state == State.FAULT_REACTION_ACTIVE and self.v_ref == 0.0:
+            self.state = State.FAULT
+        if self.state == State.QUICK_STOP_ACTIVE and self.v_ref == 0.0 and \
+                self.get(od.QUICK_STOP_OPTION) in (1, 2, 3, 4):
+            self.state = State.SWITCH_ON_DISABLED
+        j.brake_engaged = self.state not in ENERGISED
+        # following error (CSP and PP while enabled)
+        err = self.q_ref - j.q_measured
+        window = self.get(od.FOLLOWING_ERROR_WINDOW) / self._k
+        if self.state == State.OPERATION_ENABLED and abs(err) > window:
+            self.fe_time += dt
+            self.following_error = True
+            if self.fe_time * 1000.0 > self.get(od.FOLLOWING_ERROR_TIMEOUT):
+                self._fault(od.EMCY_FOLLOWING_ERROR)
+        else:
+            self.fe_time = 0.0
+            self.following_error = False
+        if j.temperature > OVER_TEMPERATURE:
+            self._fault(od.EMCY_OVER_TEMPERATURE_DRIVE, od.ERR_REG_TEMPERATURE)
+        if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
+            self.target_reached = (self.q_ref == self.pp_target and
+                                   abs(self.pp_target - j.q_measured) * self._k <= self.get(od.POSITION_WINDOW))
+        self._update_od()
+
+    def _update_od(self) -> None:
+        k = self._scale()
+        j = self.joint
+        sw = STATE_BITS[self.state] | SW_REMOTE
+        if self.limit_active:
+            sw |= SW_INTERNAL_LIMIT
+        if self.following_error:
+            sw |= SW_FOLLOWING_ERROR
+        if j.temperature > WARN_TEMPERATURE:
+            sw |= SW_WARNING
+        if self.mode == od.MODE_CSP:
+            if self.state == State.OPERATION_ENABLED:
+                sw |= SW_OP_MODE_12
+            if not self.following_error:
+                sw |= SW_TARGET_REACHED if self.state != State.OPERATION_ENABLED else 0
+        else:
+            if self.pp_ack:
+                sw |= SW_OP_MODE_12
+            if self.target_reached:
+                sw |= SW_TARGET_REACHED
+        rated = self._rated_torque()
+        self.put(od.STATUSWORD, 0, sw)
+        self.put(od.MODES_OF_OPERATION_DISPLAY, 0, self.mode)
+        self.put(od.POSITION_ACTUAL, 0, _i32(round(j.q_measured * k)))
+        self.put(od.POSITION_DEMAND, 0, _i32(round(self.q_ref * k)))
+        self.put(od.VELOCITY_ACTUAL, 0, _i32(round(j.qd * k)))
+        self.put(od.TORQUE_ACTUAL, 0, max(-32768, min(32767, round(j.motor_torque / rated * 1000.0))))
+        self.put(od.FOLLOWING_ERROR_ACTUAL, 0, _i32(round((self.q_ref - j.q_measured) * k)))
+        self.put(od.DRIVE_TEMPERATURE, 0, max(-32768, min(32767, round(j.temperature * 10.0))))
+        self.put(od.BRAKE_STATUS, 0, 1 if j.brake_engaged else 0)
+        self.put(od.ERROR_CODE, 0, self.error_code)
+
+    # ------------------------------------------------------------------ state machine
+    def _apply_controlword(self, cw: int) -> None:
+        reset_edge = cw & CW_FAULT_RESET and not self.prev_cw & CW_FAULT_RESET
+        self.prev_cw = cw
+        s = self.state
+        if s == State.FAULT:
+            if reset_edge and self.joint.temperature <= OVER_TEMPERATURE:   # transition 15
+                self.state = State.SWITCH_ON_DISABLED
+                self.error_code = 0
+                self.emcy(od.EMCY_NO_ERROR)
+            return
+        if s == State.FAULT_REACTION_ACTIVE or cw & CW_FAULT_RESET:
+            return
+        cmd = decode_controlword(cw)
+        new = s
+        if s == State.SWITCH_ON_DISABLED:
+            if cmd == Command.SHUTDOWN:
+                new = State.READY_TO_SWITCH_ON                                    # 2
+        elif s == State.READY_TO_SWITCH_ON:
+            if cmd == Command.SWITCH_ON:
+                new = State.SWITCHED_ON                                           # 3
+            elif cmd == Command.ENABLE_OPERATION:
+                new = State.OPERATION_ENABLED                                     # 3 + 4
+            elif cmd in (Command.DISABLE_VOLTAGE, Command.QUICK_STOP):
+                new = State.SWITCH_ON_DISABLED                                    # 7
+        elif s == State.SWITCHED_ON:
+            if cmd == Command.ENABLE_OPERATION:
+                new = State.OPERATION_ENABLED                                     # 4
+            elif cmd == Command.SHUTDOWN:
+                new = State.READY_TO_SWITCH_ON                                    # 6
+            elif cmd in (Command.DISABLE_VOLTAGE, Command.QUICK_STOP):
+                new = State.SWITCH_ON_DISABLED                                    # 10
+        elif s == State.OPERATION_ENABLED:
+            if cmd == Command.SWITCH_ON:
+                new = State.SWITCHED_ON                                           # 5
+            elif cmd == Command.SHUTDOWN:
+                new = State.READY_TO_SWITCH_ON                                    # 8
+            elif cmd == Command.DISABLE_VOLTAGE:
+                new = State.SWITCH_ON_DISABLED                                    # 9
+            elif cmd == Command.QUICK_STOP:
+                new = State.QUICK_STOP_ACTIVE                                     # 11
+        elif s == State.QUICK_STOP_ACTIVE:
+            if cmd == Command.DISABLE_VOLTAGE:
+                new = State.SWITCH_ON_DISABLED                                    # 12
+            elif cmd == Command.ENABLE_OPERATION and self.get(od.QUICK_STOP_OPTION) in (5, 6, 7, 8):
+                new = State.OPERATION_ENABLED                                     # 16
+        if new == State.OPERATION_ENABLED and s != State.OPERATION_ENABLED:
+            if s != State.QUICK_STOP_ACTIVE:
+                self.q_ref = self.joint.q_measured
+            self.v_ref = 0.0
+            self.pp_target = None
+            self.target_reached = True
+            self.fe_time = 0.0
+        self.state = new
+
+    def _fault(self, code: int, register_bits: int = 0, emcy: bool = True) -> None:
+        if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
+            if code != self.error_code:           # a further, different error while in fault
+                self.error_code = code
+                self.put(od.ERROR_CODE, 0, code)
+                if emcy:
+                    self.emcy(code, od.ERR_REG_PROFILE | register_bits)
+            return
+        self.error_code = code
+        if self.state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
+            self.state = State.FAULT_REACTION_ACTIVE                              # 13
+        else:
+            self.state = State.FAULT                                              # 13 + 14
+        self.put(od.ERROR_CODE, 0, code)
+        if emcy:
+            self.emcy(code, od.ERR_REG_PROFILE | register_bits)
+
+
+def _i32(value: int) -> int:
+    return max(-2**31, min(2**31 - 1, value))

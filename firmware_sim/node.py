@@ -1,0 +1,398 @@
+"""A simulated CANopen slave: NMT, SDO server, heartbeat, EMCY, SYNC-driven PDOs.
+
+Built on canopen.LocalNode for the object dictionary (loaded from the EDS) and its SDO
+server; fills the library's gaps itself: boot-up message, NMT state handling (PDOs only in
+OPERATIONAL, no SDO in STOPPED), a heartbeat producer driven by the simulator's timer
+thread, an EMCY producer that maintains 1001h/1003h, TPDOs sampled from the object
+dictionary on SYNC, RPDOs written into the object dictionary, stricter SDO checks
+(value range, PDO mapping rules) and fault injection.
+
+Frames reach a node from ``firmware_sim.runner.Simulator``, which owns the bus.
+"""
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+import canopen
+from canopen import objectdictionary as odlib
+from canopen.sdo import SdoAbortedError
+
+from drivers import od
+from drivers.eds import load_od
+
+if TYPE_CHECKING:
+    from firmware_sim.plant import Plant
+
+logger = logging.getLogger(__name__)
+
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_PDO_LENGTH = 0x06040042
+ABORT_PARAM_INCOMPATIBLE = 0x06040043
+ABORT_LENGTH_HIGH = 0x06070012
+ABORT_LENGTH_LOW = 0x06070013
+ABORT_VALUE_HIGH = 0x06090031
+ABORT_VALUE_LOW = 0x06090032
+ABORT_DEVICE_STATE = 0x08000022
+
+
+class SimLocalNode(canopen.LocalNode):
+    """LocalNode with the checks a conformant SDO server makes on download."""
+
+    def set_data(self, index, subindex, data, check_writable=False):
+        obj = self._find_object(index, subindex)
+        if check_writable and not obj.writable:
+            raise SdoAbortedError(0x06010002)
+        if obj.data_type in odlib.NUMBER_TYPES:
+            size = len(obj) // 8
+            if len(data) > size:
+                raise SdoAbortedError(ABORT_LENGTH_HIGH)
+            if len(data) < size:
+                raise SdoAbortedError(ABORT_LENGTH_LOW)
+            if check_writable:
+                value = obj.decode_raw(bytes(data))
+                if obj.max is not None and value > obj.max:
+                    raise SdoAbortedError(ABORT_VALUE_HIGH)
+                if obj.min is not None and value < obj.min:
+                    raise SdoAbortedError(ABORT_VALUE_LOW)
+        super().set_data(index, subindex, data, check_writable)
+
+
+class _NodeTx:
+    """What the library's SdoServer sees as its network: sends through the node."""
+
+    def __init__(self, node: "SimNode"):
+        self.node = node
+
+    def send_message(self, can_id, data, remote=False):
+        self.node.send(can_id, bytes(data))
+
+
+@dataclass
+class Faults:
+    """Fault injection switches of one node (tests flip these at any time)."""
+    silent: bool = False            # node sends nothing and ignores the bus (power loss, bus-off)
+    heartbeat_stopped: bool = False # heartbeat producer stops, node otherwise alive
+    sdo_abort: int | None = None    # every SDO request is answered with this abort code
+    drop_tx: int = 0                # drop this many of the next transmitted PDOs
+    corrupt_tx: int = 0             # truncate this many of the next transmitted PDOs by one byte
+    ignore_sync: bool = False       # TPDOs stop (node otherwise alive)
+
+
+@dataclass
+class NodeStats:
+    rx_frames: int = 0
+    tx_frames: int = 0
+    malformed: int = 0      # frames of a known service with a wrong length or contents
+    sdo_aborts_sent: int = 0
+    emcy_sent: int = 0
+    dropped_tx: int = 0
+    corrupted_tx: int = 0
+    syncs: int = 0
+
+
+@dataclass
+class _Pdo:
+    cob_id: int
+    transmission_type: int
+    entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
+
+    @property
+    def length(self) -> int:
+        return sum(e[2] for e in self.entries)
+
+
+class SimNode:
+    """One independent simulated node (own node ID, OD, NMT state, SDO server, heartbeat)."""
+
+    device_type = "generic"
+
+    def __init__(self, node_id: int, eds_path, name: str = "", plant: "Plant | None" = None):
+        self.node_id = node_id
+        self.name = name or f"node{node_id}"
+        self.plant = plant
+        self.local = SimLocalNode(node_id, load_od(eds_path, node_id))
+        self.od = self.local.object_dictionary
+        self.local.sdo.network = _NodeTx(self)
+        # the library's NmtSlave would start its own heartbeat timer on 1017h writes; ours is
+        # driven by the simulator (so it can be silenced)
+        self.local._write_callbacks.remove(self.local.nmt.on_write)
+        self.local.add_write_callback(self._on_od_write)
+        self.faults = Faults()
+        self.stats = NodeStats()
+        self.nmt_state = od.NMT_STATE_BOOTUP
+        self.powered = False
+        self._send = None            # set by the simulator: send(can_id, data)
+        self._lock = threading.RLock()
+        self._tpdos: list[_Pdo] | None = None
+        self._rpdos: dict[int, _Pdo] | None = None
+        self._sync_counter = 0
+        self.next_heartbeat = 0.0
+        self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
+        self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
+
+    # ------------------------------------------------------------------ OD access
+    def get(self, index: int, sub: int = 0):
+        obj = self.local._find_object(index, sub)
+        return obj.decode_raw(self.local.get_data(index, sub))
+
+    def put(self, index: int, sub: int, value) -> None:
+        """Firmware-side write: no access checks, no callbacks (updates read-only values)."""
+        obj = self.local._find_object(index, sub)
+        self.local.data_store.setdefault(index, {})[sub] = obj.encode_raw(value)
+
+    # ------------------------------------------------------------------ lifecycle
+    def power_on(self) -> None:
+        self.powered = True
+        self.reset(application=True)
+
+    def reset(self, application: bool) -> None:
+        """NMT reset node (application=True) or reset communication; ends with boot-up."""
+        with self._lock:
+            self.nmt_state = od.NMT_STATE_BOOTUP
+            if application:
+                self.local.data_store.clear()
+                self.reset_application()
+            else:
+                for index in [i for i in self.local.data_store if 0x1000 <= i < 0x2000]:
+                    if index not in (od.ERROR_REGISTER, od.PREDEFINED_ERROR_FIELD):
+                        del self.local.data_store[index]
+            self._tpdos = self._rpdos = None
+            self._sync_counter = 0
+            self.consumer_last.clear()
+            self.send(od.HEARTBEAT_BASE + self.node_id, bytes([od.NMT_STATE_BOOTUP]))
+            self.nmt_state = od.NMT_STATE_PRE_OPERATIONAL
+            self.next_heartbeat = 0.0
+        if self.pdo_changed_callback:
+            self.pdo_changed_callback()
+
+    def reset_application(self) -> None:
+        """Device-specific: put the application objects back to power-on values."""
+
+    def inject_fault(self, code: int = od.EMCY_GENERIC, register_bits: int = 0) -> None:
+        """Fault injection: the device detects an error of this EMCY code (devices override)."""
+        self.emcy(code, register_bits)
+
+    # ------------------------------------------------------------------ transmit
+    def send(self, can_id: int, data: bytes) -> None:
+        if self.faults.silent or self._send is None or not self.powered:
+            return
+        self.stats.tx_frames += 1
+        if can_id == od.SDO_TX_BASE + self.node_id and data[:1] == b"\x80":
+            self.stats.sdo_aborts_sent += 1
+        self._send(can_id, data)
+
+    def heartbeat_period(self) -> float:
+        return self.get(od.PRODUCER_HEARTBEAT) / 1000.0
+
+    def send_heartbeat(self) -> None:
+        if not self.faults.heartbeat_stopped and self.nmt_state != od.NMT_STATE_BOOTUP:
+            self.send(od.HEARTBEAT_BASE + self.node_id, bytes([self.nmt_state]))
+
+    def emcy(self, code: int, register_bits: int = 0, info: bytes = b"") -> None:
+        """Produce an EMCY; code 0 = error reset. Keeps 1001h and 1003h up to date."""
+        with self._lock:
+            if code == od.EMCY_NO_ERROR:
+                register = 0
+            else:
+                register = self.get(od.ERROR_REGISTER) | od.ERR_REG_GENERIC | register_bits
+                n = self.get(od.PREDEFINED_ERROR_FIELD, 0)
+                history = [self.get(od.PREDEFINED_ERROR_FIELD, i) for i in range(1, 9)]
+                history = [code] + history[:7]
+                for i, value in enumerate(history, start=1):
+                    self.put(od.PREDEFINED_ERROR_FIELD, i, value)
+                self.put(od.PREDEFINED_ERROR_FIELD, 0, min(8, n + 1))
+            self.put(od.ERROR_REGISTER, 0, register)
+            cob = self.get(od.COB_ID_EMCY)
+            if cob & od.PDO_COB_ID_INVALID or self.nmt_state == od.NMT_STATE_STOPPED:
+                return
+            self.stats.emcy_sent += 1
+            self.send(cob & 0x7FF, struct.pack("<HB5s", code, register, info[:5]))
+
+    # ------------------------------------------------------------------ receive
+    def on_nmt(self, command: int) -> None:
+        if command == od.NMT_START:
+            self.nmt_state = od.NMT_STATE_OPERATIONAL
+        elif command == od.NMT_STOP:
+            self.nmt_state = od.NMT_STATE_STOPPED
+        elif command == od.NMT_PRE_OPERATIONAL:
+            self.nmt_state = od.NMT_STATE_PRE_OPERATIONAL
+        elif command == od.NMT_RESET_NODE:
+            self.reset(application=True)
+        elif command == od.NMT_RESET_COMMUNICATION:
+            self.reset(application=False)
+        else:
+            self.stats.malformed += 1
+
+    def on_sdo_request(self, data: bytes) -> None:
+        if self.nmt_state == od.NMT_STATE_STOPPED:
+            return
+        if len(data) != 8:
+            self.stats.malformed += 1   # CiA 301: SDO frames have DLC 8; ignore others
+            return
+        if self.faults.sdo_abort is not None:
+            _, index, sub = struct.unpack_from("<BHB", data)
+            self.stats.sdo_aborts_sent += 1
+            self.send(od.SDO_TX_BASE + self.node_id,
+                      struct.pack("<BHBL", 0x80, index, sub, self.faults.sdo_abort))
+            return
+        ccs = data[0] & 0xE0
+        sdo = self.local.sdo
+        if ccs not in (0x00, 0x60) or sdo._index is None:   # not a segment: the frame names the object
+            # (canopen's SdoServer.abort() needs these; it fails on the first request otherwise)
+            _, sdo._index, sdo._subindex = struct.unpack_from("<BHB", data)
+        with self._lock:
+            self.local.sdo.on_request(od.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)
+
+    def on_rpdo(self, cob_id: int, data: bytes) -> None:
+        if self.nmt_state != od.NMT_STATE_OPERATIONAL:
+            return
+        pdo = (self._rpdos or {}).get(cob_id)
+        if pdo is None:
+            return
+        if len(data) < pdo.length:
+            self.stats.malformed += 1
+            self.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
+            return
+        with self._lock:
+            self.in_rpdo = True
+            offset = 0
+            for index, sub, size in pdo.entries:
+                try:
+                    self.local.set_data(index, sub, bytes(data[offset:offset + size]))
+                except SdoAbortedError:
+                    self.stats.malformed += 1
+                offset += size
+            self.in_rpdo = False
+
+    # ------------------------------------------------------------------ heartbeat consumer
+    def consumer_entries(self) -> dict[int, float]:
+        """1016h: producer node ID -> timeout (s), for the active entries."""
+        out = {}
+        for sub in range(1, self.get(od.CONSUMER_HEARTBEAT, 0) + 1):
+            value = self.get(od.CONSUMER_HEARTBEAT, sub)
+            producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
+            if producer and ms:
+                out[producer] = ms / 1000.0
+        return out
+
+    def on_heartbeat(self, producer: int, now: float) -> None:
+        if producer in self.consumer_entries():
+            self.consumer_last[producer] = now    # monitoring starts with the first heartbeat
+
+    def check_consumers(self, now: float) -> None:
+        if not self.consumer_last:
+            return
+        entries = self.consumer_entries()
+        for producer, last in list(self.consumer_last.items()):
+            timeout = entries.get(producer)
+            if timeout is None:
+                del self.consumer_last[producer]
+            elif now - last > timeout:
+                del self.consumer_last[producer]        # re-armed by the next heartbeat
+                self.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([producer]))
+                self.on_heartbeat_lost(producer)
+
+    def on_heartbeat_lost(self, producer: int) -> None:
+        """Device specific reaction to a consumer heartbeat timeout (after the EMCY)."""
+
+    def rpdo_cob_ids(self) -> list[int]:
+        if self._rpdos is None:
+            self._rpdos = {}
+            for pdo in self._read_pdos(od.RPDO_COMM, od.RPDO_MAP):
+                self._rpdos[pdo.cob_id] = pdo
+        return list(self._rpdos)
+
+    def sync_cob_id(self) -> int:
+        return self.get(od.COB_ID_SYNC) & 0x7FF
+
+    # ------------------------------------------------------------------ SYNC hooks
+    def on_sync_begin(self, dt: float) -> None:
+        """Latch the commands received since the last SYNC (device specific)."""
+
+    def on_sync_end(self, dt: float) -> None:
+        """Update the OD from the plant after the physics step (device specific)."""
+
+    def send_tpdos(self) -> None:
+        """Sample the mapped objects and send the synchronous TPDOs (OPERATIONAL only)."""
+        self._sync_counter += 1
+        self.stats.syncs += 1
+        if self.nmt_state != od.NMT_STATE_OPERATIONAL or self.faults.ignore_sync:
+            return
+        if self._tpdos is None:
+            self._tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
+        for pdo in self._tpdos:
+            t = pdo.transmission_type
+            if not (0 <= t <= 240) or (t > 1 and self._sync_counter % t):
+                continue
+            with self._lock:
+                data = b"".join(self.local.get_data(index, sub) for index, sub, _ in pdo.entries)
+            if self.faults.drop_tx > 0:
+                self.faults.drop_tx -= 1
+                self.stats.dropped_tx += 1
+                continue
+            if self.faults.corrupt_tx > 0 and data:
+                self.faults.corrupt_tx -= 1
+                self.stats.corrupted_tx += 1
+                data = data[:-1]
+            self.send(pdo.cob_id, data)
+
+    def _read_pdos(self, comm_base: int, map_base: int) -> list[_Pdo]:
+        pdos = []
+        for n in range(od.N_PDOS):
+            cob = self.get(comm_base + n, od.PDO_COB_ID)
+            if cob & od.PDO_COB_ID_INVALID:
+                continue
+            entries = []
+            for i in range(1, self.get(map_base + n, 0) + 1):
+                value = self.get(map_base + n, i)
+                entries.append((value >> 16, (value >> 8) & 0xFF, (value & 0xFF) // 8))
+            pdos.append(_Pdo(cob & 0x7FF, self.get(comm_base + n, od.PDO_TRANSMISSION_TYPE), entries))
+        return pdos
+
+    # ------------------------------------------------------------------ OD write rules
+    def _on_od_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
+        from drivers import od as ids
+        if ids.RPDO_MAP <= index < ids.RPDO_MAP + ids.N_PDOS or ids.TPDO_MAP <= index < ids.TPDO_MAP + ids.N_PDOS:
+            comm = (ids.RPDO_COMM if index < ids.TPDO_MAP else ids.TPDO_COMM) + (index & 0xFF)
+            if not self.get(comm, ids.PDO_COB_ID) & ids.PDO_COB_ID_INVALID:
+                raise SdoAbortedError(ABORT_DEVICE_STATE)   # change mapping only while the PDO is disabled
+            value = int.from_bytes(bytes(data), "little")
+            if subindex == 0:
+                total = sum(self.get(index, i) & 0xFF for i in range(1, value + 1))
+                if total > 64:
+                    raise SdoAbortedError(ABORT_PDO_LENGTH)
+            else:
+                m_index, m_sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+                if value != 0:
+                    try:
+                        target = self.local._find_object(m_index, m_sub)
+                    except SdoAbortedError:
+                        raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
+                    if not target.pdo_mappable or bits != len(target):
+                        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+                    rx = index < ids.TPDO_MAP
+                    if rx and not target.writable or not rx and not target.readable:
+                        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        if ids.RPDO_COMM <= index < ids.TPDO_MAP + ids.N_PDOS:
+            self._tpdos = self._rpdos = None
+            if self.pdo_changed_callback:
+                # after the store: defer via flag (the value is stored after callbacks run)
+                self._routing_dirty = True
+        if index == ids.PREDEFINED_ERROR_FIELD and subindex == 0:
+            if int.from_bytes(bytes(data), "little") != 0:
+                raise SdoAbortedError(ABORT_VALUE_HIGH)  # CiA 301: only 0 may be written (clears history)
+            for i in range(1, 9):
+                self.put(ids.PREDEFINED_ERROR_FIELD, i, 0)
+        if index == ids.COB_ID_SYNC:
+            self._routing_dirty = True
+        self.on_write(index, subindex, bytes(data))
+
+    _routing_dirty = False
+    in_rpdo = False   # True while an RPDO (not an SDO) is writing the OD
+
+    def on_write(self, index: int, subindex: int, data: bytes) -> None:
+        """Device specific reaction to an SDO/RPDO write (called before the value is stored)."""

@@ -1,0 +1,274 @@
+"""Hosts every simulated node of a bus config on one bus connection.
+
+One process, one bus handle, many independent nodes: each has its own node ID, object
+dictionary, NMT state, SDO server and heartbeat. A single receive thread (python-can
+Notifier) routes frames to the nodes; a timer thread produces heartbeats. The shared
+plant advances exactly one SYNC period per received SYNC.
+
+    sim = start_simulator("virtual:arm", "configs/bus/arm.toml")
+    ...
+    sim.stop()
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+
+from drivers import od
+from drivers.bus_config import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
+from drivers.transport import open_bus
+from firmware_sim.end_effector import EndEffectorNode
+from firmware_sim.ft_sensor import FtSensorNode
+from firmware_sim.joint_drive import JointDriveNode
+from firmware_sim.node import SimNode
+from firmware_sim.plant import Plant, PlantConfig, load_plant_config
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class SimStats:
+    rx_frames: int = 0
+    syncs: int = 0
+    unknown: int = 0      # standard frames of no service any node listens to
+    malformed: int = 0    # NMT/SYNC frames with a wrong length
+    ignored: int = 0      # error, remote, extended-ID and FD frames
+    internal_errors: int = 0
+
+
+class _Listener(can.Listener):
+    def __init__(self, sim: "Simulator"):
+        self.sim = sim
+
+    def on_message_received(self, msg: can.Message) -> None:
+        try:
+            self.sim._route(msg)
+        except Exception:  # never let one frame kill the receive thread
+            self.sim.stats.internal_errors += 1
+            logger.exception("simulator: error handling frame %s", msg)
+
+    def on_error(self, exc: Exception) -> None:
+        self.sim.stats.internal_errors += 1
+        logger.error("simulator: bus error %s", exc)
+
+
+class Simulator:
+    def __init__(self, bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
+                 plant: Plant | PlantConfig | str | Path | None = None, control_node_id: int | None = None):
+        self.bus_spec = bus_spec
+        self.config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config)
+        if isinstance(plant, Plant):
+            self.plant = plant
+        else:
+            plant_config = plant if isinstance(plant, PlantConfig) else load_plant_config(plant)
+            self.plant = Plant.create(len(self.config.joints), plant_config)
+        self.dt = self.config.bus.sync_period
+        self.nodes: dict[int, SimNode] = {}
+        joint_index = 0
+        for cfg in self.config.nodes:
+            if cfg.device == "joint_drive":
+                node = JointDriveNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant, joint_index)
+                joint_index += 1
+            elif cfg.device == "end_effector":
+                node = EndEffectorNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant)
+            else:
+                node = FtSensorNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant)
+            node._send = self._send
+            node.pdo_changed_callback = self._mark_dirty
+            self.nodes[cfg.node_id] = node
+        self.control = None
+        if control_node_id is not None:
+            from firmware_sim.control import SimControlNode
+            if control_node_id in self.nodes:
+                raise ValueError(f"control node ID {control_node_id} is used by a device of the bus config")
+            self.control = SimControlNode(control_node_id, self)
+        self.stats = SimStats()
+        self.bus: can.BusABC | None = None
+        self._notifier: can.Notifier | None = None
+        self._send_lock = threading.Lock()
+        self._sync_lock = threading.Lock()
+        self._dirty = True
+        self._rpdo_routes: dict[int, SimNode] = {}
+        self._sync_ids: set[int] = {od.SYNC_COB_ID_DEFAULT}
+        self._stop = threading.Event()
+        self._hb_thread: threading.Thread | None = None
+
+    # ------------------------------------------------------------------ public
+    def start(self) -> "Simulator":
+        self.bus = open_bus(self.bus_spec)
+        self._notifier = can.Notifier(self.bus, [_Listener(self)], timeout=0.1)
+        for node in self.nodes.values():
+            node.power_on()                       # each sends its boot-up message
+        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="sim-heartbeat", daemon=True)
+        self._hb_thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._hb_thread is not None:
+            self._hb_thread.join(1.0)
+        if self._notifier is not None:
+            self._notifier.stop(1.0)
+        for node in self.nodes.values():
+            node.powered = False
+        if self.bus is not None:
+            self.bus.shutdown()
+            self.bus = None
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def node(self, name_or_id: str | int) -> SimNode:
+        for node in self.nodes.values():
+            if node.name == name_or_id or node.node_id == name_or_id:
+                return node
+        raise KeyError(f"no simulated node {name_or_id!r}")
+
+    def power_cycle(self, name_or_id: str | int) -> None:
+        """Fault injection / recovery: the node reboots (boot-up message, PRE-OPERATIONAL)."""
+        node = self.node(name_or_id)
+        node.faults.silent = False
+        with self._sync_lock:
+            node.power_on()
+
+    # ------------------------------------------------------------------ internals
+    def _send(self, can_id: int, data: bytes) -> None:
+        bus = self.bus
+        if bus is None:
+            return
+        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
+        with self._send_lock:
+            try:
+                bus.send(msg)
+            except can.CanError as exc:
+                logger.warning("simulator: send failed: %s", exc)
+
+    def _mark_dirty(self) -> None:
+        self._dirty = True
+
+    def _rebuild_routes(self) -> None:
+        self._dirty = False
+        routes: dict[int, SimNode] = {}
+        syncs = set()
+        for node in self.nodes.values():
+            node._routing_dirty = False
+            if not node.powered:
+                continue
+            for cob in node.rpdo_cob_ids():
+                routes[cob] = node
+            syncs.add(node.sync_cob_id())
+        self._rpdo_routes = routes
+        self._sync_ids = syncs or {od.SYNC_COB_ID_DEFAULT}
+
+    def _route(self, msg: can.Message) -> None:
+        self.stats.rx_frames += 1
+        if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
+            self.stats.ignored += 1
+            return
+        if self._dirty:
+            self._rebuild_routes()
+        cid, data = msg.arbitration_id, bytes(msg.data)
+        if cid == od.NMT_COB_ID:
+            if len(data) != 2:
+                self.stats.malformed += 1
+                return
+            command, target = data[0], data[1]
+            with self._sync_lock:
+                for node in self.nodes.values():
+                    if (target == 0 or target == node.node_id) and node.powered and not node.faults.silent:
+                        node.stats.rx_frames += 1
+                        node.on_nmt(command)
+            self._dirty = True
+        elif cid in self._sync_ids:
+            if len(data) > 1:
+                self.stats.malformed += 1
+                return
+            self._on_sync()
+        elif od.SDO_RX_BASE < cid <= od.SDO_RX_BASE + 127:
+            node = self.nodes.get(cid - od.SDO_RX_BASE)
+            if node is None and self.control is not None and cid - od.SDO_RX_BASE == self.control.node_id:
+                self.control.on_sdo_request(data)
+            elif node is None:
+                self.stats.unknown += 1
+            elif node.powered and not node.faults.silent:
+                node.stats.rx_frames += 1
+                with self._sync_lock:
+                    node.on_sdo_request(data)
+                if node._routing_dirty:
+                    self._dirty = True
+        elif od.HEARTBEAT_BASE < cid <= od.HEARTBEAT_BASE + 127:
+            if len(data) != 1:
+                self.stats.malformed += 1
+                return
+            now = time.monotonic()
+            for node in self.nodes.values():
+                if node.powered and not node.faults.silent:
+                    node.on_heartbeat(cid - od.HEARTBEAT_BASE, now)
+        elif cid in self._rpdo_routes:
+            node = self._rpdo_routes[cid]
+            if node.powered and not node.faults.silent:
+                node.stats.rx_frames += 1
+                with self._sync_lock:
+                    node.on_rpdo(cid, data)
+        else:
+            self.stats.unknown += 1
+
+    def _on_sync(self) -> None:
+        with self._sync_lock:
+            self.stats.syncs += 1
+            nodes = [n for n in self.nodes.values() if n.powered]
+            # one SYNC period of physics: the period the controller configured (1006h), else the
+            # bus config's
+            dt = self.dt
+            for node in nodes:
+                period = node.get(od.COMM_CYCLE_PERIOD)
+                if period > 0:
+                    dt = period / 1e6
+                    break
+            for node in nodes:
+                node.on_sync_begin(dt)
+            self.plant.step(dt)
+            for node in nodes:
+                node.on_sync_end(dt)
+            for node in nodes:
+                if not node.faults.silent:
+                    node.send_tpdos()
+
+    def _heartbeat_loop(self) -> None:
+        while not self._stop.is_set():
+            now = time.monotonic()
+            for node in list(self.nodes.values()):
+                if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
+                    continue
+                if node.consumer_last and not node.faults.silent:
+                    with self._sync_lock:
+                        node.check_consumers(now)
+                try:
+                    period = node.heartbeat_period()
+                except Exception:
+                    continue
+                if period <= 0.0:
+                    node.next_heartbeat = 0.0
+                    continue
+                if node.next_heartbeat == 0.0:
+                    node.next_heartbeat = now + period
+                elif now >= node.next_heartbeat:
+                    node.send_heartbeat()
+                    node.next_heartbeat = max(node.next_heartbeat + period, now)
+            self._stop.wait(0.002)
+
+
+def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
+                    plant: Plant | PlantConfig | str | Path | None = None,
+                    control_node_id: int | None = None) -> Simulator:
+    """Start all simulated nodes of the bus config on the bus; returns the handle (.stop()).
+    control_node_id: also serve the fault-injection unit (firmware_sim.control) at this ID."""
+    return Simulator(bus_spec, bus_config, plant, control_node_id).start()

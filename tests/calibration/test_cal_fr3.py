@@ -1,0 +1,28 @@
+"""Real FR3 data: nominal model check and one held-out split (skipped without the data)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controller.calibration import fr3 as F
+from controller.calibration.errormodel import ErrorModel
+from controller.calibration.validation import compare_poses
+
+pytestmark = pytest.mark.skipif(not F.DATA.exists(), reason="FR3 data not available")
+
+
+def test_nominal_model_reproduces_controller_fk():
+    d = F.load_fr3()
+    em = ErrorModel.from_kinematics(F.fr3_kinematics())
+    s = compare_poses(d.base_T_flange, em.poses(em.nominal, d.Q))
+    assert s.pos_norm.max() < 1e-4
+
+
+def test_full_fit_beats_registration_on_held_out_postures():
+    d = F.load_fr3()
+    perm = np.random.default_rng(5).permutation(len(d.Q))
+    r = F.fit_split(d, perm[:80], perm[80:])
+    assert r.full.status == "converged"
+    assert r.held_pos_rms["full"] < 0.6 * r.held_pos_rms["registration"]
+    assert r.held_pos_rms["full"] < 2.5e-3
+    assert r.held_rot_rms["full"] < np.radians(0.35)

@@ -1,0 +1,382 @@
+"""Controller-side drivers against the in-process simulator (virtual bus)."""
+from __future__ import annotations
+
+import math
+import time
+
+import pytest
+
+from drivers import od
+from drivers.bus_config import BusConfig, NodeConfig
+from drivers.cia402_defs import State
+from drivers.devices import EeCommand, EeState
+from drivers.errors import BootError, SdoError, SdoTimeoutError
+from drivers.network import ArmCommand, ArmNetwork
+
+
+def test_boot_configures_by_sdo_and_starts(booted, sim):
+    state = booted.read()
+    assert all(h.nmt_state == od.NMT_STATE_OPERATIONAL and h.alive for h in state.nodes.values())
+    j1 = sim.node(1)
+    assert j1.get(od.PRODUCER_HEARTBEAT) == 100
+    assert j1.get(od.COMM_CYCLE_PERIOD) == 20000
+    assert j1.get(od.FOLLOWING_ERROR_WINDOW) == round(0.01 * booted.joints[0].k)
+    assert j1.get(od.SOFTWARE_POSITION_LIMIT, 2) == round(4.71 * booted.joints[0].k)
+    assert booted.poll_events() == []
+
+
+def test_boot_with_missing_node_names_it(vbus, bus_config, sim):
+    extra = NodeConfig(name="wrist_camera_drive", node_id=42, device="joint_drive")
+    cfg = BusConfig(bus=bus_config.bus.model_copy(update={"boot_timeout": 0.3}), nodes=[*bus_config.nodes, extra])
+    net = ArmNetwork(vbus, cfg)
+    try:
+        with pytest.raises(BootError, match=r"node 42 'wrist_camera_drive' \(joint_drive\)") as info:
+            net.boot()
+        assert "joint_1" not in str(info.value)
+    finally:
+        net.close()
+
+
+def test_boot_detects_wrong_device_type(vbus, bus_config, sim):
+    nodes = [n if n.node_id != 17 else NodeConfig(name="ft_sensor", node_id=17, device="end_effector")
+             for n in bus_config.nodes]
+    net = ArmNetwork(vbus, BusConfig(bus=bus_config.bus, nodes=nodes))
+    try:
+        with pytest.raises(BootError, match=r"node 17 'ft_sensor' \(end_effector\): Device type"):
+            net.boot()
+    finally:
+        net.close()
+
+
+def test_enable_all_goes_through_the_state_machine(booted):
+    seen = []
+    booted.event_callbacks.append(seen.append)
+    for j in booted.joints:
+        j.axis.enable()
+    states = []
+    for _ in range(6):
+        s = booted.cycle()
+        states.append(s.joints[0].state)
+    assert states[:4] == [State.SWITCH_ON_DISABLED, State.READY_TO_SWITCH_ON, State.SWITCHED_ON,
+                          State.OPERATION_ENABLED] or states[1:5] == [State.SWITCH_ON_DISABLED,
+                          State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.OPERATION_ENABLED]
+    s = booted.read()
+    assert s.all_enabled and not any(j.brake_engaged for j in s.joints)
+    assert seen == []
+
+
+def test_csp_tracks_trajectory_within_following_error_window(enabled):
+    net = enabled
+    q0 = net.read().joint_positions
+    amplitude = [0.1, -0.1, 0.05, 0.2, -0.15, 0.3]
+    n = 60
+    worst = 0.0
+    for k in range(1, n + 1):
+        s = (1 - math.cos(math.pi * k / n)) / 2
+        targets = [q + a * s for q, a in zip(q0, amplitude)]
+        state = net.cycle(ArmCommand(joint_positions=targets))
+        assert state.complete
+        for j, t in zip(state.joints, targets):
+            worst = max(worst, abs(j.following_error), abs(j.position - t))
+    for _ in range(10):
+        state = net.cycle()
+    window = net.config.joints[0].joint.following_error_window
+    assert worst < window / 3
+    for j, q, a in zip(state.joints, q0, amplitude):
+        assert j.position == pytest.approx(q + a, abs=2e-4)   # resolver quantum 25" = 1.2e-4 rad
+        assert j.enabled
+
+
+def test_resolver_quantisation_25_arcsec(enabled):
+    net = enabled
+    state = net.run_until(lambda s: abs(s.joints[0].position - 0.01) < 2e-4, 50,
+                          ArmCommand(joint_positions=[0.01]))
+    quantum = 25 / 3600 * math.pi / 180
+    ratio = state.joints[0].position / quantum
+    assert abs(ratio - round(ratio)) < 1e-3 * ratio + 1e-6
+
+
+def test_quick_stop_then_switch_on_disabled(enabled):
+    net = enabled
+    for k in range(15):
+        net.cycle(ArmCommand(joint_positions=[0.01 * k]))
+    net.quick_stop(0)
+    s = net.cycle(ArmCommand(joint_positions=[0.3]))
+    assert s.joints[0].state in (State.QUICK_STOP_ACTIVE, State.SWITCH_ON_DISABLED)
+    net.run_until(lambda s: s.joints[0].state == State.SWITCH_ON_DISABLED, 50)
+    s = net.cycle()
+    assert s.joints[0].velocity == 0.0 and s.joints[0].torque == 0.0 and s.joints[0].brake_engaged
+    assert s.joints[0].position < 0.3
+    assert all(j.enabled for j in s.joints[1:])
+
+
+def test_following_error_fault_emcy_and_reset(enabled, sim):
+    net = enabled
+    sim.plant.joints[2].stalled = True
+    events = []
+    state = None
+    for k in range(1, 120):
+        state = net.cycle(ArmCommand(joint_positions=[None, None, min(0.4, 0.02 * k)]))
+        events += net.poll_events()
+        if state.joints[2].state == State.FAULT:
+            break
+    assert state.joints[2].state == State.FAULT
+    assert state.joints[2].error_code == od.EMCY_FOLLOWING_ERROR
+    emcy = [e for e in events if e.kind == "emcy"]
+    assert emcy and emcy[0].node == "joint_3" and emcy[0].code == 0x8611 and "following error" in emcy[0].message
+    assert all(j.enabled for i, j in enumerate(state.joints) if i != 2)
+    sim.plant.joints[2].stalled = False
+    net.fault_reset(2)
+    state = net.run_until(lambda s: s.joints[2].enabled, 20)
+    kinds = [e.kind for e in net.poll_events()]
+    assert "emcy_reset" in kinds and "fault_cleared" in kinds
+    assert sim.node(3).get(od.ERROR_REGISTER) == 0
+
+
+def test_fault_reset_that_does_not_clear_is_reported(enabled, sim):
+    net = enabled
+    sim.plant.joints[0].temperature = 95.0          # over temperature persists
+    net.cycle()
+    s = net.cycle()
+    assert s.joints[0].fault and s.joints[0].temperature == pytest.approx(95.0)
+    net.fault_reset(0)
+    for _ in range(10):
+        net.cycle()
+    events = net.poll_events()
+    failed = [e for e in events if e.kind == "fault_reset_failed"]
+    assert failed and "joint_1" in failed[0].message and "0x4310" in failed[0].message
+    sim.plant.joints[0].temperature = 30.0
+    net.fault_reset(0)
+    s = net.run_until(lambda s: s.joints[0].enabled, 20)
+    assert s.joints[0].enabled
+
+
+def test_heartbeat_loss_detected_within_three_periods(booted, sim):
+    net = booted   # (hil_tests/test_canopen_arm.py checks every node over every transport)
+    for cfg in (net.config.node("joint_1"), net.config.node("ft_sensor")):
+        node = sim.node(cfg.node_id)
+        net.poll_events()
+        t0 = time.monotonic()
+        node.faults.silent = True
+        deadline = t0 + 1.0
+        lost = []
+        while time.monotonic() < deadline and not lost:
+            time.sleep(0.005)
+            lost = [e for e in net.poll_events() if e.kind == "heartbeat_lost"]
+        assert lost and lost[0].node == cfg.name, cfg.name
+        assert lost[0].time - t0 <= 3 * cfg.heartbeat_period
+        assert not net.read().nodes[cfg.name].alive
+        node.faults.silent = False
+        time.sleep(cfg.heartbeat_period * 1.5)
+        assert any(e.kind == "heartbeat_restored" and e.node == cfg.name for e in net.poll_events())
+
+
+def test_lockstep_does_not_wait_for_a_lost_node(enabled, sim):
+    net = enabled
+    sim.node(17).faults.silent = True
+    time.sleep(0.3)
+    t = time.monotonic()
+    s = net.cycle()
+    assert s.complete and time.monotonic() - t < 0.1
+    assert not s.nodes["ft_sensor"].alive
+
+
+def test_sdo_errors_are_clear(booted, sim):
+    with pytest.raises(SdoError, match=r"node 1 'joint_1' \(joint_drive\): SDO read 0x1234:00 aborted with "
+                                       r"0x06020000 \(Object does not exist\)") as info:
+        booted.sdo_read("joint_1", 0x1234)
+    assert info.value.code == 0x06020000
+    with pytest.raises(SdoError, match=r"0x06010002 \(Attempt to write a read only object\)"):
+        booted.sdo_write(2, od.STATUSWORD, 0, 7)
+    with pytest.raises(SdoError, match=r"0x06090011 \(Subindex does not exist\)"):
+        booted.sdo_read("end_effector", od.IDENTITY, 7)
+    with pytest.raises(SdoError, match=r"0x06070012"):
+        booted.sdo_write("ft_sensor", od.FT_TARE, 0, b"\x01\x00\x00\x00")
+    sim.node(1).faults.silent = True
+    with pytest.raises(SdoTimeoutError, match="joint_1"):
+        booted.sdo_read("joint_1", od.DEVICE_TYPE)
+
+
+def test_corrupted_and_dropped_tpdos_are_counted(enabled, sim):
+    net = enabled
+    sim.node(1).faults.corrupt_tx = 3
+    sim.node(2).faults.drop_tx = 1
+    incomplete = 0
+    for _ in range(5):
+        s = net.cycle(timeout=0.05)
+        incomplete += not s.complete
+    assert net.stats.malformed == 3
+    assert incomplete >= 1 and net.stats.tpdo_timeouts == incomplete
+    assert net.cycle().complete
+
+
+def test_end_effector_clamp_lock_and_release(enabled, sim):
+    net = enabled
+    s = net.cycle(ArmCommand(end_effector=EeCommand.CLAMP))
+    seen = set()
+    for _ in range(200):
+        s = net.cycle()
+        seen.add(s.end_effector.state)
+        if s.end_effector.state == EeState.LOCKED:
+            break
+    assert {EeState.CLOSING, EeState.LOCKING} <= seen
+    ee = s.end_effector
+    assert ee.state == EeState.LOCKED and ee.grip == 1.0
+    assert ee.screw_torque >= net.config.node("end_effector").end_effector.lock_torque
+    net.cycle(ArmCommand(end_effector=EeCommand.RELEASE))
+    s = net.run_until(lambda s: s.end_effector.state == EeState.OPEN, 300)
+    assert s.end_effector.grip == 0.0 and s.end_effector.screw_turns == 0.0
+
+
+def test_end_effector_without_target_faults(enabled, sim):
+    from firmware_sim.plant import EndEffectorParams
+    sim.plant.ee.params = EndEffectorParams(target_present=False)
+    net = enabled
+    net.cycle(ArmCommand(end_effector=EeCommand.CLAMP))
+    s = net.run_until(lambda s: s.end_effector.state == EeState.FAULT, 300)
+    assert s.end_effector.fault_code == od.EMCY_EE_SCREW_TORQUE
+    assert any(e.kind == "emcy" and e.node == "end_effector" for e in net.poll_events())
+
+
+def test_ft_sensor_values_tare_and_overload(enabled, sim):
+    net = enabled
+    sim.plant.wrench[:] = [10.0, -5.0, 2.5, 0.5, -0.25, 1.0]
+    s = net.cycle()
+    assert s.ft.force == pytest.approx((10.0, -5.0, 2.5), abs=0.01)
+    assert s.ft.torque == pytest.approx((0.5, -0.25, 1.0), abs=0.001)
+    net.tare_ft()
+    s = net.cycle()
+    assert s.ft.tared and s.ft.force == pytest.approx((0, 0, 0), abs=0.01)
+    sim.plant.wrench[2] = 2.5 + 400.0
+    s = net.cycle()
+    assert s.ft.overload
+    assert any(e.kind == "emcy" and e.code == od.EMCY_FT_OVERLOAD for e in net.poll_events())
+
+
+def test_node_reboot_is_reported_and_recovered(enabled, sim):
+    net = enabled
+    sim.power_cycle("joint_4")
+    time.sleep(0.05)
+    kinds = [(e.kind, e.node) for e in net.poll_events()]
+    assert ("bootup", "joint_4") in kinds
+    assert net.cycle().joints[3].state == State.NOT_READY_TO_SWITCH_ON    # no stale values
+    net.recover("joint_4")
+    s = net.run_until(lambda s: s.all_enabled, 10)
+    assert s.nodes["joint_4"].nmt_state == od.NMT_STATE_OPERATIONAL
+    time.sleep(0.3)
+    assert not [e for e in net.poll_events() if e.kind == "heartbeat_lost"]
+
+
+def test_shutdown_disables_and_engages_brakes(enabled, sim):
+    enabled.shutdown()
+    assert all(sim.plant.joints[i].brake_engaged for i in range(6))
+
+
+def test_profile_position_mode(enabled):
+    net = enabled
+    net.set_mode(3, od.MODE_PROFILE_POSITION)
+    s = net.run_until(lambda s: s.joints[3].mode == od.MODE_PROFILE_POSITION, 5)
+    assert s.joints[3].enabled
+    q0 = s.joints[3].position
+    start = net.cycle(ArmCommand(joint_positions=[None, None, None, q0 + 0.05])).sync
+    s = net.cycle()
+    peak = 0.0
+    while not (s.joints[3].target_reached and abs(s.joints[3].position - q0 - 0.05) < 2e-4) \
+            and s.sync - start < 200:
+        s = net.cycle()
+        peak = max(peak, s.joints[3].velocity)
+    assert s.joints[3].position == pytest.approx(q0 + 0.05, abs=2e-4)
+    # trapezoid: profile velocity 0.1 rad/s, acceleration 0.2 rad/s^2 from the bus config
+    assert peak == pytest.approx(0.1, abs=0.01)
+    assert (s.sync - start) * 0.02 == pytest.approx(0.05 / 0.1 + 0.1 / 0.2, abs=0.1)
+    net.set_mode(3, od.MODE_CSP)
+    s = net.run_until(lambda s: s.joints[3].mode == od.MODE_CSP, 5)
+    for _ in range(5):
+        s = net.cycle()
+    assert s.joints[3].enabled and s.joints[3].position == pytest.approx(q0 + 0.05, abs=2e-4)
+
+
+def test_nodes_consume_the_controller_heartbeat(enabled, sim):
+    net = enabled
+    assert sim.node(1).get(od.CONSUMER_HEARTBEAT, 1) == (127 << 16) | 300
+    for k in range(10):
+        net.cycle(ArmCommand(joint_positions=[0.005 * k]))
+    net.close()                                   # controller dies: no heartbeat, no SYNC
+    time.sleep(0.45)
+    for i in range(1, 7):
+        drive = sim.node(i)
+        assert drive.error_code == od.EMCY_HEARTBEAT_ERROR, drive.name
+        assert drive.get(od.ERROR_REGISTER) & od.ERR_REG_COMMUNICATION
+    # the fault reaction ramp needs SYNCs (physics runs only on SYNC): a new controller recovers
+    net2 = ArmNetwork(net.bus_spec, net.config)
+    try:
+        net2.boot()
+        s = net2.cycle()
+        assert all(j.fault for j in s.joints)
+        net2.fault_reset()
+        for j in net2.joints:
+            j.axis.enable()
+        s = net2.run_until(lambda s: s.all_enabled, 80)
+    finally:
+        net2.close()
+
+
+def test_position_and_velocity_limits_clamp_the_target(enabled):
+    net = enabled
+    upper = net.config.joints[1].joint.upper            # 2.5 rad
+    vmax = net.config.joints[1].joint.max_velocity      # 1 rad/s
+    s = net.cycle(ArmCommand(joint_positions=[None, upper + 1.0]))
+    assert s.joints[1].limit_active
+    positions = []
+    for _ in range(140):
+        s = net.cycle()
+        positions.append(s.joints[1].position)
+        assert not s.joints[1].fault
+    # the reference moves at most vmax: reaching the limit takes at least (distance / vmax)
+    cycles = next(i for i, q in enumerate(positions) if abs(q - upper) < 1e-3)
+    assert cycles >= upper / (vmax * 0.02) - 3
+    assert positions[-1] == pytest.approx(upper, abs=2e-4)
+    assert s.joints[1].limit_active
+
+
+def test_torque_limit(enabled, sim):
+    net = enabled
+    net.sdo_write("joint_3", od.MAX_TORQUE, 0, 20)      # 2 % of rated
+    limit = 0.02 * net.config.joints[2].joint.rated_joint_torque
+    worst = 0.0
+    for k in range(1, 30):
+        s = net.cycle(ArmCommand(joint_positions=[None, None, 0.01 * k]))
+        worst = max(worst, abs(s.joints[2].torque))
+        if s.joints[2].fault:
+            break
+    assert worst <= limit + 1e-9 and worst == pytest.approx(limit, rel=0.01)
+
+
+def test_free_running_mode_never_blocks(enabled):
+    net = enabled
+    q0 = net.read().joints[0].position
+    complete = 0
+    t_next = time.monotonic()
+    worst_call = 0.0
+    for k in range(1, 26):
+        t = time.monotonic()
+        state = net.read()
+        complete += state.complete
+        net.write(ArmCommand(joint_positions=[q0 + 0.002 * k]))
+        net.send_sync()
+        net.poll_events()
+        worst_call = max(worst_call, time.monotonic() - t)
+        t_next += 0.02
+        time.sleep(max(0.0, t_next - time.monotonic()))
+    assert complete >= 20
+    assert worst_call < 0.015
+    assert net.read().joints[0].position == pytest.approx(q0 + 0.05, abs=2e-3)
+
+
+def test_move_to_demo_helper(enabled):
+    net = enabled
+    q = net.read().joint_positions
+    state = net.move_to([q[0] + 0.1, None, -0.05], duration=0.5)
+    assert state.joints[0].position == pytest.approx(q[0] + 0.1, abs=2e-4)
+    assert state.joints[1].position == pytest.approx(q[1], abs=2e-4)
+    assert state.joints[2].position == pytest.approx(-0.05, abs=2e-4)
