@@ -6,37 +6,17 @@ dataclasses below and commands in SI units back into PDO bytes.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import IntEnum
 
 import canopen
 
 from drivers import od
+from drivers.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
 from drivers.bus_config import BusSettings, NodeConfig
 from drivers.cia402 import Cia402Axis
 from drivers.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
 from drivers.pdo_maps import PDO_MAPS
-
-
-class EeCommand(IntEnum):
-    NONE = 0
-    CLAMP = 1        # close the grip, then screw until locked
-    RELEASE = 2      # unscrew, then open the grip
-    STOP = 3
-    FAULT_RESET = 4
-
-
-class EeState(IntEnum):
-    UNKNOWN = 0
-    OPEN = 1
-    CLOSING = 2
-    LOCKING = 3
-    LOCKED = 4       # clamped and locked
-    UNLOCKING = 5
-    OPENING = 6      # releasing
-    STOPPED = 7
-    FAULT = 8
 
 
 @dataclass

@@ -410,6 +410,12 @@ class ArmNetwork:
         if c.end_effector is not None and self.end_effector is not None:
             self.end_effector.command(c.end_effector)
 
+    def nodes_missing_tpdos(self) -> list[str]:
+        """Names of live nodes whose TPDOs of the current SYNC have not all arrived."""
+        with self._cv:
+            missing = self._expected_tpdos() - self._received
+            return sorted({self._tpdo_routes[cob][0].name for cob in missing})
+
     def tpdos_complete(self) -> bool:
         """Have all expected TPDOs of the last SYNC arrived (non-blocking)?"""
         with self._cv:

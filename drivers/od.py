@@ -8,6 +8,8 @@ here; the EDS files in configs/eds/ are generated from the same names
 """
 from __future__ import annotations
 
+from enum import IntEnum
+
 # --- CiA 301 communication profile area -------------------------------------------
 DEVICE_TYPE = 0x1000
 ERROR_REGISTER = 0x1001
@@ -160,3 +162,25 @@ NMT_STATE_PRE_OPERATIONAL = 0x7F
 NMT_STATE_NAMES = {0x00: "INITIALISING", 0x04: "STOPPED", 0x05: "OPERATIONAL", 0x7F: "PRE-OPERATIONAL"}
 
 DEVICE_TYPES = ("joint_drive", "end_effector", "ft_sensor")
+
+
+class EeCommand(IntEnum):
+    """End-effector command codes (2100h), shared by the device and the driver."""
+    NONE = 0
+    CLAMP = 1        # close the grip, then screw until locked
+    RELEASE = 2      # unscrew, then open the grip
+    STOP = 3
+    FAULT_RESET = 4
+
+
+class EeState(IntEnum):
+    """End-effector state codes (2101h), shared by the device and the driver."""
+    UNKNOWN = 0
+    OPEN = 1
+    CLOSING = 2
+    LOCKING = 3
+    LOCKED = 4       # clamped and locked
+    UNLOCKING = 5
+    OPENING = 6      # releasing
+    STOPPED = 7      # stopped part way by command
+    FAULT = 8

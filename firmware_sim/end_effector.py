@@ -2,35 +2,16 @@
 
 Command (2100h): 0 none, 1 clamp and lock, 2 release, 3 stop, 4 fault reset. An SDO
 write always executes; an RPDO executes when the value changes (so a cyclic RPDO can
-hold the last command). State (2101h) follows EeState below.
+hold the last command). The codes are drivers.od.EeCommand (2100h) and EeState (2101h).
 """
 from __future__ import annotations
 
-from enum import IntEnum
 
 from drivers import od
+from drivers.od import EeCommand, EeState
 from firmware_sim.node import SimNode
 
 STALL_TIMEOUT = 1.0   # s without progress while moving -> jam fault
-
-
-class EeCommand(IntEnum):
-    NONE = 0
-    CLAMP = 1
-    RELEASE = 2
-    STOP = 3
-    FAULT_RESET = 4
-
-
-class EeState(IntEnum):
-    OPEN = 1
-    CLOSING = 2
-    LOCKING = 3
-    LOCKED = 4          # clamped and locked
-    UNLOCKING = 5
-    OPENING = 6         # releasing
-    STOPPED = 7         # stopped part way by command
-    FAULT = 8
 
 
 MOVING = (EeState.CLOSING, EeState.LOCKING, EeState.UNLOCKING, EeState.OPENING)

@@ -75,8 +75,8 @@ class CanopenHardware:
         joints = state.joints
         missing: tuple[str, ...] = ()
         if not state.complete:
-            missing = tuple(name for name, health in state.nodes.items() if not health.alive)
-            missing = missing or ("bus",)
+            dead = [name for name, health in state.nodes.items() if not health.alive]
+            missing = tuple(dead + self.network.nodes_missing_tpdos())
         ft = state.ft
         wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
         return Measurement(

@@ -23,7 +23,8 @@ class SupervisionLimits:
     following_error: float = 0.0175      # rad (1 deg) between last target and measurement
     wrench_force_limit: float = 150.0    # N
     wrench_torque_limit: float = 30.0    # N m
-    missing_pdo_cycles: int = 3          # consecutive cycles without a node's PDOs
+    missing_pdo_cycles: int = 5          # consecutive cycles without a node's PDOs (100 ms at 50 Hz,
+                                         # below the 250 ms heartbeat-loss detection)
 
 
 @dataclass(frozen=True)

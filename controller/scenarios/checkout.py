@@ -84,8 +84,9 @@ def run_checkout(daemon: Daemon, on_progress: Callable[[int, str, float], None])
         t_start = daemon.snapshot.tick.time
         errors: list[float] = []
         issued_at = daemon.snapshot.tick.cycle
-        daemon.handlers.handle(None, step.command, {**step.args, "lease": lease})
-        _wait(daemon, step, index, on_progress, errors, issued_at)
+        answer = daemon.handlers.handle(None, step.command, {**step.args, "lease": lease})
+        motion = answer.get("motion") if isinstance(answer, dict) else None
+        _wait(daemon, step, index, on_progress, errors, issued_at, motion)
         snapshot = daemon.snapshot
         outcome = StepResult(step.name, snapshot.tick.time - t_start, max(errors, default=0.0))
         if step.goal is not None:
@@ -104,11 +105,12 @@ def run_checkout(daemon: Daemon, on_progress: Callable[[int, str, float], None])
 
 
 def _wait(daemon: Daemon, step: Step, index: int, on_progress, errors: list[float],
-          issued_at: int) -> None:
+          issued_at: int, motion: int | None) -> None:
     """Follow the step cycle by cycle until it is done; fail on a protective stop.
 
-    The command takes effect inside a cycle that publishes its snapshot afterwards, so
-    snapshots up to one cycle after `issued_at` may predate it and are skipped."""
+    A motion is done when the daemon reports its number finished. Enable/disable take
+    effect inside a cycle that publishes its snapshot afterwards, so snapshots up to one
+    cycle after `issued_at` may predate them and are skipped."""
     last_cycle = -1
     while True:
         s = daemon.snapshot
@@ -125,8 +127,8 @@ def _wait(daemon: Daemon, step: Step, index: int, on_progress, errors: list[floa
             return
         if step.command == "disable" and s.state == "disabled" and not np.any(s.measurement.joints_enabled):
             return
-        if step.command not in ("enable", "disable"):
-            if s.mode == "hold" or s.mode is None:
+        if motion is not None:
+            if s.motions_finished >= motion:
                 return
             on_progress(index, step.name, s.progress)
         time.sleep(0.002)

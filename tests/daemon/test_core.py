@@ -117,9 +117,12 @@ def test_following_error_only_counts_while_moving(core):
     assert core.stop_reason.code == "following_error"
 
 
-def test_missing_pdos_for_three_cycles_stop(core):
+def test_missing_pdos_for_five_cycles_stop(core):
     enable(core)
-    for k in range(3):
+    for k in range(4):
+        core.update(measurement(0.04 + 0.02 * k, missing=("joint2",)))
+    assert core.state == "enabled"
+    for k in range(4, 5):
         core.update(measurement(0.04 + 0.02 * k, missing=("joint2",)))
     assert core.state == "stopped" and core.stop_reason.code == "pdo_missing"
 
