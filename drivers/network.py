@@ -159,6 +159,10 @@ class ArmNetwork:
         self.event_callbacks: list[Callable[[NetworkEvent], None]] = []
         self._booted: set[int] = set()
         self._received: set[int] = set()
+        # TPDOs this SYNC should bring, fixed at the SYNC; None after a heartbeat/NMT change
+        # (then every TPDO wakes the waiter, which recomputes). Waking the cycle only when the
+        # set is complete saves a thread hop per TPDO.
+        self._expected: set[int] | None = None
         self._monitoring = False
         self._sync = 0
         self._connected = False
@@ -171,6 +175,11 @@ class ArmNetwork:
             return self
         self.network.bus = open_bus(self.bus_spec)
         self.network.connect()
+        if hasattr(self.network.bus, "add_inline_listener"):
+            # in-process bus: TPDOs are handled in the simulator's sending thread (see
+            # drivers/transport); the library's Notifier stays for the queued fallback
+            for listener in self.network.listeners:
+                self.network.bus.add_inline_listener(listener)
         for name, driver in self.drivers.items():
             node = canopen.RemoteNode(driver.node_id, driver.od)
             node.sdo.RESPONSE_TIMEOUT = self.config.bus.sdo_timeout
@@ -352,6 +361,7 @@ class ArmNetwork:
         with self._cv:
             self._sync += 1
             self._received = set()
+            self._expected = self._expected_tpdos()
         self.network.send_message(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
@@ -394,7 +404,9 @@ class ArmNetwork:
                     if d.axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
                 h = self.health[d.name]
-                if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL:
+                # Also to a node whose heartbeat was lost: it may still listen (only its
+                # heartbeat producer failed), and the protective stop must reach it.
+                if h.nmt_state == od.NMT_STATE_OPERATIONAL:
                     frames += d.rpdo_frames()
         for cob, data in frames:
             self.network.send_message(cob, data)
@@ -557,6 +569,8 @@ class ArmNetwork:
                                 state)
                 if self._monitoring and not was_alive:
                     self._event("heartbeat_restored", driver, f"{driver.label} heartbeat back")
+                if state != previous or not was_alive:
+                    self._expected = None
                 self._cv.notify_all()
         return on_heartbeat
 
@@ -589,7 +603,8 @@ class ArmNetwork:
             driver.decode(spec, bytes(data))
             self._received.add(can_id)
             self.stats.tpdos += 1
-            self._cv.notify_all()
+            if self._expected is None or self._expected <= self._received:
+                self._cv.notify_all()
 
     def _monitor_loop(self) -> None:
         factor = self.config.bus.heartbeat_loss_factor
@@ -615,6 +630,7 @@ class ArmNetwork:
                         self._event("heartbeat_lost", d,
                                     f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
                                     f"period {cfg.heartbeat_period:.3f} s)")
+                        self._expected = None
                         self._cv.notify_all()
 
 

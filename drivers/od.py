@@ -147,6 +147,7 @@ SIM_POWER_CYCLE = 0x2F09       # UNSIGNED8: write 1 = node reboots
 SIM_EE_TARGET_PRESENT = 0x2F0A # UNSIGNED8: an ORU interface is in the end-effector grip
 SIM_WRENCH = 0x2F0B            # ARRAY of INTEGER32, sub 1..6: wrench at the F/T sensor, mN / mN m
 SIM_IGNORE_SYNC = 0x2F0C       # UNSIGNED8: 1 = node stops sending TPDOs
+SIM_FREEZE = 0x2F0D            # UNSIGNED8: 1 = node keeps sending its last TPDO values (frozen sensor)
 SIM_CONTROL_NODE_DEFAULT = 126
 
 # NMT
@@ -171,6 +172,10 @@ class EeCommand(IntEnum):
     RELEASE = 2      # unscrew, then open the grip
     STOP = 3
     FAULT_RESET = 4
+    # The screw drive turns the ORU's connection bolt, which drives the store's latch (ORU
+    # paper Table 1 subtasks 5 and 10); accepted only while clamped and locked on an adapter.
+    LATCH_UNLOCK = 5
+    LATCH_LOCK = 6
 
 
 class EeState(IntEnum):

@@ -63,6 +63,10 @@ class SimControl:
     def ignore_sync(self, node: str | int, on: bool = True) -> None:
         self._write(od.SIM_IGNORE_SYNC, 0, int(on), node)
 
+    def freeze(self, node: str | int, on: bool = True) -> None:
+        """The node's sensor values stop updating; its TPDOs go on with the last values."""
+        self._write(od.SIM_FREEZE, 0, int(on), node)
+
     def raise_fault(self, node: str | int, emcy_code: int) -> None:
         """The device detects a fault with this EMCY code (drives enter FAULT)."""
         self._write(od.SIM_RAISE_FAULT, 0, emcy_code, node)

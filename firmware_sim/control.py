@@ -85,6 +85,8 @@ class SimControlNode:
                 f.corrupt_tx = value
             elif index == ids.SIM_IGNORE_SYNC:
                 f.ignore_sync = bool(value)
+            elif index == ids.SIM_FREEZE:
+                f.frozen = bool(value)
             elif index == ids.SIM_RAISE_FAULT:
                 node.inject_fault(value)
             elif index in (ids.SIM_STALL, ids.SIM_TEMPERATURE):

@@ -166,7 +166,7 @@ def end_effector() -> tuple[str, list[Obj]]:
     objs = comm_objects(0x0000_0000, 0x0EE0_0001, "SpaceArm end-effector controller (sim)")
     objs += pdo_objects(EE_RPDOS, EE_TPDOS)
     objs += [
-        v(od.EE_COMMAND, "End-effector command", UNSIGNED8, "rw", 0, pdo=True, high=4),
+        v(od.EE_COMMAND, "End-effector command", UNSIGNED8, "rw", 0, pdo=True, high=max(od.EeCommand)),
         v(od.EE_STATE, "End-effector state", UNSIGNED8, "ro", 1, pdo=True),
         v(od.EE_SCREW_TORQUE, "Screw torque", INTEGER16, "ro", 0, pdo=True),
         v(od.EE_SCREW_TURNS, "Screw turns", INTEGER32, "ro", 0, pdo=True),
@@ -226,6 +226,7 @@ def sim_control() -> tuple[str, list[Obj]]:
                   **{i + 1: Var(f"{n} (mN, mN m)", INTEGER32, "rw", 0)
                      for i, n in enumerate(("Fx", "Fy", "Fz", "Tx", "Ty", "Tz"))}}),
         v(od.SIM_IGNORE_SYNC, "Ignore SYNC", UNSIGNED8, "rw", 0, high=1),
+        v(od.SIM_FREEZE, "Freeze process data", UNSIGNED8, "rw", 0, high=1),
     ]
     return "SpaceArm simulation fault-injection unit (test rig only)", objs
 

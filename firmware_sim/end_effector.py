@@ -62,6 +62,10 @@ class EndEffectorNode(SimNode):
             self.state = EeState.CLOSING if ee.grip < 1.0 else EeState.LOCKING
         elif cmd == EeCommand.RELEASE and s in (EeState.LOCKED, EeState.STOPPED, EeState.LOCKING, EeState.CLOSING):
             self.state = EeState.UNLOCKING if ee.turns > 0.0 else EeState.OPENING
+        elif cmd in (EeCommand.LATCH_UNLOCK, EeCommand.LATCH_LOCK) and s == EeState.LOCKED:
+            drive_latch = getattr(self.plant.environment, "drive_latch", None)   # the contact world
+            if drive_latch is not None:
+                drive_latch(cmd == EeCommand.LATCH_LOCK)
         if self.state != s:
             self.stall_time = 0.0
         self._drive()

@@ -33,6 +33,8 @@ class FtSensorNode(SimNode):
                 self.pending_tare = value
 
     def on_sync_end(self, dt: float) -> None:
+        if self.faults.frozen:
+            return  # fault injection: the last sample goes out again and again
         self._sample()
 
     def _sample(self) -> None:

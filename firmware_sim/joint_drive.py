@@ -156,11 +156,7 @@ class JointDriveNode(SimNode):
                     self.q_ref, self.v_ref = self.pp_target, 0.0
                 else:
                     self.q_ref += self.v_ref * h
-        j = self.joint
-        w = 2.0 * math.pi * j.params.servo_bandwidth_hz
-        inertia = j.effective_inertia
-        tau_joint = inertia * (w * w * (self.q_ref - q_meas) + 2.0 * j.params.servo_damping * w * (self.v_ref - qd))
-        return tau_joint / j.params.gear_ratio + self.torque_ff
+        return servo_torque(self.joint, self.q_ref, self.v_ref, q_meas, qd) + self.torque_ff
 
     def on_sync_end(self, dt: float) -> None:
         j = self.joint
@@ -211,10 +207,10 @@ class JointDriveNode(SimNode):
         rated = self._rated_torque()
         self.put(od.STATUSWORD, 0, sw)
         self.put(od.MODES_OF_OPERATION_DISPLAY, 0, self.mode)
-        self.put(od.POSITION_ACTUAL, 0, _i32(round(j.q_measured * k)))
+        self.put(od.POSITION_ACTUAL, 0, _i32(round(j.q_reported * k)))   # late by any feedback latency
         self.put(od.POSITION_DEMAND, 0, _i32(round(self.q_ref * k)))
-        self.put(od.VELOCITY_ACTUAL, 0, _i32(round(j.qd * k)))
-        self.put(od.TORQUE_ACTUAL, 0, max(-32768, min(32767, round(j.motor_torque / rated * 1000.0))))
+        self.put(od.VELOCITY_ACTUAL, 0, _i32(round(j.qd_reported * k)))
+        self.put(od.TORQUE_ACTUAL, 0, max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))))
         self.put(od.FOLLOWING_ERROR_ACTUAL, 0, _i32(round((self.q_ref - j.q_measured) * k)))
         self.put(od.DRIVE_TEMPERATURE, 0, max(-32768, min(32767, round(j.temperature * 10.0))))
         self.put(od.BRAKE_STATUS, 0, 1 if j.brake_engaged else 0)
@@ -291,6 +287,17 @@ class JointDriveNode(SimNode):
         self.put(od.ERROR_CODE, 0, code)
         if emcy:
             self.emcy(code, od.ERR_REG_PROFILE | register_bits)
+
+
+def servo_torque(joint, q_ref: float, v_ref: float, q_meas: float, qd: float) -> float:
+    """The drive's position servo law (PD scaled by the joint's inertia): motor torque, N m.
+
+    Shared with the direct simulation path (controller.diagnosis.direct_sim) so the fast
+    replay and the CAN path run the same law."""
+    p = joint.params
+    w = 2.0 * math.pi * p.servo_bandwidth_hz
+    tau_joint = joint.effective_inertia * (w * w * (q_ref - q_meas) + 2.0 * p.servo_damping * w * (v_ref - qd))
+    return tau_joint / p.gear_ratio
 
 
 def _i32(value: int) -> int:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
 
 MODEL = "SIM-LR1"
 
@@ -140,18 +141,40 @@ class LaserRangerSim:
                 os.write(self.master, out)
 
 
-def arm_plane_distance(model, x_true: np.ndarray, normal, offset: float,
-                       joint_angles: Callable[[], np.ndarray]) -> Callable[[], Optional[float]]:
-    """Distance source for the simulator: the true arm (calibration ErrorModel at x_true) at
-    the current joint angles, beam along tool +z, to the plane n.p + f = 0 (eq. 10).
-    Returns None when the beam points away from the plane."""
+class LaserTarget(BaseModel):
+    """Plant-file section `[laser]`: a ranger on the tool (beam along tool +z from the tool
+    origin) aimed at a plane n.p + f = 0 in the base frame; the simulator serves it on a pty."""
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    plane: tuple[float, float, float, float] = Field(description="n_x, n_y, n_z, f of the true plane (m)")
+    sigma: float = Field(default=0.2e-3, ge=0.0, le=0.01, description="m, reading noise (1 sigma)")
+    min_range: float = Field(default=0.05, ge=0.0, le=100.0, description="m")
+    max_range: float = Field(default=5.0, gt=0.0, le=100.0, description="m")
+    seed: int = 0
+
+    def ranger_config(self) -> RangerConfig:
+        return RangerConfig(sigma=self.sigma, min_range=self.min_range, max_range=self.max_range,
+                            seed=self.seed)
+
+
+def tool_plane_distance(tool_pose: Callable[[], np.ndarray], normal, offset: float
+                        ) -> Callable[[], Optional[float]]:
+    """Distance source: along tool +z from the tool origin to the plane n.p + f = 0 (eq. 10 of
+    the laser-ranger paper), None when the beam points away from the plane."""
     n = np.asarray(normal, float)
 
     def distance() -> Optional[float]:
-        T = model.poses(x_true[: model.n_params], np.atleast_2d(joint_angles()))[0]
+        T = tool_pose()
         nb = float(T[:3, 2] @ n)
         if abs(nb) < 1e-9:
             return None
         h = -(float(T[:3, 3] @ n) + offset) / nb
         return h if h > 0 else None
     return distance
+
+
+def arm_plane_distance(model, x_true: np.ndarray, normal, offset: float,
+                       joint_angles: Callable[[], np.ndarray]) -> Callable[[], Optional[float]]:
+    """Distance source from the true arm as a calibration ErrorModel at x_true."""
+    return tool_plane_distance(
+        lambda: model.poses(x_true[: model.n_params], np.atleast_2d(joint_angles()))[0], normal, offset)

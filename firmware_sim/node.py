@@ -42,6 +42,16 @@ ABORT_DEVICE_STATE = 0x08000022
 class SimLocalNode(canopen.LocalNode):
     """LocalNode with the checks a conformant SDO server makes on download."""
 
+    def _find_object(self, index, subindex):
+        # Every SYNC reads and writes ~100 objects per node; the library's lookup walks the
+        # OD each time. The OD never changes after loading, so found objects are cached
+        # (misses still raise the library's SDO abort).
+        cache = self.__dict__.setdefault("_object_cache", {})
+        obj = cache.get((index, subindex))
+        if obj is None:
+            obj = cache[(index, subindex)] = super()._find_object(index, subindex)
+        return obj
+
     def set_data(self, index, subindex, data, check_writable=False):
         obj = self._find_object(index, subindex)
         if check_writable and not obj.writable:
@@ -80,6 +90,7 @@ class Faults:
     drop_tx: int = 0                # drop this many of the next transmitted PDOs
     corrupt_tx: int = 0             # truncate this many of the next transmitted PDOs by one byte
     ignore_sync: bool = False       # TPDOs stop (node otherwise alive)
+    frozen: bool = False            # sensor values stop updating, TPDOs go on (frozen sensor)
 
 
 @dataclass
@@ -137,6 +148,10 @@ class SimNode:
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
         obj = self.local._find_object(index, sub)
+        # Fast path (hot every SYNC): a stored value, no read callbacks installed.
+        stored = self.local.data_store.get(index)
+        if stored is not None and sub in stored and not self.local._read_callbacks:
+            return obj.decode_raw(stored[sub])
         return obj.decode_raw(self.local.get_data(index, sub))
 
     def put(self, index: int, sub: int, value) -> None:

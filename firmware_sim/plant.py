@@ -13,13 +13,22 @@ from __future__ import annotations
 
 import math
 import random
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Protocol
 
+import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from controller.config.loader import load_toml_model
+from controller.kinematics.forward import fk
+from controller.kinematics.model import KinematicData, KinematicModel
+from firmware_sim.effects import (DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error,
+                                  static_friction, transmission_error, transmission_error_slope)
+from firmware_sim.geometry import GeometryErrors
+from firmware_sim.laser_ranger import LaserTarget
+from firmware_sim.contact.config import ContactConfig
 
 ARCSEC = math.pi / (180.0 * 3600.0)
 
@@ -40,6 +49,25 @@ class JointParams(Strict):
     servo_damping: float = Field(default=1.0, gt=0.0, le=5.0)
     initial_position: float = Field(default=0.0, ge=-20.0, le=20.0, description="rad")
     temperature: float = Field(default=25.0, ge=-100.0, le=200.0, description="degC drive temperature")
+    # --- hidden physical effects (firmware_sim/effects), each off by default ---
+    stribeck_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m static rise above Coulomb; off = 0")
+    stribeck_velocity: float = Field(default=0.01, gt=0.0, le=10.0, description="rad/s, Stribeck decay speed")
+    backlash: float = Field(default=0.0, ge=0.0, le=0.1, description="rad total dead band in the gear; off = 0")
+    joint_stiffness: float = Field(default=0.0, ge=0.0, le=1.0e6,
+                                   description="N m/rad motor-to-link elasticity; 0 = rigid (above 1e6 the "
+                                               "2 ms physics sub-step is no longer stable)")
+    joint_damping: float = Field(default=0.0, ge=0.0, le=1.0e5, description="N m s/rad across the elastic gear")
+    te_amplitude: float = Field(default=0.0, ge=0.0, le=0.01, description="rad harmonic-drive transmission error")
+    te_harmonic: float = Field(default=2.0, gt=0.0, le=10.0, description="cycles per wave-generator turn")
+    te_phase: float = Field(default=0.0, ge=-7.0, le=7.0, description="rad")
+    encoder_bias: float = Field(default=0.0, ge=-0.1, le=0.1, description="rad added to the resolver reading")
+    feedback_latency_cycles: int = Field(default=0, ge=0, le=20, description="SYNC cycles the reported values lag")
+    torque_limit: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m motor side saturation; 0 = none")
+    gravity_torque: float = Field(default=0.0, ge=0.0, le=1.0e5,
+                                  description="N m load torque with the link horizontal (tau = G cos(q + angle)); off = 0")
+    gravity_angle: float = Field(default=0.0, ge=-7.0, le=7.0, description="rad, where the load torque peaks")
+    payload_lever: float = Field(default=0.0, ge=-10.0, le=10.0, description="m from this joint axis to the payload")
+    torque_noise: float = Field(default=0.0, ge=0.0, le=1.0e3, description="N m rms (joint side) on the reported torque")
 
 
 class EndEffectorParams(Strict):
@@ -54,6 +82,16 @@ class FtParams(Strict):
     noise_force: float = Field(default=0.0, ge=0.0, le=100.0, description="N rms; off = 0")
     noise_torque: float = Field(default=0.0, ge=0.0, le=100.0, description="N m rms; off = 0")
     bias: tuple[float, float, float, float, float, float] = (0.0,) * 6
+    drift: tuple[float, float, float, float, float, float] = Field(default=(0.0,) * 6, description="per s; off = 0")
+    scale_error: tuple[float, float, float, float, float, float] = Field(default=(0.0,) * 6,
+                                                                        description="fraction; off = 0")
+    temp_coefficient: tuple[float, float, float, float, float, float] = Field(
+        default=(0.0,) * 6, description="N (N m) per K from the profile's reference; off = 0")
+
+
+class PayloadParams(Strict):
+    mass_error: float = Field(default=0.0, ge=-1000.0, le=1000.0, description="kg more than the nominal payload")
+    com_error: float = Field(default=0.0, ge=-1.0, le=1.0, description="m along each joint's payload lever")
 
 
 class PlantConfig(Strict):
@@ -62,11 +100,27 @@ class PlantConfig(Strict):
     joints: list[JointParams] = Field(default_factory=list, description="per-joint overrides (in bus order)")
     end_effector: EndEffectorParams = EndEffectorParams()
     ft: FtParams = FtParams()
+    gravity: bool = Field(default=True, description="joint load torques (gravity_torque, payload) act; false = orbit")
+    payload: PayloadParams = PayloadParams()
+    temperature: TemperatureProfile = Field(default_factory=TemperatureProfile,
+                                            description="link/sensor temperature over the run (thermal effects)")
+    geometry: GeometryErrors = GeometryErrors()
+    laser: LaserTarget | None = None   # a laser ranger on the tool, served on a pty
+    contact: ContactConfig | None = None   # the ORU cell's contact world (firmware_sim/contact)
     seed: int = 0
 
 
 def load_plant_config(path: str | Path | None) -> PlantConfig:
     return PlantConfig() if path is None else load_toml_model(path, PlantConfig)
+
+
+class Environment(Protocol):
+    """What the arm touches (contact world, gravity of held payloads).
+
+    Called once per physics sub-step after the joints moved; sets ``plant.wrench`` (what the
+    F/T sensor feels, sensor frame) and each joint's ``external_torque``."""
+
+    def step(self, plant: "Plant", h: float) -> None: ...
 
 
 # controller(s, q_measured, qd_measured) -> motor torque, s in (0, 1] through the SYNC period
@@ -85,6 +139,24 @@ class JointModel:
     external_torque: float = 0.0       # N m at the joint from the environment (contact, later)
     controller: Controller | None = None
     max_motor_torque: float = math.inf  # drive torque limit, N m motor side
+    load_amplitude: float = 0.0        # N m gravity/payload load torque amplitude (set by Plant.create)
+    theta: float = math.nan            # motor angle in joint units (gear output before play/error)
+    thetad: float = 0.0
+    feedback: DelayLine | None = None  # reported (q, qd) lag the physics by whole SYNC cycles
+    noise_rng: random.Random | None = None
+    torque_reported: float = 0.0       # motor torque as the drive reports it (with sensor noise), N m
+
+    # Stiffness standing in for a rigid gear when only backlash is set (rad play needs a
+    # motor-side state); stable with the default 1 ms..2 ms sub-step.
+    RIGID_GEAR_STIFFNESS = 1.0e5
+
+    def __post_init__(self) -> None:
+        if math.isnan(self.theta):
+            self.theta = self.q
+        lag = self.params.feedback_latency_cycles
+        if lag > 0:
+            self.feedback = DelayLine(lag, self.q_measured)
+            self.feedback_velocity = DelayLine(lag, 0.0)
 
     @property
     def effective_inertia(self) -> float:
@@ -93,30 +165,103 @@ class JointModel:
 
     @property
     def q_measured(self) -> float:
+        q = self.q + self.params.encoder_bias
         quantum = self.params.resolver_arcsec * ARCSEC
         if quantum <= 0.0:
-            return self.q
-        return round(self.q / quantum) * quantum
+            return q
+        return round(q / quantum) * quantum
+
+    @property
+    def q_reported(self) -> float:
+        """Position the drive reports (TPDO): the resolver reading, late by the feedback latency."""
+        return self.q_measured if self.feedback is None else self.feedback.output
+
+    @property
+    def qd_reported(self) -> float:
+        return self.qd if self.feedback is None else self.feedback_velocity.output
+
+    def end_cycle(self) -> None:
+        """Called once per SYNC period after the physics: feeds the feedback delay line."""
+        if self.feedback is not None:
+            self.feedback.push(self.q_measured)
+            self.feedback_velocity.push(self.qd)
+        noise = self.params.torque_noise
+        self.torque_reported = self.motor_torque
+        if noise > 0.0 and self.noise_rng is not None:
+            self.torque_reported += self.noise_rng.gauss(0.0, noise / self.params.gear_ratio)
+
+    @property
+    def two_mass(self) -> bool:
+        return self.params.joint_stiffness > 0.0 or self.params.backlash > 0.0
+
+    def _friction(self, v: float) -> float:
+        p = self.params
+        return friction_torque(v, p.coulomb_friction, p.viscous_friction, p.stribeck_friction, p.stribeck_velocity)
+
+    def _load(self) -> float:
+        if self.load_amplitude == 0.0:
+            return 0.0
+        return self.load_amplitude * math.cos(self.q + self.params.gravity_angle)
 
     def substep(self, s: float, h: float) -> None:
         tau_m = 0.0
         if self.controller is not None:
-            tau_m = self.controller(s, self.q_measured, self.qd)
-        tau_m = max(-self.max_motor_torque, min(self.max_motor_torque, tau_m))
+            # velocity feedback from the motor encoder (collocated): with an elastic or loose
+            # gear, damping on the link speed alone would make the servo ring
+            tau_m = self.controller(s, self.q_measured, self.thetad if self.two_mass else self.qd)
+        limit = self.max_motor_torque
+        if self.params.torque_limit > 0.0:
+            limit = min(limit, self.params.torque_limit)
+        tau_m = max(-limit, min(limit, tau_m))
         self.motor_torque = tau_m
         if self.brake_engaged or self.stalled:
-            self.qd = 0.0
+            self.qd = self.thetad = 0.0
             return
         p = self.params
-        tau = tau_m * p.gear_ratio * p.gear_efficiency - p.viscous_friction * self.qd - self.external_torque
-        if p.coulomb_friction > 0.0:
-            if abs(self.qd) > 1e-6:
-                tau -= math.copysign(p.coulomb_friction, self.qd)
-            elif abs(tau) <= p.coulomb_friction:
-                tau = 0.0
-            else:
-                tau -= math.copysign(p.coulomb_friction, tau)
-        self.qd += tau / self.effective_inertia * h   # semi-implicit Euler
+        drive = tau_m * p.gear_ratio * p.gear_efficiency
+        if self.two_mass:
+            self._substep_two_mass(drive, h)
+            return
+        tau = drive - self.external_torque - self._load()
+        v = self.thetad
+        static = static_friction(p.coulomb_friction, p.stribeck_friction)
+        if abs(v) > 1e-6 or static == 0.0:
+            tau -= self._friction(v)
+        elif abs(tau) <= static:
+            tau = 0.0
+            self.thetad = 0.0
+        else:
+            tau -= math.copysign(static, tau)
+        self.thetad += tau / self.effective_inertia * h   # semi-implicit Euler
+        self.theta += self.thetad * h
+        if p.te_amplitude > 0.0:
+            args = (p.te_amplitude, p.te_harmonic, p.te_phase, p.gear_ratio)
+            self.q = self.theta + transmission_error(self.theta, *args)
+            self.qd = self.thetad * (1.0 + transmission_error_slope(self.theta, *args))
+        else:
+            self.q, self.qd = self.theta, self.thetad
+
+    def _substep_two_mass(self, drive: float, h: float) -> None:
+        """Motor and link as two inertias joined by the gear: stiffness, play, transmission error."""
+        p = self.params
+        stiffness = p.joint_stiffness or self.RIGID_GEAR_STIFFNESS
+        j_motor = p.motor_inertia * p.gear_ratio ** 2
+        j_link = max(p.link_inertia, 1e-3)
+        damping = p.joint_damping or 0.2 * math.sqrt(stiffness * j_motor * j_link / (j_motor + j_link))
+        out = self.theta + transmission_error(self.theta, p.te_amplitude, p.te_harmonic, p.te_phase, p.gear_ratio)
+        deflection = dead_zone(out - self.q, p.backlash)
+        coupling = stiffness * deflection + (damping * (self.thetad - self.qd) if deflection != 0.0 else 0.0)
+        self.thetad += (drive - coupling) / j_motor * h
+        self.theta += self.thetad * h
+        tau = coupling - self.external_torque - self._load()
+        static = static_friction(p.coulomb_friction, p.stribeck_friction)
+        if abs(self.qd) > 1e-6 or static == 0.0:
+            tau -= self._friction(self.qd)
+            self.qd += tau / j_link * h
+        elif abs(tau) > static:
+            self.qd += (tau - math.copysign(static, tau)) / j_link * h
+        else:
+            self.qd = 0.0
         self.q += self.qd * h
 
 
@@ -149,6 +294,7 @@ class Plant:
     joints: list[JointModel] = field(default_factory=list)
     ee: EndEffectorModel | None = None
     wrench: list[float] = field(default_factory=lambda: [0.0] * 6)   # at the F/T sensor, N and N m
+    environment: Environment | None = None
     time: float = 0.0
     steps: int = 0
 
@@ -158,9 +304,14 @@ class Plant:
         joints = []
         for i in range(n_joints):
             p = config.joints[i] if i < len(config.joints) else config.joint
-            joints.append(JointModel(params=p, q=p.initial_position, temperature=p.temperature))
+            joints.append(JointModel(params=p, q=p.initial_position, temperature=p.temperature,
+                                     load_amplitude=_load_amplitude(config, p),
+                                     noise_rng=random.Random(config.seed * 1000 + i + 1)))
         plant = cls(config=config, joints=joints, ee=EndEffectorModel(config.end_effector))
         plant._rng = random.Random(config.seed)
+        if config.contact is not None:
+            from firmware_sim.contact.world import build_contact_world
+            plant.environment = build_contact_world(config.contact, plant)
         return plant
 
     def step(self, dt: float) -> None:
@@ -172,15 +323,56 @@ class Plant:
                 joint.substep(s, h)
             if self.ee is not None:
                 self.ee.step(h)
+            if self.environment is not None:
+                self.environment.step(self, h)
+        for joint in self.joints:
+            joint.end_cycle()
         self.time += dt
         self.steps += 1
+
+    @property
+    def true_model(self) -> KinematicModel:
+        """The arm as built (nominal arm file + the plant's hidden geometry errors)."""
+        return self.config.geometry.true_model(self.config.temperature.delta(self.time))
+
+    @property
+    def q_link(self) -> np.ndarray:
+        """True link-side joint angles, rad (not what the resolvers report)."""
+        return np.array([j.q for j in self.joints])
+
+    def tool_pose(self) -> np.ndarray:
+        """True 4x4 base_T_tool of the arm now."""
+        model = self.true_model
+        # Read from the simulator's SYNC thread and from device threads (laser ranger, camera):
+        # each thread gets its own kinematics scratch.
+        local = self.__dict__.setdefault("_kin_local", threading.local())
+        data = getattr(local, "data", None)
+        # KinematicData precomputes from its model: a new one when the model changes (thermal growth)
+        if data is None or data.nq != model.nq or getattr(local, "model", None) is not model:
+            data = local.data = KinematicData(model)
+            local.model = model
+        return fk(model, data, self.q_link).copy()
 
     def ft_reading(self) -> list[float]:
         """What the F/T sensor measures: the wrench plus (optional) bias and noise."""
         ft = self.config.ft
         rng = getattr(self, "_rng", random)
+        reading = ft_sensor_error(self.wrench, self.time, self.config.temperature.delta(self.time), ft.bias,
+                                  ft.drift, ft.scale_error, ft.temp_coefficient)
         out = []
-        for i, w in enumerate(self.wrench):
+        for i, w in enumerate(reading):
             noise = ft.noise_force if i < 3 else ft.noise_torque
-            out.append(w + ft.bias[i] + (rng.gauss(0.0, noise) if noise > 0.0 else 0.0))
+            out.append(w + (rng.gauss(0.0, noise) if noise > 0.0 else 0.0))
         return out
+
+
+GRAVITY = 9.81
+
+
+def _load_amplitude(config: PlantConfig, p: JointParams) -> float:
+    """Gravity load torque amplitude on one joint: its own load plus the payload error."""
+    if not config.gravity:
+        return 0.0
+    payload = config.payload
+    lever = p.payload_lever + (payload.com_error if p.payload_lever else 0.0)
+    return p.gravity_torque + payload.mass_error * GRAVITY * lever

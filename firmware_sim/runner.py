@@ -87,6 +87,13 @@ class Simulator:
             if control_node_id in self.nodes:
                 raise ValueError(f"control node ID {control_node_id} is used by a device of the bus config")
             self.control = SimControlNode(control_node_id, self)
+        self.laser = None
+        if self.plant.config.laser is not None:
+            from firmware_sim.laser_ranger import LaserRangerSim, tool_plane_distance
+            target = self.plant.config.laser
+            self.laser = LaserRangerSim(tool_plane_distance(self.plant.tool_pose, target.plane[:3], target.plane[3]),
+                                        target.ranger_config())
+        self.camera = None        # firmware_sim.camera.service.CameraService, see attach_camera
         self.stats = SimStats()
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
@@ -101,15 +108,32 @@ class Simulator:
     # ------------------------------------------------------------------ public
     def start(self) -> "Simulator":
         self.bus = open_bus(self.bus_spec)
-        self._notifier = can.Notifier(self.bus, [_Listener(self)], timeout=0.1)
+        listener = _Listener(self)
+        self._notifier = can.Notifier(self.bus, [listener], timeout=0.1)
+        if hasattr(self.bus, "add_inline_listener"):
+            self.bus.add_inline_listener(listener)   # in-process bus: no thread hop per frame
         for node in self.nodes.values():
             node.power_on()                       # each sends its boot-up message
         self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="sim-heartbeat", daemon=True)
         self._hb_thread.start()
+        if self.laser is not None:
+            self.laser.start()
         return self
+
+    def attach_camera(self, sink, scene=None, frame_rate: float | None = None):
+        """Serve the eye-in-hand camera from this plant into `sink` (ShmFrameRing for another
+        process, LocalFrameSource in-process); renders on its own thread."""
+        from firmware_sim.camera.service import CameraService
+        from controller.config.scene import DEFAULT_SCENE
+        self.camera = CameraService.from_files(self.plant, sink, scene or DEFAULT_SCENE, frame_rate).start()
+        return self.camera
 
     def stop(self) -> None:
         self._stop.set()
+        if self.camera is not None:
+            self.camera.stop()
+        if self.laser is not None:
+            self.laser.stop()
         if self._hb_thread is not None:
             self._hb_thread.join(1.0)
         if self._notifier is not None:
@@ -236,6 +260,8 @@ class Simulator:
             for node in nodes:
                 node.on_sync_begin(dt)
             self.plant.step(dt)
+            if self.camera is not None:       # exposure snapshot only; rendering is on its own thread
+                self.camera.on_sync(self.stats.syncs)
             for node in nodes:
                 node.on_sync_end(dt)
             for node in nodes:

@@ -23,6 +23,10 @@ if [ "$(uname -s)" = Linux ] && [ "$(uname -m)" = x86_64 ] && [ "${SPACEARM_NO_V
     compgen -G "/lib/modules/*/kernel/drivers/net/can/vcan.ko*" >/dev/null && compgen -G "/boot/vmlinuz-*" >/dev/null \
         || need_apt+=(linux-image-amd64)
 fi
+# The browser console (console/web): three.js from Debian (served from /usr/share/javascript,
+# never fetched at run time) and Chromium for its end-to-end test (Playwright drives it).
+dpkg -s libjs-three >/dev/null 2>&1 || need_apt+=(libjs-three)
+[ -x /usr/bin/chromium ] || need_apt+=(chromium)
 for extra in ${SPACEARM_APT_EXTRA:-}; do need_apt+=("$extra"); done
 if ((${#need_apt[@]})); then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"

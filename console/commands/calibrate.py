@@ -2,11 +2,14 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import typer
 
+from console.client import DEFAULT_API
 from console.errors import CommandFailed, friendly_errors
 
 STUDIES = ("laser-ranger", "ekf")
@@ -119,5 +122,84 @@ def register(app: typer.Typer) -> None:
             raise CommandFailed(f"FR3 data not found: {path}")
         text, _ = fr3_study(splits=splits, seed=seed, path=path)
         print(text)
+
+    @cal.command("laser")
+    @friendly_errors
+    def laser(port: str = typer.Option(..., "--port", help="Laser ranger serial device (e.g. /dev/ttyUSB0, or the "
+                                                            "pty `spacearm sim` prints)."),
+              arm: Path = typer.Option(Path("configs/arm/space_robot_6dof_laser.toml"), "--arm",
+                                       help="Nominal arm file the daemon runs (laser-ranger paper arm)."),
+              configs: int = typer.Option(50, "--configs", min=10, max=500, help="Identification postures (O3-optimal)."),
+              candidates: int = typer.Option(101, "--candidates", min=10, max=10000),
+              validation: int = typer.Option(20, "--validation", min=0, max=500, help="Held-out postures."),
+              repetitions: int = typer.Option(10, "--repetitions", min=1, max=1000, help="Readings per posture."),
+              speed: float = typer.Option(1.0, "--speed", min=0.05, max=1.0, help="Fraction of the joint limits."),
+              seed: int = typer.Option(0, "--seed"),
+              apply: Optional[Path] = typer.Option(None, "--apply", help="Write the calibrated arm file here."),
+              data_out: Optional[Path] = typer.Option(None, "--data-out", help="Save the readings (CSV, plane kind)."),
+              api: str = typer.Option(DEFAULT_API, "--api", envvar="SPACEARM_API"),
+              token: Optional[str] = typer.Option(None, "--token", envvar="SPACEARM_TOKEN"),
+              as_json: bool = typer.Option(False, "--json")) -> None:
+        """On-orbit laser-ranger calibration on the running daemon: move, measure, identify, validate."""
+        from console.arm_session import DaemonArm
+        from console.client import ApiClient
+        from controller.calibration.datafile import write_measurements
+        from controller.calibration.laser_routine import (CalibrationRunError, calibration_section,
+                                                          run_laser_calibration, write_calibrated_arm)
+        from controller.calibration.study_laser import setup as laser_setup
+        from drivers.laser_ranger import LaserRanger, NoHit, RangerError
+
+        st = laser_setup(arm)
+        with ApiClient(api, token) as client, LaserRanger(port) as ranger:
+            session = DaemonArm(client, speed=speed)
+            status = session.status()
+            if len(status.get("joints", [])) != st.model.kin.nq or status.get("arm") != st.model.kin.name:
+                raise CommandFailed(f"the daemon runs arm {status.get('arm')!r}, not {st.model.kin.name!r} ({arm})")
+            try:
+                info = ranger.info()
+            except RangerError as exc:
+                raise CommandFailed(f"laser ranger on {port} does not answer: {exc}") from None
+
+            def measure():
+                try:
+                    return ranger.average(repetitions)
+                except NoHit:
+                    return None
+
+            def progress(phase: str, step: int, total: int) -> None:
+                if not as_json:
+                    print(f"\r  {phase:<14} posture {step:3d}/{total}", end="", file=sys.stderr, flush=True)
+
+            session.enable()
+            try:
+                result = run_laser_calibration(
+                    st, session.move_to, measure, session.q(), m=configs, n_candidates=candidates,
+                    n_validation=validation, sigma=info.sigma / np.sqrt(repetitions), seed=seed,
+                    progress=progress)
+            except CalibrationRunError as exc:
+                raise CommandFailed(str(exc)) from None
+            if not as_json:
+                print(file=sys.stderr)
+        if data_out is not None:
+            write_measurements(data_out, result.Q, "plane", result.h)
+        section = calibration_section(st, result, str(data_out or ""))
+        if apply is not None:
+            write_calibrated_arm(arm, section, apply)
+        summary = {"configurations": len(result.Q), "skipped": result.skipped, "status": result.fit.status,
+                   "residual_rms": result.residual_rms, "validation_rms_before": result.validation_rms_before,
+                   "validation_rms_after": result.validation_rms_after, "seconds": result.seconds,
+                   "errors": result.errors, "applied_to": str(apply) if apply else None}
+        if as_json:
+            print(json.dumps(summary))
+            return
+        print(f"identified {len(result.errors)} parameters from {len(result.Q)} postures "
+              f"({result.skipped} skipped) in {result.seconds:.1f} s: {result.fit.status}")
+        print(f"  identification residual RMS {result.residual_rms * 1e3:.4f} mm")
+        print(f"  held-out distance residual RMS: nominal {result.validation_rms_before * 1e3:.4f} mm -> "
+              f"calibrated {result.validation_rms_after * 1e3:.4f} mm")
+        for name, v in sorted(result.errors.items()):
+            print(f"  {name:<10} {_fmt_value(name, v):>16}")
+        if apply is not None:
+            print(f"calibrated arm file written: {apply} (start the daemon with --arm {apply})")
 
     app.add_typer(cal, name="calibrate")

@@ -29,7 +29,9 @@ def register(app: typer.Typer) -> None:
                token: str = typer.Option(None, envvar="SPACEARM_TOKEN", help="API token (required with --expose)."),
                record_dir: Path = typer.Option(Path("runs"), help="Where recordings go."),
                record: bool = typer.Option(True, "--record/--no-record", help="Record every cycle from start."),
-               max_cycles: int = typer.Option(0, help="Stop after this many cycles (0: run until signalled).")) -> None:
+               max_cycles: int = typer.Option(0, help="Stop after this many cycles (0: run until signalled)."),
+               camera: str = typer.Option(None, "--camera", help="Shared-memory frame ring of the eye-in-hand "
+                                          "camera (spacearm sim --camera NAME); enables `approach`.")) -> None:
         """Run the controller daemon until SIGINT/SIGTERM; the arm starts disabled, brakes on."""
         if clock not in ("realtime", "lockstep"):
             raise CommandFailed(f"--clock must be realtime or lockstep, got {clock!r}")
@@ -38,7 +40,7 @@ def register(app: typer.Typer) -> None:
         options = DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock, period=period,
                                 api=api, expose=expose, token=token,
                                 record_dir=record_dir if record else None,
-                                thresholds=CycleThresholds())
+                                thresholds=CycleThresholds(), camera=camera)
         try:
             controller = Daemon(options)
         except ApiError as exc:

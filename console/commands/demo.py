@@ -20,6 +20,7 @@ from console.errors import CommandFailed, friendly_errors
 from controller.daemon.command_api import ApiError
 from controller.daemon.daemon import Daemon, DaemonOptions
 from controller.recording.csv_export import export_csv
+from controller.scenarios.changeout import ChangeoutFailed, run_changeout
 from controller.scenarios.checkout import CheckoutFailed, run_checkout
 from drivers.bus_config import DEFAULT_BUS_CONFIG
 from drivers.errors import DriverError
@@ -30,12 +31,17 @@ def register(app: typer.Typer) -> None:
     @app.command()
     @friendly_errors
     def demo(arm: Path = typer.Option(Path("configs/arm/oru_testbed_6dof.toml"), help="Arm file."),
-             plant: Path = typer.Option(Path("configs/plant/oru_testbed_nominal.toml"),
-                                        help="Simulated plant (the hidden truth)."),
+             plant: Path = typer.Option(None, help="Simulated plant (the hidden truth); default: the ORU "
+                                                   "cell (changeout) or the bare arm (checkout)."),
+             job: str = typer.Option("changeout", help="changeout (ORU paper Table 1, four stages) or "
+                                                       "checkout (the arm's functional checkout)."),
              bus_config: Path = typer.Option(DEFAULT_BUS_CONFIG, help="Bus file."),
              clock: str = typer.Option("realtime", help="realtime (20 ms wall-clock cycle) or lockstep (fast)."),
              record_dir: Path = typer.Option(Path("runs"), help="Where the recording goes.")) -> None:
-        """Main job: boot the simulated arm over CAN, run the checkout sequence, summarise."""
+        """Main job: boot the simulated arm over CAN, run the ORU changeout, summarise."""
+        if job not in ("changeout", "checkout"):
+            raise CommandFailed(f"--job: expected changeout or checkout, got {job!r}")
+        plant = plant or Path(CHANGEOUT_PLANT if job == "changeout" else "configs/plant/oru_testbed_nominal.toml")
         console = Console()
         bus = f"virtual:demo-{time.monotonic_ns()}"
         console.print(f"[bold]spacearm[/] main job: simulated devices + daemon on [cyan]{bus}[/] ({clock} clock)")
@@ -59,23 +65,53 @@ def register(app: typer.Typer) -> None:
                         tasks[index] = progress.add_task(name, total=1.0)
                     progress.update(tasks[index], completed=fraction)
 
-                result = run_checkout(daemon, on_progress)
+                if job == "changeout":
+                    overall = progress.add_task("ORU changeout", total=1.0)
+
+                    def on_stage(name: str, fraction: float) -> None:
+                        progress.update(overall, completed=fraction, description=name[:46])
+                    result = run_changeout(daemon, on_stage, simulator.plant.environment)
+                else:
+                    result = run_checkout(daemon, on_progress)
             daemon.request_stop()
             cycle_thread.join(timeout=5)
-        except (CheckoutFailed, DriverError, ApiError) as exc:
+        except (CheckoutFailed, ChangeoutFailed, DriverError, ApiError) as exc:
             raise CommandFailed(str(exc)) from None
         finally:
             if daemon is not None:
                 daemon.request_stop()
                 daemon.shutdown()
             simulator.stop()
-        _summary(console, result)
+        (_changeout_summary if job == "changeout" else _summary)(console, result)
         if result.recording:
             csv_path = Path(result.recording).with_suffix(".csv")
             exported = export_csv(result.recording, csv_path)
             console.print(f"recording: {result.recording} (+ {Path(result.recording).with_suffix('.can.log').name}, "
                           f"{csv_path.name}: {exported.rows} cycles"
                           + (f", {len(exported.gaps)} gaps" if exported.gaps else ", no gaps") + ")")
+
+
+CHANGEOUT_PLANT = "configs/oru/plant_cell.toml"
+
+
+def _changeout_summary(console: Console, result) -> None:
+    table = Table(title="ORU changeout summary")
+    for column in ("stage", "arm time s", "peak contact force N", "peak torque N m", "peak insertion force N"):
+        table.add_column(column, justify="left" if column == "stage" else "right")
+    for s in result.stages:
+        table.add_row(f"{s.number} {s.name}", f"{s.arm_time:.1f}", f"{s.peak_force:.2f}", f"{s.peak_torque:.3f}",
+                      f"{s.peak_insert_force:.2f}")
+    console.print(table)
+    for where, (position, angle) in result.seat_errors.items():
+        console.print(f"final pose error (simulator truth) {where}: {1e3 * position:.2f} mm / "
+                      f"{math.degrees(angle):.3f} deg")
+    for note in result.notes:
+        console.print(f"note: {note}")
+    s = result.stats
+    console.print(f"changeout {result.arm_time:.1f} s arm time; {result.cycles} cycles in {result.wall_time:.1f} s wall; "
+                  f"period error median {1e3 * s['period_error_median']:.3f} ms, p99 {1e3 * s['period_error_p99']:.3f} ms, "
+                  f"max {1e3 * s['period_error_max']:.3f} ms; execution p99 {1e3 * s['execution_p99']:.3f} ms; "
+                  f"overruns {s['overruns']}")
 
 
 def _summary(console: Console, result) -> None:

@@ -133,6 +133,9 @@ def register(app: typer.Typer) -> None:
             api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
             wait: bool = WAIT_OPTION) -> None:
         """Move one joint by DELTA (jerk-limited, within its limits)."""
+        if not wait:
+            raise CommandFailed("jog --no-wait: a jog stops when its console disconnects (command "
+                                "watchdog); use `move joints --no-wait` for an unattended motion")
         [angle] = _angles([delta])
         _motion("jog", api, token, as_json, wait, joint=joint, delta=angle, speed=speed)
 

@@ -2,6 +2,8 @@
 
     spacearm sim --bus loopback:arm [--plant PLANT.toml] [--bus-config configs/bus/arm.toml]
 
+With a `[laser]` section in the plant file it also serves the tool's laser ranger on a
+pseudo-terminal and prints "spacearm sim: laser ranger on /dev/pts/N" first.
 Prints one line "spacearm sim: N nodes ready on BUS" when all nodes have sent their boot-up
 message, then runs until SIGINT/SIGTERM (or --duration seconds).
 """
@@ -17,10 +19,15 @@ import typer
 from drivers.bus_config import DEFAULT_BUS_CONFIG
 
 READY_LINE = "spacearm sim: {n} nodes ready on {bus}"
+LASER_LINE = "spacearm sim: laser ranger on {port}"   # printed before READY_LINE
+
+
+CAMERA_LINE = "spacearm sim: camera frames in shared memory {name}"   # printed before READY_LINE
 
 
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
-            duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None) -> int:
+            duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
+            camera: Optional[str] = None) -> int:
     from controller.config.errors import ConfigError
     from drivers.transport import BusSpecError
     from firmware_sim.runner import Simulator
@@ -43,11 +50,28 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
     if threading.current_thread() is threading.main_thread():
         for sig in (signal.SIGTERM, signal.SIGINT):
             previous[sig] = signal.signal(sig, _stop)
+    ring = None
+    if camera:
+        from controller.vision.config import load_camera
+        from controller.vision.frames import ShmFrameRing
+        cam = load_camera()
+        try:
+            ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height, name=camera)
+        except FileExistsError:
+            sim.stop()
+            typer.echo(f"spacearm sim: shared memory {camera!r} exists (another sim running?)", err=True)
+            return 1
+        sim.attach_camera(ring)
+        typer.echo(CAMERA_LINE.format(name=ring.name))
+    if sim.laser is not None:
+        typer.echo(LASER_LINE.format(port=sim.laser.port))
     typer.echo(READY_LINE.format(n=len(sim.nodes), bus=bus))
     try:
         stop.wait(duration)
     finally:
         sim.stop()
+        if ring is not None:
+            ring.close()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if stats:
@@ -66,6 +90,9 @@ def register(app: typer.Typer) -> None:
         control_node: Optional[int] = typer.Option(
             None, "--control-node", min=1, max=127,
             help="also serve the fault-injection unit (configs/eds/sim_control.eds) at this node ID (tests)"),
+        camera: Optional[str] = typer.Option(
+            None, "--camera", help="render the eye-in-hand camera into this shared-memory frame ring "
+                                   "(give the daemon the same --camera NAME)"),
     ) -> None:
         """Run the simulated CANopen nodes (6 joint drives, end effector, F/T sensor)."""
-        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node))
+        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node, camera))

@@ -98,7 +98,7 @@ class SplitResult:
     held_rot_rms: dict[str, float]    # rad
 
 
-def _camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
+def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
                         huber: float = 3.5) -> Array:
     """Per-posture 6x6 residual covariance, estimated in the camera frame and rotated to the board.
 
@@ -136,7 +136,7 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     Qt = data.Q[train]
     reg = lm(Problem(em, "pose", Qt, meas, frames, sigma=np.array([1e-3] * 3 + [3e-3] * 3)))
     for _ in range(3):   # re-estimate the noise model from the residuals, refit
-        reg = lm(Problem(em, "pose", Qt, meas, frames, cov=_camera_covariances(reg, em, Qt), x0=reg.x))
+        reg = lm(Problem(em, "pose", Qt, meas, frames, cov=camera_covariances(reg, em, Qt), x0=reg.x))
     cands = em.dh_names(with_beta=False) + frames
     probe = Problem(em, "pose", Qt, meas, cands)
     ident = find_identifiable(probe, cands, Q=Qt)
@@ -145,7 +145,7 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
                       else prior_angle) for n in free])
     full = reg
     for _ in range(3):
-        full = lm(Problem(em, "pose", Qt, meas, free, cov=_camera_covariances(full, em, Qt),
+        full = lm(Problem(em, "pose", Qt, meas, free, cov=camera_covariances(full, em, Qt),
                           x0=full.x), x_prior=em.nominal, sigma_prior=prior)
     pos, rot = {}, {}
     for name, res in (("registration", reg), ("full", full)):

@@ -115,6 +115,36 @@ class ArmInfo(Strict):
     payload: float | None = Field(default=None, ge=0.0, le=1.0e5, description="kg")
 
 
+class Calibration(Strict):
+    """Identified corrections to the nominal rows above, with where they came from.
+
+    Written by `spacearm calibrate ... --apply`; the kinematic model adds them to the nominal
+    D-H values (per joint, bus order), so the nominal rows stay readable and the correction
+    can be removed by deleting this table."""
+    method: str = Field(min_length=1, description="e.g. 'laser-ranger plane, weighted LM'")
+    date: str = Field(min_length=1, description="UTC, ISO 8601")
+    data: str = Field(default="", description="measurement file the fit used")
+    configurations: int = Field(default=0, ge=0)
+    residual_rms: float = Field(default=0.0, ge=0.0, description="m, identification residual RMS")
+    validation_rms_before: float | None = Field(default=None, ge=0.0, description="m, held-out residual RMS, nominal")
+    validation_rms_after: float | None = Field(default=None, ge=0.0, description="m, held-out residual RMS, calibrated")
+    dtheta: list[float] = Field(default_factory=list, max_length=12, description="rad")
+    dalpha: list[float] = Field(default_factory=list, max_length=12, description="rad")
+    da: list[float] = Field(default_factory=list, max_length=12, description="m")
+    dd: list[float] = Field(default_factory=list, max_length=12, description="m")
+    dbeta: list[float] = Field(default_factory=list, max_length=12, description="rad")
+
+    @model_validator(mode="after")
+    def _small(self) -> "Calibration":
+        for name in ("dtheta", "dalpha", "dbeta"):
+            if any(abs(v) > 0.1 for v in getattr(self, name)):
+                raise ValueError(f"{name}: corrections above 0.1 rad are not a calibration; check units")
+        for name in ("da", "dd"):
+            if any(abs(v) > 0.1 for v in getattr(self, name)):
+                raise ValueError(f"{name}: corrections above 0.1 m are not a calibration; check units (m)")
+        return self
+
+
 class ArmConfig(Strict):
     arm: ArmInfo
     joints: list[Joint] = Field(min_length=1, max_length=12)
@@ -125,6 +155,7 @@ class ArmConfig(Strict):
     plane: Plane | None = None
     postures: dict[str, list[float]] = Field(default_factory=dict,
                                              description="named joint postures, rad")
+    calibration: Calibration | None = None
 
     @model_validator(mode="after")
     def _unique_names(self) -> "ArmConfig":
@@ -139,6 +170,12 @@ class ArmConfig(Strict):
                 if not joint.limits.lower <= value <= joint.limits.upper:
                     raise ValueError(f"posture {name!r}: {joint.name} = {value} is outside "
                                      f"[{joint.limits.lower}, {joint.limits.upper}]")
+        if self.calibration is not None:
+            for name in ("dtheta", "dalpha", "da", "dd", "dbeta"):
+                values = getattr(self.calibration, name)
+                if values and len(values) != len(self.joints):
+                    raise ValueError(f"calibration.{name} has {len(values)} values, the arm has "
+                                     f"{len(self.joints)} joints")
         return self
 
 

@@ -7,6 +7,8 @@ by ControllerCore. `stop` needs no lease: anyone watching may stop the arm.
 from __future__ import annotations
 
 import math
+import threading
+import time
 from concurrent.futures import TimeoutError as FutureTimeout
 from typing import Any, Callable, Literal
 
@@ -18,6 +20,7 @@ from controller.daemon.command_api import ApiError, Session
 from controller.daemon.core import CommandRefused, ControllerCore
 from controller.daemon.leases import ControlLease, LeaseError
 from controller.daemon.modes import PlannedMode
+from controller.daemon.watchdog import KeepAliveMode
 from controller.planning.errors import PlanningError
 
 
@@ -52,6 +55,12 @@ class MovePoseArgs(Args):
     speed: float = Field(default=1.0, gt=0.0, le=1.0)
 
 
+class ApproachArgs(Args):
+    target: str = Field(min_length=1, max_length=64, description="store name of the scene file")
+    dz: float = Field(default=0.10, gt=0.0, le=0.5, description="m, stand-off of the pre-contact pose")
+    holding: str | None = Field(default=None, min_length=1, max_length=64, description="ORU held by the end effector")
+
+
 class RecordArgs(Args):
     path: str | None = Field(default=None, max_length=4096)
 
@@ -77,6 +86,7 @@ class CommandHandlers:
         self.recorder_control = recorder_control
         self.dof = dof
         self.cycle_timeout = cycle_timeout
+        self._local = threading.local()   # the session of the request this API thread serves
         self.table: dict[str, tuple[type[Args], bool, Callable[[Args], Any]]] = {
             # name: (argument model, needs control lease, action)
             "ping": (NoArgs, False, lambda a: "pong"),
@@ -90,6 +100,7 @@ class CommandHandlers:
             "jog": (JogArgs, True, self._jog),
             "move_joints": (MoveJointsArgs, True, self._move_joints),
             "move_pose": (MovePoseArgs, True, self._move_pose),
+            "approach": (ApproachArgs, True, self._approach),
             "record.start": (RecordArgs, True, lambda a: self.recorder_control.start(a.path)),
             "record.stop": (NoArgs, True, lambda a: self.recorder_control.stop()),
         }
@@ -98,8 +109,11 @@ class CommandHandlers:
         entry = self.table.get(cmd)
         if entry is None:
             raise ApiError(f"unknown command {cmd!r}; known: {', '.join(sorted(self.table))}")
+        if session is not None:
+            session.last_seen = time.monotonic()   # keep-alive for the command watchdog
         model, needs_lease, action = entry
         parsed = _parse(model, args)
+        self._local.session = session
         try:
             if needs_lease:
                 self.lease.require(parsed.lease)
@@ -116,21 +130,40 @@ class CommandHandlers:
     def _take(self, a: TakeArgs) -> dict:
         return {"lease": self.lease.take(a.holder)}
 
-    def _start_motion(self, name: str, description: str, plan_from: Callable[[np.ndarray], Any]) -> Any:
+    def _start_motion(self, name: str, description: str, plan_from: Callable[[np.ndarray], Any],
+                      keepalive: bool = False) -> Any:
         """Plan in this (API) thread from the cycle's current target, then start in the cycle."""
         start = self._in_cycle(self.core.motion_start)
         try:
             plan = plan_from(start)
         except PlanningError as exc:
             raise ApiError(str(exc)) from None
-        mode = PlannedMode(name, plan, 0.0, description)
+        session = getattr(self._local, "session", None)
+        if keepalive and session is not None:
+            mode = KeepAliveMode(name, plan, 0.0, description, session=session)
+        else:
+            mode = PlannedMode(name, plan, 0.0, description)
         return self._in_cycle(lambda t, m: self.core.start_planned(t, m, mode, start))
+
+    def _approach(self, a: ApproachArgs) -> Any:
+        """Closed-loop approach (controller/daemon/approach_mode.py); needs a camera."""
+        factory = (getattr(self, "mode_factories", None) or {}).get("approach")
+        if factory is None:
+            raise ApiError("no camera attached to the daemon (start it with --camera): approach unavailable")
+        if not math.isfinite(a.dz):
+            raise ApiError("dz: must be finite")
+        try:
+            mode = factory(a.target, a.dz, a.holding)
+        except (KeyError, ValueError) as exc:
+            raise ApiError(str(exc).strip("'\"")) from None
+        return self._in_cycle(lambda t, m: self.core.start_planned(t, m, mode, None))
 
     def _jog(self, a: JogArgs) -> Any:
         if a.joint > self.dof:
             raise ApiError(f"joint: {a.joint} is not a joint of this {self.dof}-joint arm")
         return self._start_motion("jog", f"joint {a.joint} by {a.delta:+.4f} rad",
-                                  lambda q0: self.planner.jog(q0, a.joint - 1, a.delta, a.speed))
+                                  lambda q0: self.planner.jog(q0, a.joint - 1, a.delta, a.speed),
+                                  keepalive=True)
 
     def _move_joints(self, a: MoveJointsArgs) -> Any:
         if len(a.q) != self.dof:

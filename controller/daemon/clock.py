@@ -81,6 +81,11 @@ class LockstepClock:
         self.skipped_cycles = 0
 
     def next_tick(self) -> Tick:
+        # With the in-process bus a lockstep cycle never blocks, and Python's locks are not
+        # fair: without a yield here, threads that share the simulator's or the master's send
+        # lock (heartbeat producers, the API) can starve for hundreds of ms, and heartbeats
+        # that are due in wall time go missing.
+        time.sleep(0)
         self._cycle += 1
         wall = self._now()
         return Tick(self._cycle, self._cycle * self.period, wall, wall, 0)

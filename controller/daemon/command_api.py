@@ -20,6 +20,7 @@ import os
 import socket
 import socketserver
 import threading
+import time
 from dataclasses import dataclass, field
 from itertools import count
 from pathlib import Path
@@ -40,6 +41,7 @@ class Session:
     peer: str
     authenticated: bool
     closed: threading.Event = field(default_factory=threading.Event)
+    last_seen: float = field(default_factory=time.monotonic)   # last request (command watchdog)
 
 
 Handler = Callable[[Session, str, dict[str, Any]], Any]

@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from controller.daemon.modes import HoldMode, PlannedMode
+from controller.daemon.modes import HoldMode, Mode
 from controller.daemon.state import JointCommand, Measurement
 from controller.daemon.supervision import Finding, Supervisor
 from controller.planning.errors import PlanningError
@@ -54,7 +54,7 @@ class ControllerCore:
         self.motions_finished = 0
         self.joint_names = joint_names
         self.state = "disabled"
-        self.mode: HoldMode | PlannedMode | None = None
+        self.mode: Mode | None = None
         self.stop_reason: Finding | None = None
         self.events: list[Event] = []           # new events since the last drain
         self.last_target: np.ndarray | None = None
@@ -74,13 +74,13 @@ class ControllerCore:
     def update(self, m: Measurement) -> JointCommand:
         self.last_measurement = m
         self._apply_pending(m)
-        moving = self.state == "enabled" and isinstance(self.mode, PlannedMode)
+        moving = self.state == "enabled" and self.mode is not None and self.mode.moving
         if self.state in ("enabled", "enabling"):
             findings = self.supervisor.check(m, self.last_target, moving)
         else:
             # Disabled or stopped: still watch the nodes, but not motion-related limits.
             findings = [f for f in self.supervisor.check(m, None, False)
-                        if f.code in ("heartbeat_lost", "emcy", "bootup", "pdo_missing")]
+                        if f.code in ("heartbeat_lost", "emcy", "bootup", "pdo_missing", "ft_frozen")]
         if findings and self.state != "stopped":
             self.protective_stop(m.time, findings[0])
             for extra in findings[1:]:
@@ -100,13 +100,22 @@ class ControllerCore:
 
     def _command(self, m: Measurement) -> JointCommand:
         if self.state == "enabled" and self.mode is not None:
-            setpoint = self.mode.setpoint(self.motion_time)
-            if isinstance(self.mode, PlannedMode) and self.mode.finished(self.motion_time):
-                self._event(m.time, "motion", f"{self.mode.name} finished")
+            mode = self.mode
+            setpoint = mode.setpoint(self.motion_time, m)
+            failure = mode.failure()
+            if failure is not None:
+                # The mode cannot go on safely (lost marker, capture not confirmed, ...).
+                self.protective_stop(m.time, failure)
+                self.last_target = None
+                return JointCommand(m.q.copy(), np.zeros_like(m.q), enable=False)
+            devices = mode.device_commands()
+            if mode.moving and mode.finished(self.motion_time):
+                self._event(m.time, "motion", f"{mode.name} finished")
                 self.motions_finished = self.motions_started
                 self.mode = HoldMode(setpoint.q.copy())
             self.last_target = setpoint.q.copy()
-            return JointCommand(setpoint.q.copy(), setpoint.dq.copy(), enable=True)
+            return JointCommand(setpoint.q.copy(), setpoint.dq.copy(), enable=True,
+                                end_effector=devices.get("end_effector"))
         # Not enabled: targets follow the measurement so enabling never causes a jump.
         self.last_target = None
         return JointCommand(m.q.copy(), np.zeros_like(m.q), enable=self.state == "enabling")
@@ -145,6 +154,12 @@ class ControllerCore:
             raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first")
         if self.state in ("enabling", "enabled"):
             return self.state
+        faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
+        if faulted:
+            # Right after a reset the drives' fault reset takes a few cycles: refuse instead of
+            # enabling into a "drive in fault" protective stop.
+            raise CommandRefused(f"drive fault on {', '.join(faulted)}: reset first "
+                                 "(right after a reset: try again in a moment)")
         self.state = "enabling"
         self._enable_started = t
         self._event(t, "state", "enabling joints")
@@ -163,6 +178,10 @@ class ControllerCore:
 
     def cmd_reset(self, t: float, m: Measurement) -> str:
         if self.state != "stopped":
+            faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
+            if faulted and self.state == "disabled":
+                # e.g. after a daemon restart: the drives faulted when the controller vanished
+                self._event(t, "reset", f"fault reset of {', '.join(faulted)}")
             return self.state
         self.state = "disabled"
         self._event(t, "reset", f"reset after: {self.stop_reason}")
@@ -174,17 +193,20 @@ class ControllerCore:
         if self.state != "enabled":
             raise CommandRefused(f"arm is {self.state}; enable it first" if self.state != "stopped"
                                  else f"protective stop active ({self.stop_reason}); reset first")
-        if isinstance(self.mode, PlannedMode) and not self.mode.finished(self.motion_time):
+        if self.mode is not None and self.mode.moving and not self.mode.finished(self.motion_time):
             raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait")
         return (self.last_target if self.last_target is not None else m.q).copy()
 
-    def start_planned(self, t: float, m: Measurement, mode: PlannedMode, planned_from: np.ndarray) -> dict:
-        """Start a motion planned outside the cycle from `planned_from`, if still valid."""
+    def start_planned(self, t: float, m: Measurement, mode: Mode, planned_from: np.ndarray | None) -> dict:
+        """Start a motion planned outside the cycle from `planned_from` (if given and still
+        valid), or a reactive mode that plans as it goes (`planned_from` None)."""
         start = self.motion_start(t, m)
-        if not np.allclose(start, planned_from, atol=1e-9, rtol=0):
+        if planned_from is not None and not np.allclose(start, planned_from, atol=1e-9, rtol=0):
             raise CommandRefused("the arm moved while the motion was being planned; send it again")
         mode.start = self.motion_time
         self.mode = mode
         self.motions_started += 1
         self._event(t, "motion", f"{mode.name} started: {mode.description}")
-        return {"mode": mode.name, "duration": mode.plan.duration, "motion": self.motions_started}
+        plan = getattr(mode, "plan", None)
+        return {"mode": mode.name, "duration": plan.duration if plan is not None else None,
+                "motion": self.motions_started}

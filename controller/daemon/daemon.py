@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -23,7 +23,7 @@ from controller.daemon.core import ControllerCore, Event
 from controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from controller.daemon.hardware import CanopenHardware, with_drive_limits
 from controller.daemon.leases import ControlLease
-from controller.daemon.modes import PlannedMode
+from controller.daemon.modes import Mode
 from controller.daemon.recorder_thread import RecorderThread
 from controller.daemon.state import JointCommand, Measurement
 from controller.daemon.supervision import SupervisionLimits, Supervisor
@@ -44,6 +44,7 @@ class DaemonOptions:
     expose: bool = False
     token: str | None = None
     record_dir: Path | None = Path("runs")       # None: do not record
+    camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
 
 
@@ -84,6 +85,11 @@ class Daemon:
         self.hardware = CanopenHardware(self.network, lockstep=lockstep,
                                         realtime_budget=0.4 * options.period)
         self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
+        # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
+        # A factory builds a Mode from validated arguments; composite modes (the ORU task
+        # flow) build their sub-modes through the same registry.
+        self.mode_factories: dict[str, Callable[..., Mode]] = {}
+        self.vision = None                           # VisionWorker once a camera is attached
         self.recorder: RecorderThread | None = None
         self.snapshot: Snapshot | None = None
         self.event_log: list[dict[str, Any]] = []    # last events, for status
@@ -91,6 +97,9 @@ class Daemon:
         self._last_stats_time = -1.0
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
                                         RecordingControl(self), self.model.nq)
+        self.handlers.mode_factories = self.mode_factories   # the same dict: "approach" once a camera is attached
+        from controller.oru.install import install_oru   # here: it imports the daemon's handler types
+        self.oru = install_oru(self)                      # "impedance", "oru" modes and oru.* commands
         self.server: CommandServer | None = None
         if options.api:
             self.server = CommandServer(ApiAddress.parse(options.api), self.handlers.handle,
@@ -101,12 +110,27 @@ class Daemon:
         """Boot the CAN network (all nodes configured and operational), start recording and
         the command API. The arm comes up disabled with brakes on."""
         self.hardware.start()
+        if self.options.camera:
+            from controller.vision.frames import ShmFrameRing
+            self.attach_vision(ShmFrameRing.attach(self.options.camera))
         if self.options.record_dir is not None:
             self.start_recording(None)
         # One cycle so status has something to show before the API accepts requests.
         self.cycle_once()
         if self.server is not None:
             self.server.start()
+
+    def attach_vision(self, source) -> None:
+        """Run the vision pipeline on `source` (a FrameSource) on its own thread and register
+        mode_factories["approach"] (controller/daemon/approach_mode.py)."""
+        from controller.config.scene import load_scene
+        from controller.daemon.approach_mode import approach_factory
+        from controller.vision.config import load_mount
+        from controller.vision.worker import VisionWorker
+        self.vision = VisionWorker(source).start()
+        self.mode_factories["approach"] = approach_factory(
+            self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
+            self.vision.pipeline.marker.marker_T_oru, self.arm.cartesian, self.options.period)
 
     def run(self, max_cycles: int | None = None) -> None:
         cycles = 0
@@ -121,6 +145,8 @@ class Daemon:
         """Disable the drives (brakes on), stop the network, close the recording and API."""
         if self.server is not None:
             self.server.stop()
+        if self.vision is not None:
+            self.vision.stop()
         try:
             self.hardware.stop()
         finally:
@@ -203,6 +229,7 @@ class Daemon:
             "state": s.state, "mode": s.mode, "progress": s.progress, "stop_reason": s.stop_reason,
             "motions_finished": s.motions_finished,
             "time": s.tick.time, "cycle": s.tick.cycle, "sync_counter": m.sync_counter,
+            "woke_at": s.tick.woke_at,   # monotonic s (machine-wide): state latency, web console timing
             "clock": self.options.clock, "period": self.options.period, "bus": self.options.bus,
             "arm": self.model.name,
             "joints": [{"name": name, "q": float(m.q[i]), "q_cmd": float(s.command.q[i]),

@@ -101,7 +101,8 @@ class CanopenHardware:
                 self.network.disable_all()
         self._enabled = command.enable
         self.network.write(ArmCommand(joint_positions=list(command.q),
-                                      joint_velocities=list(command.dq) if len(command.dq) else None))
+                                      joint_velocities=list(command.dq) if len(command.dq) else None,
+                                      end_effector=command.end_effector))
 
     def stop(self) -> None:
         self.network.shutdown()

@@ -6,6 +6,7 @@ The hardware interface turns CANopen traffic into a `Measurement` each cycle and
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -39,3 +40,4 @@ class JointCommand:
     q: np.ndarray                # rad, CSP target
     dq: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad/s feed-forward
     enable: bool = True          # False: drives to quick stop and brakes
+    end_effector: Any = None     # drivers.od.EeCommand to send this cycle, or None

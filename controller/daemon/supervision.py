@@ -25,6 +25,16 @@ class SupervisionLimits:
     wrench_torque_limit: float = 30.0    # N m
     missing_pdo_cycles: int = 5          # consecutive cycles without a node's PDOs (100 ms at 50 Hz,
                                          # below the 250 ms heartbeat-loss detection)
+    # A wrench step this large from one cycle to the next is not a contact the arm can make
+    # at its speeds (ORU insertion forces build over many cycles): a sensor or cable fault.
+    ft_jump_force: float = 80.0          # N per cycle
+    ft_jump_torque: float = 15.0         # N m per cycle
+    # Frozen sensor: a live F/T sensor is never bit-for-bit constant (noise). The check arms
+    # itself once the reading has changed in `ft_live_changes` consecutive cycles (noise; a
+    # noise-free simulator with step changes never arms it) and then stops on
+    # `ft_frozen_cycles` identical readings in a row.
+    ft_frozen_cycles: int = 25           # 0.5 s at 50 Hz
+    ft_live_changes: int = 3
 
 
 @dataclass(frozen=True)
@@ -41,6 +51,10 @@ class Supervisor:
         self.limits = limits
         self.names = joint_names
         self._missing_count: dict[str, int] = {}
+        self._last_wrench: np.ndarray | None = None
+        self._wrench_changes = 0
+        self._wrench_same = 0
+        self._ft_live = False     # seen changing every cycle (noise): the frozen check is armed
 
     def check(self, m: Measurement, last_target: np.ndarray | None, moving: bool) -> list[Finding]:
         lim = self.limits
@@ -82,4 +96,33 @@ class Supervisor:
         elif force > lim.wrench_force_limit or torque > lim.wrench_torque_limit:
             findings.append(Finding("ft_limit", f"force/torque {force:.1f} N / {torque:.2f} N m above "
                                     f"limits {lim.wrench_force_limit:.0f} N / {lim.wrench_torque_limit:.0f} N m"))
+        findings.extend(self._check_ft_signal(m))
+        return findings
+
+    def _check_ft_signal(self, m: Measurement) -> list[Finding]:
+        """Jump and frozen checks on the F/T reading (skipped while any node's data is missing,
+        when the measurement repeats the last received values)."""
+        lim = self.limits
+        last, self._last_wrench = self._last_wrench, m.wrench.copy()
+        if last is None or m.missing:
+            self._wrench_same = 0
+            return []
+        findings = []
+        step = m.wrench - last
+        df, dt = float(np.linalg.norm(step[:3])), float(np.linalg.norm(step[3:]))
+        if df > lim.ft_jump_force or dt > lim.ft_jump_torque:
+            findings.append(Finding("ft_jump", f"force/torque sensor: reading jumped by {df:.1f} N / "
+                                    f"{dt:.2f} N m in one cycle (limits {lim.ft_jump_force:.0f} N / "
+                                    f"{lim.ft_jump_torque:.0f} N m)"))
+        if np.array_equal(step, np.zeros(6)):
+            self._wrench_same += 1
+            if not self._ft_live:
+                self._wrench_changes = 0
+        else:
+            self._wrench_same = 0
+            self._wrench_changes += 1
+            self._ft_live = self._ft_live or self._wrench_changes >= lim.ft_live_changes
+        if lim.ft_frozen_cycles > 0 and self._ft_live and self._wrench_same >= lim.ft_frozen_cycles:
+            findings.append(Finding("ft_frozen", f"force/torque sensor: reading frozen (identical for "
+                                    f"{self._wrench_same} cycles)"))
         return findings

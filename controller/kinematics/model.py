@@ -124,11 +124,12 @@ class KinematicModel:
                      + np.linalg.norm(self.base[:3, 3]) + np.linalg.norm(self.tool[:3, 3]))
 
     @classmethod
-    def from_config(cls, config: ArmConfig) -> "KinematicModel":
-        """Build the model from a validated arm file."""
+    def from_config(cls, config: ArmConfig, calibrated: bool = True) -> "KinematicModel":
+        """Build the model from a validated arm file, with its [calibration] corrections
+        unless `calibrated` is False."""
         conv = config.arm.convention
         joints = config.joints
-        return cls(
+        model = cls(
             convention=conv,
             a=[j.a for j in joints],
             alpha=[j.alpha for j in joints],
@@ -147,6 +148,11 @@ class KinematicModel:
             joint_names=[j.name for j in joints],
             name=config.arm.name,
         )
+        c = config.calibration
+        if c is None or not calibrated:
+            return model
+        return model.with_errors(dtheta=c.dtheta or None, dalpha=c.dalpha or None, da=c.da or None,
+                                 dd=c.dd or None, dbeta=c.dbeta or None)
 
     def with_errors(self, *, dtheta: ArrayLike | None = None, dalpha: ArrayLike | None = None,
                     da: ArrayLike | None = None, dd: ArrayLike | None = None,

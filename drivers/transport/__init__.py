@@ -12,7 +12,10 @@ real CAN controller.
 """
 from __future__ import annotations
 
+import queue
 import sys
+import threading
+import time
 
 import can
 
@@ -77,13 +80,84 @@ def _enlarge_rcvbuf(bus: can.BusABC, size: int = SOCKETCAN_RCVBUF) -> None:
             continue
 
 
+class _FastVirtual:
+    """python-can's VirtualBus, made cheap enough for lockstep runs.
+
+    * Its send() deep-copies every frame once per receiver (~25 us each); a CAN frame is a few
+      plain fields, so each receiver gets a new Message built from them instead.
+    * A receiver may register *inline* listeners (`add_inline_listener`): frames for it are
+      then handled in the sender's thread, during send(), instead of waking the receiver's
+      Notifier thread. In a lockstep cycle this removes every thread hop (SYNC -> simulated
+      nodes -> TPDOs -> controller), the largest cost left. Frames fall back to the receiver's
+      queue (and its Notifier) when delivery to it is already running in this thread or
+      frames are still queued for it, so order is kept and nothing recurses.
+
+    Listeners called inline must not take a lock the sending code may hold; the simulator's
+    and the ArmNetwork's listeners only take their own state locks.
+    """
+
+    def add_inline_listener(self, listener: can.Listener) -> None:
+        self.queue.inline_listeners = getattr(self.queue, "inline_listeners", []) + [listener]
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        self._check_if_open()
+        timestamp = msg.timestamp if self.preserve_timestamps else time.time()
+        data = bytes(msg.data)
+        all_sent = True
+        for bus_queue in list(self.channel):
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            copy = can.Message(timestamp=timestamp, arbitration_id=msg.arbitration_id,
+                               is_extended_id=msg.is_extended_id, is_remote_frame=msg.is_remote_frame,
+                               is_error_frame=msg.is_error_frame, channel=self.channel_id, dlc=msg.dlc,
+                               data=data, is_fd=msg.is_fd, is_rx=bus_queue is not self.queue,
+                               bitrate_switch=msg.bitrate_switch, error_state_indicator=msg.error_state_indicator,
+                               check=False)
+            listeners = getattr(bus_queue, "inline_listeners", None)
+            if listeners and bus_queue.empty() and _enter_inline(bus_queue):
+                try:
+                    for listener in listeners:
+                        try:
+                            listener.on_message_received(copy)
+                        except Exception as exc:   # a receiver's bug must not fail the sender
+                            listener.on_error(exc)
+                finally:
+                    _leave_inline(bus_queue)
+                continue
+            try:
+                bus_queue.put(copy, block=True, timeout=timeout)
+            except queue.Full:
+                all_sent = False
+        if not all_sent:
+            raise can.CanOperationError("Could not send message to one or more recipients")
+
+
+_inline = threading.local()
+
+
+def _enter_inline(bus_queue) -> bool:
+    active = getattr(_inline, "active", None)
+    if active is None:
+        active = _inline.active = set()
+    if id(bus_queue) in active:
+        return False
+    active.add(id(bus_queue))
+    return True
+
+
+def _leave_inline(bus_queue) -> None:
+    _inline.active.discard(id(bus_queue))
+
+
 _CHECKED: dict[str, type] = {}
 
 
 def _bus_class(kind: str) -> type:
     if kind not in _CHECKED:
         if kind == "virtual":
-            from can.interfaces.virtual import VirtualBus as base
+            from can.interfaces.virtual import VirtualBus
+
+            base = type("FastVirtualBus", (_FastVirtual, VirtualBus), {})
         else:
             from can.interfaces.socketcan import SocketcanBus as base
         _CHECKED[kind] = _checked(base)

@@ -84,6 +84,11 @@ class LoopbackHub:
         self._stop = False
         self._thread: threading.Thread | None = None
         self.frames_forwarded = 0
+        # Fault injection for tests (hil_tests/faults.py): the hub is the bus, so frames are
+        # lost or reordered here. fault_filter(channel, records) -> records to deliver now;
+        # disconnect requests cut every TCP client of a channel (they reconnect by themselves).
+        self.fault_filter = None
+        self._disconnect_requests: list[str] = []
 
     # ----------------------------------------------------------------- lifecycle
     @property
@@ -124,6 +129,10 @@ class LoopbackHub:
                             self._on_readable(client)
                         if mask & selectors.EVENT_WRITE and client.cid in self._clients:
                             self._flush(client)
+                while self._disconnect_requests:
+                    channel = self._disconnect_requests.pop()
+                    for client in list(self._channels.get(channel, ())):
+                        self._drop(client, "disconnected by fault injection")
                 now = time.monotonic()
                 for client in [c for c in self._clients.values() if c.channel is None]:
                     if now > client.hello_deadline:
@@ -140,6 +149,14 @@ class LoopbackHub:
             self._lsock.close()
             self._wake_r.close()
             self._wake_w.close()
+
+    def disconnect(self, channel: str) -> None:
+        """Cut every client of `channel` (thread-safe; done by the hub thread at once)."""
+        self._disconnect_requests.append(channel)
+        try:
+            self._wake_w.send(b"x")
+        except OSError:
+            pass
 
     # ----------------------------------------------------------------- internals
     def _accept(self) -> None:
@@ -211,6 +228,8 @@ class LoopbackHub:
                 self._drop(client, f"protocol error: {exc}")
                 return
             out.append(bytes((len(body) + 1, wire.T_FRAME)) + body)
+        if self.fault_filter is not None:
+            out = self.fault_filter(client.channel, out)
         if out:
             self._fan_out(client, b"".join(out), len(out))
 

@@ -1,0 +1,102 @@
+"""`spacearm oru run|pause|resume|abort|status`: the ORU changeout task flow on a running daemon.
+
+`run` starts the four stages of ORU paper Table 1 (or `--stages 1,2`) from the current
+pose and, with --wait (default), follows it subtask by subtask until it ends; a failure ends
+in a protective stop whose reason is printed (exit code 1). `abort` needs no control lease
+(like `stop`): the flow ends holding the current pose.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Any
+
+import typer
+
+from console.client import ApiClient
+from console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, WAIT_OPTION, _controlled_call, _emit
+from console.errors import CommandFailed, friendly_errors
+
+
+def _stages(text: str | None) -> list[int] | None:
+    if not text:
+        return None
+    try:
+        return [int(s) for s in text.split(",") if s.strip()]
+    except ValueError:
+        raise CommandFailed(f"--stages: expected stage numbers like 1,2 got {text!r}") from None
+
+
+def describe(status: dict[str, Any]) -> str:
+    if status.get("state") == "idle":
+        return "no ORU changeout has run"
+    head = f"ORU changeout {status['state']}: {100 * status['progress']:.1f} %"
+    if status.get("subtask") is not None:
+        head += (f", stage {status['stage']} ({status['stage_name']}) subtask {status['subtask']}: "
+                 f"{status['title']} [{status['algorithm']}]")
+    lines = [head]
+    if status.get("holding"):
+        lines.append(f"holding {status['holding']}")
+    if status.get("failure"):
+        lines.append(f"failure: {status['failure']}")
+    lines += [f"note: {n}" for n in dict.fromkeys(status.get("notes", []))]
+    return "\n".join(lines)
+
+
+def follow(client: ApiClient, as_json: bool) -> dict:
+    last = None
+    while True:
+        status = client.call("oru.status")
+        key = (status.get("stage"), status.get("subtask"), status["state"])
+        if key != last and not as_json and status.get("subtask") is not None:
+            print(f"\r{100 * status['progress']:5.1f} %  stage {status['stage']} subtask {status['subtask']:2d}: "
+                  f"{status['title']:<42}", end="", file=sys.stderr)
+            last = key
+        if status["state"] not in ("running", "paused"):
+            if not as_json:
+                print(file=sys.stderr)
+            return status
+        time.sleep(0.2)
+
+
+def register(app: typer.Typer) -> None:
+    oru = typer.Typer(help="ORU changeout task flow (ORU paper Table 1).", no_args_is_help=True)
+    app.add_typer(oru, name="oru")
+
+    @oru.command()
+    @friendly_errors
+    def run(stages: str = typer.Option(None, help="Stages to run, e.g. 1,2 (default: all four)."),
+            api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+            wait: bool = WAIT_OPTION) -> None:
+        """Start the changeout from the current pose (the arm must be enabled and still)."""
+        with ApiClient(api, token) as client:
+            args = {"stages": _stages(stages)} if stages else {}
+            result = _controlled_call(client, "oru.run", **args)
+            if not wait:
+                _emit(result, as_json, "ORU changeout started")
+                return
+            status = follow(client, as_json)
+        _emit(status, as_json, describe(status))
+        if status["state"] != "done":
+            raise CommandFailed(f"ORU changeout {status['state']}: {status.get('failure') or 'aborted'}")
+
+    for name, lease, helptext in (("pause", True, "Hold still; the flow resumes where it was."),
+                                  ("resume", True, "Continue a paused changeout."),
+                                  ("abort", False, "End the changeout holding the current pose (no lease needed).")):
+        def make(cmd: str, needs_lease: bool):
+            @friendly_errors
+            def simple(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+                with ApiClient(api, token) as client:
+                    result = _controlled_call(client, cmd) if needs_lease else client.call(cmd)
+                _emit({"state": result}, as_json, f"ORU changeout {result}")
+            simple.__doc__ = helptext
+            return simple
+        oru.command(name)(make(f"oru.{name}", lease))
+
+    @oru.command()
+    @friendly_errors
+    def status(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """State of the current (or last) changeout: stage, subtask, progress, failure."""
+        with ApiClient(api, token) as client:
+            result = client.call("oru.status")
+        _emit(result, as_json, describe(result))

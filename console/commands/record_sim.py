@@ -1,0 +1,49 @@
+"""`spacearm record-sim`: a commanded trajectory through controller and simulator in lockstep."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import typer
+
+from console.errors import EXIT_USAGE, CommandFailed, friendly_errors
+from controller.diagnosis.record import DEFAULT_ARM, RecordSimError, record_can, record_direct
+from controller.diagnosis.trajectory import TrajectoryError, load_trajectory
+from drivers.bus_config import DEFAULT_BUS_CONFIG
+from drivers.errors import DriverError
+from firmware_sim.plant import load_plant_config
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("record-sim")
+    @friendly_errors
+    def record_sim(plant: Path = typer.Option(..., help="Plant file (the hidden truth)."),
+                   trajectory: Path = typer.Option(..., help="CSV with t, q_cmd_1..n (rad)."),
+                   out: Path = typer.Option(..., help="REC.mcap or REC.csv (wide CSV)."),
+                   arm: Path = typer.Option(DEFAULT_ARM, help="Arm file."),
+                   bus_config: Path = typer.Option(DEFAULT_BUS_CONFIG, help="Bus file."),
+                   direct: bool = typer.Option(False, help="Direct simulation path (no CAN; CSV only, fast).")) -> None:
+        """Run TRAJECTORY on the simulated PLANT through the daemon over CAN (lockstep) and record it."""
+        config = load_plant_config(plant)
+        if out.suffix not in (".mcap", ".csv"):
+            print(f"error: --out {out}: must end in .mcap or .csv", file=sys.stderr)
+            raise SystemExit(EXIT_USAGE)
+        try:
+            traj = load_trajectory(trajectory, n_joints=6)
+        except TrajectoryError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            raise SystemExit(EXIT_USAGE) from None
+        try:
+            if direct:
+                if out.suffix != ".csv":
+                    raise CommandFailed("--direct writes the wide CSV only")
+                table = record_direct(config, traj, out, hold_cycles=0)
+                rows = len(table.t)
+            else:
+                record_can(config, traj, out, arm, bus_config)
+                rows = None
+        except (RecordSimError, DriverError) as exc:
+            raise CommandFailed(str(exc)) from None
+        path = "direct simulation" if direct else "controller + simulator over CAN (lockstep)"
+        print(f"recorded {traj.duration:.1f} s of {trajectory.name} via {path} -> {out}"
+              + (f" ({rows} cycles)" if rows else ""))

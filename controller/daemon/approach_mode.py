@@ -1,0 +1,228 @@
+"""Closed-loop approach on visual feedback (ORU paper Section 4.2, Figure 12): a reactive Mode.
+
+Factory (registered by the daemon as `mode_factories["approach"]`; the ORU task flow calls it
+for subtasks 2 and 8):
+
+    mode_factories["approach"](target: str, dz: float, holding: str | None = None) -> Mode
+
+- target: a store name of the scene file (configs/scene/*.toml). The marker beside that
+  store's slot is measured by the eye-in-hand camera.
+- dz (m, > 0): stand-off of the pre-contact pose along the target's approach axis, the
+  paper's (x, y, z + dz, alpha, beta, gamma).
+- holding None: the goal is the tool `dz` above the ORU adapter's top face (tool z along the
+  capture direction), i.e. oru_T_tool = oru_tip @ Trans(0, 0, -dz).
+  holding = ORU name: the goal puts the held ORU `dz` above its seated pose in the slot
+  (the pre-insertion pose), using the scene's tool_T_oru.
+
+Each vision result (camera_T_marker of a frame exposed at SYNC s) gives the goal in the base
+frame of the *nominal* model: base_T_goal = FK_nominal(q measured at s) @ end_T_camera @
+camera_T_marker @ marker_T_goal. Because the target is static this stays valid however late
+the frame arrives, and because it is re-measured from every frame, the arm's absolute error
+(true geometry != nominal) cancels as the tool closes in. Each cycle the mode moves the
+commanded joints with resolved rates (damped pseudo-inverse of the nominal Jacobian) towards
+that goal: a proportional twist, limited in linear/angular velocity and acceleration (the arm
+file's [cartesian] limits), with per-joint velocity limits.
+
+It finishes when a frame exposed while the arm was still measures the remaining pose error
+below tolerance twice in a row. `failure()` (protective stop) when:
+  vision_lost   `lost_frames` consecutive frames without a marker pose (reason given: out of
+                view, too far, ambiguous, no marker), or no frame at all for `no_frame_timeout`
+  too_far       the first measured goal is farther than `max_start_distance` from the tool
+  error_grows   the measured remaining error grows beyond its smallest value + margin
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controller.config.arm import CartesianLimits
+from controller.config.scene import SceneConfig
+from controller.daemon.modes import ModeBase
+from controller.daemon.state import Measurement
+from controller.daemon.supervision import Finding
+from controller.kinematics.jacobian import fk_jacobian
+from controller.kinematics.forward import fk
+from controller.kinematics.model import KinematicData, KinematicModel
+from controller.kinematics.pose_error import twist_error
+from controller.kinematics.transforms import inv_transform, trans
+from controller.planning.joint_move import JointSetpoint
+from controller.planning.resolved_rate import damped_pinv
+
+
+@dataclass(frozen=True)
+class ApproachTuning:
+    gain: float = 1.5                     # 1/s, twist = gain x pose error
+    tol_position: float = 0.0004          # m, measured remaining error to finish
+    tol_rotation: float = np.radians(0.08)  # rad
+    still_speed: float = 0.0005           # m/s: the arm counts as still below this commanded speed
+    lost_frames: int = 6                  # consecutive frames without a pose -> vision_lost
+    no_frame_timeout: float = 10.0        # s of controller time without any frame
+    max_start_distance: float = 0.6       # m
+    grow_margin: float = 0.01             # m above the smallest measured error -> error_grows
+    damping: float = 0.02                 # DLS damping of the Jacobian pseudo-inverse
+
+
+def marker_T_goal(scene: SceneConfig, marker_T_oru: np.ndarray, dz: float, holding: str | None) -> np.ndarray:
+    """Goal tool pose in the marker frame (see the module docstring)."""
+    g = scene.geometry
+    if holding is None:
+        return marker_T_oru @ g.oru_tip() @ trans(0.0, 0.0, -dz)
+    return marker_T_oru @ trans(0.0, 0.0, dz) @ inv_transform(g.tool_T_oru())
+
+
+@dataclass
+class ApproachMode(ModeBase):
+    model: KinematicModel                  # nominal model (the controller's)
+    vision: object                         # VisionWorker-like: latest() -> (result, sync) | None
+    end_T_camera: np.ndarray
+    marker_T_goal: np.ndarray
+    limits: CartesianLimits
+    period: float
+    target: str = ""
+    tuning: ApproachTuning = field(default_factory=ApproachTuning)
+    name: str = "approach"
+    description: str = ""
+    # --- state
+    goal: np.ndarray | None = None         # base_T_goal (nominal frame)
+    measured_error: tuple[float, float] | None = None   # (m, rad) of the newest frame
+    _q: np.ndarray | None = None
+    _v: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    _history: OrderedDict = field(default_factory=OrderedDict)   # sync -> (q, still)
+    _seen: object = None
+    _bad_frames: int = 0
+    _last_failure: str = ""
+    _last_frame_time: float | None = None
+    _started_at: float | None = None
+    _converged_frames: int = 0
+    _done: bool = False
+    _failure: Finding | None = None
+    _err0: float | None = None
+    _err_min: float = np.inf
+    frames_used: int = 0
+
+    def __post_init__(self) -> None:
+        self._data = KinematicData(self.model)
+        self._v_joint = np.asarray(self.model.v_max, float)
+
+    # ------------------------------------------------------------------ Mode protocol
+    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+        if self._q is None:
+            self._q = m.q.copy()
+            self._started_at = t
+        still = bool(np.linalg.norm(self._v[:3]) < self.tuning.still_speed
+                     and np.linalg.norm(self._v[3:]) < self.tuning.still_speed)
+        self._history[m.sync_counter] = (m.q.copy(), still)
+        while len(self._history) > 500:
+            self._history.popitem(last=False)
+        self._take_vision(t)
+        if self._failure is not None or self._done:
+            self._v[:] = 0.0
+            return JointSetpoint(self._q.copy(), np.zeros_like(self._q), np.zeros_like(self._q))
+        T_cur, J = fk_jacobian(self.model, self._data, self._q)
+        if self.goal is None:
+            v_des = np.zeros(6)
+        else:
+            v_des = self.tuning.gain * twist_error(self.goal, T_cur)
+        v_des[:3] = _clip_norm(v_des[:3], self.limits.linear_velocity)
+        v_des[3:] = _clip_norm(v_des[3:], self.limits.angular_velocity)
+        dv = v_des - self._v
+        dv[:3] = _clip_norm(dv[:3], self.limits.linear_acceleration * self.period)
+        dv[3:] = _clip_norm(dv[3:], self.limits.angular_acceleration * self.period)
+        self._v = self._v + dv
+        dq = damped_pinv(J, self.tuning.damping) @ self._v
+        scale = np.max(np.abs(dq) / self._v_joint)
+        if scale > 1.0:
+            dq /= scale
+            self._v /= scale
+        self._q = self._q + dq * self.period
+        return JointSetpoint(self._q.copy(), dq, np.zeros_like(dq))
+
+    def finished(self, t: float) -> bool:
+        return self._done
+
+    def progress(self, t: float) -> float:
+        if self._err0 is None or self.measured_error is None or self._err0 <= 0:
+            return 0.0
+        return float(np.clip(1.0 - self.measured_error[0] / self._err0, 0.0, 1.0))
+
+    def failure(self) -> Finding | None:
+        return self._failure
+
+    # ------------------------------------------------------------------ vision
+    def _take_vision(self, t: float) -> None:
+        latest = self.vision.latest()
+        if latest is None or latest is self._seen:
+            if self._last_frame_time is None and t - self._started_at > self.tuning.no_frame_timeout:
+                self._fail("vision_lost", f"no camera frame within {self.tuning.no_frame_timeout:.0f} s")
+            elif self._last_frame_time is not None and t - self._last_frame_time > self.tuning.no_frame_timeout:
+                self._fail("vision_lost", f"no camera frame for {t - self._last_frame_time:.1f} s")
+            return
+        self._seen = latest
+        result, sync = latest
+        entry = self._history.get(sync)
+        if entry is None:
+            return                           # exposed before this mode started: not usable
+        self._last_frame_time = t
+        if not result.ok:
+            self._bad_frames += 1
+            self._last_failure = f"{result.reason}: {result.message}"
+            if self._bad_frames >= self.tuning.lost_frames:
+                self._fail("vision_lost", f"marker lost for {self._bad_frames} frames ({self._last_failure})")
+            return
+        self._bad_frames = 0
+        q_exp, still = entry
+        end_T_goal = self.end_T_camera @ result.camera_T_marker @ self.marker_T_goal
+        goal = fk(self.model, self._data, q_exp) @ end_T_goal
+        pos, rot = float(np.linalg.norm(end_T_goal[:3, 3])), _angle(end_T_goal[:3, :3])
+        self.measured_error = (pos, rot)
+        self.frames_used += 1
+        if self._err0 is None:
+            self._err0 = pos
+            if pos > self.tuning.max_start_distance:
+                self._fail("too_far", f"target {self.target} is {pos:.3f} m from the tool "
+                           f"(> {self.tuning.max_start_distance} m): move closer open-loop first")
+                return
+        self._err_min = min(self._err_min, pos)
+        if pos > self._err_min + self.tuning.grow_margin:
+            self._fail("error_grows", f"remaining error grew to {pos * 1e3:.1f} mm "
+                       f"(smallest {self._err_min * 1e3:.1f} mm)")
+            return
+        self.goal = goal
+        if still and pos < self.tuning.tol_position and rot < self.tuning.tol_rotation:
+            self._converged_frames += 1
+            if self._converged_frames >= 2:
+                self._done = True
+        elif still:
+            self._converged_frames = 0
+
+    def _fail(self, code: str, message: str) -> None:
+        if self._failure is None:
+            self._failure = Finding(code, f"approach to {self.target}: {message}")
+
+
+def _clip_norm(v: np.ndarray, limit: float) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    return v * (limit / n) if n > limit else v
+
+
+def _angle(R: np.ndarray) -> float:
+    return float(np.arccos(np.clip((np.trace(R) - 1) / 2, -1.0, 1.0)))
+
+
+def approach_factory(model: KinematicModel, scene: SceneConfig, vision, end_T_camera: np.ndarray,
+                     marker_T_oru: np.ndarray, limits: CartesianLimits, period: float,
+                     tuning: ApproachTuning | None = None):
+    """Builds `mode_factories["approach"]`: (target, dz, holding=None) -> ApproachMode."""
+    def make(target: str, dz: float, holding: str | None = None) -> ApproachMode:
+        scene.store(target)                                  # KeyError names the known stores
+        if holding is not None:
+            scene.oru(holding)
+        if not (0.0 < dz <= 0.5):
+            raise ValueError(f"dz {dz} m outside (0, 0.5] m")
+        what = f"holding {holding} to slot {target}" if holding else f"adapter in {target}"
+        return ApproachMode(model, vision, end_T_camera, marker_T_goal(scene, marker_T_oru, dz, holding),
+                            limits, period, target=target, tuning=tuning or ApproachTuning(),
+                            description=f"{what}, stand-off {dz * 1e3:.0f} mm")
+    return make

@@ -1,0 +1,52 @@
+"""Parameters of the ORU changeout task flow (configs/oru/changeout.toml)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from controller.config.loader import load_toml_model
+
+DEFAULT_CHANGEOUT = Path(__file__).resolve().parents[2] / "configs" / "oru" / "changeout.toml"
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class StageConfig(Strict):
+    name: str = Field(min_length=1, max_length=64)
+    store: str = Field(min_length=1, max_length=64, description="store the stage picks from / places into")
+
+
+class MotionConfig(Strict):
+    view_height: float = Field(default=0.15, gt=0.0, le=1.0, description="m")
+    contact_gap: float = Field(default=0.010, gt=0.0, le=0.1, description="m")
+    extract_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
+    withdraw_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
+    speed: float = Field(default=1.0, gt=0.0, le=1.0)
+
+
+class EndEffectorConfig(Strict):
+    sensor_offset: float = Field(default=0.20, ge=0.0, le=2.0, description="m")
+    mass: float = Field(default=3.0, ge=0.0, le=100.0, description="kg")
+    centroid: tuple[float, float, float] = (0.0, 0.0, 0.08)
+    clamp_timeout: float = Field(default=12.0, gt=0.0, le=120.0, description="s")
+    release_timeout: float = Field(default=12.0, gt=0.0, le=120.0, description="s")
+    latch_wait: float = Field(default=1.5, gt=0.0, le=60.0, description="s")
+
+
+class ContactConfig(Strict):
+    capture_stiffness: tuple[float, float, float, float, float, float] = (0.0, 0.0, 1000.0, 0.0, 0.0, 0.0)
+    seat_tolerance: float = Field(default=0.006, gt=0.0, le=0.05, description="m")
+
+
+class ChangeoutConfig(Strict):
+    stages: list[StageConfig] = Field(min_length=2, max_length=8)
+    motion: MotionConfig = MotionConfig()
+    end_effector: EndEffectorConfig = EndEffectorConfig()
+    contact: ContactConfig = ContactConfig()
+
+
+def load_changeout(path: str | Path = DEFAULT_CHANGEOUT) -> ChangeoutConfig:
+    return load_toml_model(path, ChangeoutConfig)

@@ -1,0 +1,164 @@
+"""The ORU changeout task runner: itself a daemon Mode that drives the Table 1 steps.
+
+State: running -> (paused <-> running) -> done | aborted | failed. The runner keeps its own
+clock, which stops while paused, so a paused free motion or contact resumes where it was; a
+paused runner holds the last joint target. Any step failure (force limit, capture not
+confirmed, end-effector fault or timeout, jammed insertion, planning refused, lost marker in
+the approach) is reported through `failure()`, and the daemon core makes a protective stop
+(quick stop, brakes) and keeps the reason. Abort ends the flow holding the current target.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from controller.daemon.modes import ModeBase
+from controller.daemon.state import Measurement
+from controller.daemon.supervision import Finding
+from controller.oru.flow import FlowContext, stage_steps
+from controller.oru.steps import ContactStep, Step, hold
+from controller.planning.joint_move import JointSetpoint
+
+
+@dataclass
+class StepRecord:
+    stage: int
+    number: int
+    title: str
+    algorithm: str
+    started: float
+    duration: float = 0.0
+    peak_force: float = 0.0          # N, compensated contact force (contact steps)
+    peak_lateral_force: float = 0.0
+    peak_torque: float = 0.0
+    peak_insert_force: float = 0.0
+    notes: list[str] = field(default_factory=list)
+
+
+class OruTaskRunner(ModeBase):
+    moving = True
+
+    def __init__(self, ctx: FlowContext, stages: list[int] | None = None):
+        self.ctx = ctx
+        self.stage_names = [s.name for s in ctx.config.stages]
+        chosen = stages if stages is not None else list(range(len(ctx.config.stages)))
+        self.steps: list[Step] = []
+        for i in chosen:
+            self.steps += stage_steps(ctx, i, ctx.config.stages[i].store)
+        self.contents = {s.name: s.holds for s in ctx.scene.stores}
+        self.name = "oru"
+        self.description = f"ORU changeout: {len(chosen)} stages, {len(self.steps)} subtasks"
+        self.state = "running"
+        self.index = 0
+        self.clock = 0.0
+        self.q_last = ctx.q_initial.copy()
+        self.records: list[StepRecord] = []
+        self._failure: Finding | None = None
+        self._begun = False
+        self._last_t: float | None = None
+
+    # ---- operator commands (run inside the cycle) ------------------------------------
+    def pause(self) -> str:
+        if self.state == "running":
+            self.state = "paused"
+        return self.state
+
+    def resume(self) -> str:
+        if self.state == "paused":
+            self.state = "running"
+        return self.state
+
+    def abort(self) -> str:
+        if self.state in ("running", "paused"):
+            self.state = "aborted"
+        return self.state
+
+    # ---- Mode protocol -----------------------------------------------------------------
+    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+        period = self.ctx.impedance.period
+        if self.state != "running" or self._failure is not None:
+            return hold(self.q_last)
+        if self.index >= len(self.steps):
+            self.state = "done"
+            return hold(self.q_last)
+        step = self.steps[self.index]
+        if not self._begun:
+            step.begin(self.q_last, self.clock)
+            self.records.append(StepRecord(step.stage, step.number, step.title, step.algorithm, self.clock,
+                                           notes=list(step.notes)))
+            self.ctx.notes += [f"stage {step.stage + 1} subtask {step.number}: {n}" for n in step.notes]
+            self._begun = True
+        sp = step.setpoint(self.clock, m)
+        self.q_last = sp.q.copy()
+        failure = step.failure()
+        if failure is not None:
+            self._failure = failure
+            self.state = "failed"
+            self._record(step)
+            return sp
+        if step.finished(self.clock):
+            self._complete(step)
+        self.clock += period
+        return sp
+
+    def _complete(self, step: Step) -> None:
+        self._record(step)
+        store = self.ctx.config.stages[step.stage].store
+        if isinstance(step, ContactStep) and step.mode.task.tare_cycles > 0:
+            self.ctx.ft_bias = step.mode.bias.copy()
+        if step.number == 5:
+            self.ctx.holding, self.contents[store] = self.contents.get(store), None
+        elif step.number == 11:
+            self.contents[store], self.ctx.holding = self.ctx.holding, None
+        self.index += 1
+        self._begun = False
+        if self.index >= len(self.steps):
+            self.state = "done"
+
+    def _record(self, step: Step) -> None:
+        rec = self.records[-1]
+        rec.duration = self.clock - rec.started
+        if isinstance(step, ContactStep):
+            pk = step.mode.peaks
+            rec.peak_force, rec.peak_torque = pk.force, pk.torque
+            rec.peak_lateral_force, rec.peak_insert_force = pk.lateral_force, pk.insert_force
+
+    def device_commands(self) -> dict:
+        if self.state != "running" or self.index >= len(self.steps) or not self._begun:
+            return {}
+        return self.steps[self.index].device_commands()
+
+    def finished(self, t: float) -> bool:
+        return self.state in ("done", "aborted")
+
+    def progress(self, t: float) -> float:
+        if not self.steps:
+            return 1.0
+        if self.state == "done":
+            return 1.0
+        current = self.steps[self.index].progress(self.clock) if self._begun and self.index < len(self.steps) else 0.0
+        return float(np.clip((self.index + current) / len(self.steps), 0.0, 1.0))
+
+    def failure(self) -> Finding | None:
+        return self._failure
+
+    # ---- status ------------------------------------------------------------------------
+    def current(self) -> Step | None:
+        return self.steps[self.index] if self.index < len(self.steps) else None
+
+    def status(self) -> dict:
+        step = self.current()
+        return {
+            "state": self.state, "progress": self.progress(0.0), "time": self.clock,
+            "subtask_index": self.index, "subtasks": len(self.steps),
+            "stage": None if step is None else step.stage + 1,
+            "stage_name": None if step is None else self.stage_names[step.stage],
+            "subtask": None if step is None else step.number,
+            "title": None if step is None else step.title,
+            "algorithm": None if step is None else step.algorithm,
+            "holding": self.ctx.holding,
+            "failure": None if self._failure is None else self._failure.message,
+            "notes": list(self.ctx.notes),
+            "records": [vars(r) | {"notes": list(r.notes)} for r in self.records],
+        }

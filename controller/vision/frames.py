@@ -1,0 +1,150 @@
+"""Frames and their transport from the camera (simulator or driver) to the controller.
+
+`FrameSource.latest()` is all the controller needs. `ShmFrameRing` is a real inter-process
+transport: a multiprocessing.shared_memory ring of N slots, each guarded by a seqlock
+(begin/end sequence numbers written around the pixel copy), so a reader in another process
+never returns a torn frame and never blocks the writer.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from multiprocessing import shared_memory
+from typing import Protocol
+
+import numpy as np
+
+MAGIC = 0x5341_4D43_414D_0002          # "SAMCAM" v2
+HEADER_WORDS = 8                        # magic, width, height, slots, slot_bytes, latest_seq, closed, spare
+SLOT_META = 6 * 8 + 16 * 8              # begin, end, timestamp, flags, sync, spare, truth (16 x f64)
+
+
+@dataclass(frozen=True)
+class Frame:
+    timestamp: float                     # s, time of exposure (the writer's clock: plant time)
+    seq: int                             # 1, 2, ... per camera
+    image: np.ndarray                    # (H, W) uint8
+    true_camera_T_marker: np.ndarray | None = None   # simulator ground truth, tests only
+    sync: int = 0                        # number of the SYNC the exposure belongs to (the
+                                         # controller's Measurement.sync_counter of that cycle)
+
+
+class FrameSource(Protocol):
+    def latest(self) -> Frame | None:
+        """Newest complete frame, or None before the first one."""
+        ...
+
+
+class ShmFrameRing:
+    """Single writer, any number of readers, across processes. Create with `create()` in the
+    camera process, `attach(name)` in the controller."""
+
+    def __init__(self, shm: shared_memory.SharedMemory, owner: bool):
+        self._shm = shm
+        self._owner = owner
+        self._header = np.ndarray((HEADER_WORDS,), np.uint64, shm.buf, 0)
+        if int(self._header[0]) != MAGIC:
+            raise ValueError(f"shared memory {shm.name!r} is not a frame ring")
+        self.width, self.height = int(self._header[1]), int(self._header[2])
+        self.slots, self.slot_bytes = int(self._header[3]), int(self._header[4])
+        self._seq = int(self._header[5])
+
+    # ------------------------------------------------------------------ lifecycle
+    @classmethod
+    def create(cls, width: int, height: int, slots: int = 4, name: str | None = None) -> "ShmFrameRing":
+        slot_bytes = (SLOT_META + width * height + 63) // 64 * 64
+        size = HEADER_WORDS * 8 + slots * slot_bytes
+        shm = shared_memory.SharedMemory(name=name, create=True, size=size)
+        header = np.ndarray((HEADER_WORDS,), np.uint64, shm.buf, 0)
+        header[:] = 0
+        header[1:5] = (width, height, slots, slot_bytes)
+        header[0] = MAGIC
+        return cls(shm, owner=True)
+
+    @classmethod
+    def attach(cls, name: str, timeout: float = 5.0) -> "ShmFrameRing":
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                return cls(shared_memory.SharedMemory(name=name, create=False), owner=False)
+            except FileNotFoundError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.01)
+
+    @property
+    def name(self) -> str:
+        return self._shm.name
+
+    def close(self) -> None:
+        self._header = None             # drop views before closing the mapping
+        self._shm.close()
+        if self._owner:
+            self._shm.unlink()
+
+    def __enter__(self) -> "ShmFrameRing":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ slots
+    def _slot(self, index: int):
+        base = HEADER_WORDS * 8 + index * self.slot_bytes
+        meta = np.ndarray((6,), np.uint64, self._shm.buf, base)
+        stamp = np.ndarray((1,), np.float64, self._shm.buf, base + 16)
+        truth = np.ndarray((16,), np.float64, self._shm.buf, base + 48)
+        image = np.ndarray((self.height, self.width), np.uint8, self._shm.buf, base + SLOT_META)
+        return meta, stamp, truth, image
+
+    def publish(self, image: np.ndarray, timestamp: float, truth: np.ndarray | None = None,
+                sync: int = 0) -> int:
+        """Write a frame into the next slot; returns its sequence number."""
+        if image.shape != (self.height, self.width) or image.dtype != np.uint8:
+            raise ValueError(f"frame must be uint8 {self.height}x{self.width}, got {image.dtype} {image.shape}")
+        seq = int(self._header[5]) + 1
+        meta, stamp, tr, img = self._slot(seq % self.slots)
+        meta[0] = seq                    # begin: slot is being written
+        stamp[0] = timestamp
+        meta[3] = 1 if truth is not None else 0
+        meta[4] = sync
+        if truth is not None:
+            tr[:] = np.asarray(truth, float).ravel()
+        img[:] = image
+        meta[1] = seq                    # end: slot complete
+        self._header[5] = seq
+        return seq
+
+    def latest(self) -> Frame | None:
+        for _ in range(self.slots + 2):
+            seq = int(self._header[5])
+            if seq == 0:
+                return None
+            meta, stamp, tr, img = self._slot(seq % self.slots)
+            if int(meta[1]) != seq:
+                continue
+            image, t, sync = img.copy(), float(stamp[0]), int(meta[4])
+            truth = tr.reshape(4, 4).copy() if int(meta[3]) else None
+            if int(meta[0]) == seq and int(meta[1]) == seq:     # not overwritten while copying
+                return Frame(t, seq, image, truth, sync)
+        return None
+
+
+class LocalFrameSource:
+    """In-process source (single-process runs and tests): holds the last frame pushed."""
+
+    def __init__(self) -> None:
+        self._frame: Frame | None = None
+
+    def push(self, frame: Frame) -> None:
+        self._frame = frame
+
+    def publish(self, image: np.ndarray, timestamp: float, truth: np.ndarray | None = None,
+                sync: int = 0) -> int:
+        """Same signature as ShmFrameRing.publish, so the camera writes to either."""
+        seq = (self._frame.seq if self._frame is not None else 0) + 1
+        self._frame = Frame(timestamp, seq, image, truth, sync)
+        return seq
+
+    def latest(self) -> Frame | None:
+        return self._frame

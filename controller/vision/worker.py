@@ -1,0 +1,71 @@
+"""Runs the vision pipeline on its own thread at frame rate, never inside the control cycle.
+
+The worker polls a FrameSource (ShmFrameRing from the simulator's process, or a local source),
+measures each new frame with the previous good pose as the prior (tracking window), and keeps
+the newest result. The control cycle only reads `latest()`: one attribute read, no lock.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from controller.vision.frames import FrameSource
+from controller.vision.pipeline import VisionPipeline, VisionResult
+
+PRIOR_MAX_AGE = 0.5          # s (frame time): an older good pose is not used as prior
+
+
+class VisionWorker:
+    def __init__(self, source: FrameSource, pipeline: VisionPipeline | None = None, poll: float = 0.002):
+        self.source = source
+        self.pipeline = pipeline or VisionPipeline.from_configs()
+        self.poll = poll
+        self._latest: tuple[VisionResult, int] | None = None   # (result, frame sync)
+        self._prior: tuple[float, np.ndarray] | None = None
+        self._last_seq = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.processed = 0
+        self.processing_times: list[float] = []
+
+    def latest(self) -> tuple[VisionResult, int] | None:
+        """(newest result, SYNC number of its exposure), or None before the first frame."""
+        return self._latest
+
+    def step(self) -> bool:
+        """Process the newest frame if there is one; True if a frame was processed."""
+        frame = self.source.latest()
+        if frame is None or frame.seq == self._last_seq:
+            return False
+        self._last_seq = frame.seq
+        prior = None
+        if self._prior is not None and frame.timestamp - self._prior[0] <= PRIOR_MAX_AGE:
+            prior = self._prior[1]
+        result = self.pipeline.process(frame, prior)
+        if result.ok:
+            self._prior = (frame.timestamp, result.camera_T_marker)
+        self._latest = (result, frame.sync)
+        self.processed += 1
+        self.processing_times = (self.processing_times + [result.processing_time])[-200:]
+        return True
+
+    def start(self) -> "VisionWorker":
+        self._thread = threading.Thread(target=self._run, name="vision", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                busy = self.step()
+            except Exception:       # a bad frame must not end the worker
+                busy = False
+            if not busy:
+                time.sleep(self.poll)

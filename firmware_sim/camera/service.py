@@ -1,0 +1,132 @@
+"""The eye-in-hand camera inside the simulator process: frames from the plant's true poses.
+
+A thread takes an exposure every 1/frame_rate s of *plant* time (so lockstep runs see the
+same frame rate per control cycle as real-time ones): at that SYNC it snapshots the true
+camera pose (plant.tool_pose() @ end_T_camera, true geometry with the plant file's errors)
+and the true marker poses (scene slot pose @ true_offset @ marker placement), then renders
+and publishes outside the SYNC handler, so rendering (50-200 ms per frame on this machine)
+never delays the nodes' answers. Frames carry the plant time and the SYNC number of the
+exposure. Rendering is slower than 30 Hz here; the effective rate is what the renderer
+manages (frames are dropped, never queued).
+
+    service = CameraService.from_files(plant, sink)      # sink: ShmFrameRing or LocalFrameSource
+    service.start(); ...; service.stop()
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from controller.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
+from controller.kinematics.transforms import inv_transform
+from firmware_sim.camera.scene import OruShape, Scene
+from firmware_sim.camera.simulator import CameraSimulator
+
+
+@dataclass(frozen=True)
+class MarkerSite:
+    store: str
+    base_T_marker: np.ndarray        # true pose
+    holds_oru: bool
+
+
+def marker_sites(scene: SceneConfig, marker_T_oru: np.ndarray) -> list[MarkerSite]:
+    """True marker pose at every store: base_T_slot(nominal) @ true_offset @ slot_T_oru @ oru_T_marker."""
+    g = scene.geometry
+    out = []
+    for s in scene.stores:
+        base_T_slot = s.pose.matrix() @ s.true_offset.matrix()
+        out.append(MarkerSite(s.name, base_T_slot @ g.slot_T_oru() @ inv_transform(marker_T_oru), s.holds is not None))
+    return out
+
+
+class CameraService:
+    def __init__(self, plant, sink, camera: CameraSimulator, scene: SceneConfig,
+                 frame_rate: float | None = None, render_noise: bool = True):
+        self.plant = plant
+        self.sink = sink
+        self.camera = camera
+        self.sites = marker_sites(scene, camera.scene.marker.marker_T_oru)
+        g = scene.geometry
+        self._oru = OruShape(tuple(g.oru_size), tuple(g.adapter_size))
+        self.period = 1.0 / (frame_rate or 30.0)
+        self.render_noise = render_noise
+        self.min_gap = 0.03                  # s of wall time between renders
+        self._next_exposure = 0.0
+        self._pending: tuple | None = None
+        self._wake = threading.Condition()
+        self._stop = False
+        self._thread: threading.Thread | None = None
+        self.frames = 0
+        self.errors = 0
+
+    @classmethod
+    def from_files(cls, plant, sink, scene: str | Path = DEFAULT_SCENE, frame_rate: float | None = None,
+                   scene_seed: int = 0, noise_seed: int | None = 1) -> "CameraService":
+        cam = CameraSimulator.from_configs(scene_seed=scene_seed, noise_seed=noise_seed)
+        return cls(plant, sink, cam, load_scene(scene), frame_rate or 30.0)
+
+    # ------------------------------------------------------------------ plant side (SYNC thread)
+    def on_sync(self, sync: int) -> None:
+        """Called after each plant step: take an exposure when one is due and the renderer
+        is free (cheap: one FK of the true model)."""
+        t = self.plant.time
+        if t + 1e-9 < self._next_exposure or self._pending is not None:
+            return
+        self._next_exposure = t + self.period
+        base_T_camera = self.plant.tool_pose() @ self.camera.end_T_camera
+        with self._wake:
+            self._pending = (t, sync, base_T_camera)
+            self._wake.notify()
+
+    # ------------------------------------------------------------------ render thread
+    def start(self) -> "CameraService":
+        self._thread = threading.Thread(target=self._run, name="sim-camera", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        with self._wake:
+            self._stop = True
+            self._wake.notify()
+        if self._thread is not None:
+            self._thread.join(2.0)
+
+    def render_now(self, t: float, sync: int, base_T_camera: np.ndarray):
+        """Render and publish one frame (also used directly by single-threaded tests)."""
+        site = self._site_in_view(base_T_camera)
+        camera_T_marker = inv_transform(base_T_camera) @ site.base_T_marker
+        self.camera.scene.oru = self._oru if site.holds_oru else None
+        irradiance = self.camera.renderer.render(self.camera.scene, camera_T_marker)
+        image = self.camera.sensor.expose(irradiance, self.camera.rng, self.render_noise)
+        self.frames += 1
+        return self.sink.publish(image, t, camera_T_marker, sync)
+
+    def _site_in_view(self, base_T_camera: np.ndarray) -> MarkerSite:
+        """The marker nearest to the optical axis in front of the camera."""
+        def off_axis(site: MarkerSite) -> float:
+            p = (inv_transform(base_T_camera) @ site.base_T_marker)[:3, 3]
+            return np.hypot(p[0], p[1]) / p[2] if p[2] > 0 else np.inf
+        return min(self.sites, key=off_axis)
+
+    def _run(self) -> None:
+        while True:
+            with self._wake:
+                while self._pending is None and not self._stop:
+                    self._wake.wait(0.5)
+                if self._stop:
+                    return
+                t, sync, pose = self._pending
+            try:
+                self.render_now(t, sync, pose)
+            except Exception:  # a bad frame must not kill the camera
+                self.errors += 1
+            finally:
+                self._pending = None
+            # leave the CPU to the nodes' heartbeat and SYNC threads between frames (lockstep
+            # runs would otherwise render back to back)
+            time.sleep(self.min_gap)

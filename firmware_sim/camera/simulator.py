@@ -1,0 +1,52 @@
+"""Camera simulator: the eye-in-hand camera's frames from the plant's true poses."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controller.kinematics.transforms import inv_transform
+from controller.vision.camera import CameraModel
+from controller.vision.config import CameraConfig, MarkerConfig, MountConfig, load_camera, load_marker, load_mount
+from controller.vision.frames import Frame
+from controller.vision.marker import MarkerModel
+from firmware_sim.camera.noise import SensorModel
+from firmware_sim.camera.renderer import Renderer
+from firmware_sim.camera.scene import Scene
+
+
+@dataclass
+class CameraSimulator:
+    camera: CameraModel
+    renderer: Renderer
+    sensor: SensorModel
+    scene: Scene
+    end_T_camera: np.ndarray
+    rng: np.random.Generator
+    seq: int = 0
+
+    @classmethod
+    def from_configs(cls, camera: CameraConfig | None = None, marker: MarkerConfig | None = None,
+                     mount: MountConfig | None = None, scene_seed: int = 0,
+                     noise_seed: int | None = None) -> "CameraSimulator":
+        camera = camera or load_camera()
+        marker_model = MarkerModel.from_config(marker or load_marker())
+        mount = mount or load_mount()
+        cam = CameraModel.from_config(camera)
+        return cls(cam, Renderer(cam, camera.optics), SensorModel(camera.sensor),
+                   Scene.cluttered(marker_model, seed=scene_seed), mount.end_T_camera.matrix(),
+                   np.random.default_rng(noise_seed))
+
+    def render(self, camera_T_marker: np.ndarray, timestamp: float = 0.0, noise: bool = True) -> Frame:
+        """A frame seen from the given true camera_T_marker (4x4)."""
+        irradiance = self.renderer.render(self.scene, camera_T_marker)
+        image = self.sensor.expose(irradiance, self.rng, noise)
+        self.seq += 1
+        return Frame(timestamp=timestamp, seq=self.seq, image=image,
+                     true_camera_T_marker=np.asarray(camera_T_marker, float).copy())
+
+    def render_from_plant(self, base_T_end: np.ndarray, base_T_marker: np.ndarray,
+                          timestamp: float = 0.0) -> Frame:
+        """A frame from the plant's true end pose and the marker's pose (both in the base)."""
+        base_T_camera = base_T_end @ self.end_T_camera
+        return self.render(inv_transform(base_T_camera) @ base_T_marker, timestamp)

@@ -1,0 +1,131 @@
+"""Penalty contact of a box-shaped male part entering a chamfered rectangular cavity.
+
+One primitive serves both contacts of the ORU cell: the ORU entering its store slot
+(10 mm chamfer, 0.5 mm clearance) and the ORU adapter head entering the end effector's
+guide blocks (12 mm arc guide, the capture tolerance > 10 mm). Frames:
+
+- female F: origin at the centre of the opening, the cavity along -z, outside at z > 0;
+- male M: origin at the tip face centre, the body along +z (tip first into the cavity).
+
+The solid around the cavity is, per side, the convex wedge {below the opening plane,
+outside the wall, beyond the 45-degree chamfer plane}; a point inside it is pushed out along
+the nearest of the three planes, and a point below the floor (inside the opening's footprint) is pushed up; the body ends `rim` beyond
+the chamfer, so a part passing beside it feels nothing. The male box is
+sampled at its 8 corners plus the points where its 4 long edges cross the opening and the
+chamfer-foot planes: for a convex box against planar walls the deepest penetration is at one
+of these, so 16 points (vectorised numpy) capture face, edge and corner contact.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+SQRT_HALF = math.sqrt(0.5)
+
+
+@dataclass(frozen=True)
+class Cavity:
+    half_x: float      # m, inner half width (male half width + clearance)
+    half_y: float
+    chamfer: float     # m, 45-degree guide width at the opening
+    depth: float       # m, floor below the opening (0: a closed top, e.g. an occupied slot)
+    rim: float = 0.03  # m of top face around the chamfer: the body's outer edge
+
+
+@dataclass(frozen=True)
+class MaleBox:
+    half_x: float
+    half_y: float
+    length: float      # m along +z from the tip face
+
+    def corners(self) -> np.ndarray:
+        """(8, 3) corners in the male frame: tip face first."""
+        c = np.array([[1, 1, 0], [1, -1, 0], [-1, 1, 0], [-1, -1, 0],
+                      [1, 1, 1], [1, -1, 1], [-1, 1, 1], [-1, -1, 1]], float)
+        return c * (self.half_x, self.half_y, self.length)
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    stiffness: float          # N/m per contact point
+    damping: float            # N s/m per contact point
+    friction: float           # Coulomb coefficient
+    slip_velocity: float      # m/s, regularisation of the friction law
+
+
+def sample_points(box: MaleBox, F_T_M: np.ndarray, chamfer: float) -> np.ndarray:
+    """(16, 3) sample points in male coordinates for the current relative pose."""
+    corners = box.corners()
+    xy = corners[:4]
+    R, t = F_T_M[:3, :3], F_T_M[:3, 3]
+    base_z = xy @ R[2, :] + t[2]          # z_F of each long edge at its tip end
+    slope = R[2, 2]                       # dz_F per unit length along the edge
+    if abs(slope) < 1e-6:
+        return corners
+    out = np.empty((16, 3))
+    out[:8] = corners
+    out[8:12, :2] = out[12:, :2] = xy[:, :2]
+    out[8:12, 2] = np.clip(-base_z / slope, 0.0, box.length)
+    out[12:, 2] = np.clip((-chamfer - base_z) / slope, 0.0, box.length)
+    return out
+
+
+def cavity_forces(cavity: Cavity, law: ContactLaw, p: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Forces (n, 3) on the male points p (n, 3, female frame) moving with velocity v."""
+    n = len(p)
+    depth = -p[:, 2]
+    normals = np.zeros((n, 3))
+    pen = np.zeros(n)
+    forces = np.zeros((n, 3))
+    outer = (cavity.half_x + cavity.chamfer + cavity.rim, cavity.half_y + cavity.chamfer + cavity.rim)
+    beside = (np.abs(p[:, 0]) < outer[0]) & (np.abs(p[:, 1]) < outer[1])   # over the body at all
+    for axis, half in ((0, cavity.half_x), (1, cavity.half_y)):
+        u = np.abs(p[:, axis])
+        side = np.sign(p[:, axis])
+        wall = u - half
+        cham = (u + depth - half - cavity.chamfer) * SQRT_HALF
+        inside = beside & (depth > 0.0) & (wall > 0.0) & (cham > 0.0)
+        if not inside.any():
+            continue
+        # The chamfer face spans depths 0..c only: below it the nearest surface is the wall (a
+        # face sliding past the chamfer's foot is pushed sideways, not up).
+        candidates = np.column_stack([wall, np.where(depth < cavity.chamfer, cham, np.inf), depth])
+        which = np.argmin(candidates, axis=1)
+        pen[:] = np.where(inside, candidates[np.arange(n), which], 0.0)
+        normals[:] = 0.0
+        normals[:, axis] = np.where(which == 0, -side, np.where(which == 1, -side * SQRT_HALF, 0.0))
+        normals[:, 2] = np.where(which == 0, 0.0, np.where(which == 1, SQRT_HALF, 1.0))
+        forces += _penalty(law, pen, normals, v)
+    floor = np.where((np.abs(p[:, 0]) < cavity.half_x) & (np.abs(p[:, 1]) < cavity.half_y), depth - cavity.depth, 0.0)
+    if (floor > 0.0).any():
+        pen[:] = np.maximum(floor, 0.0)
+        normals[:] = 0.0
+        normals[:, 2] = 1.0
+        forces += _penalty(law, pen, normals, v)
+    return forces
+
+
+def _penalty(law: ContactLaw, pen: np.ndarray, normals: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Spring-damper along the normal (never pulling) plus regularised Coulomb friction."""
+    vn = np.einsum("ij,ij->i", v, normals)
+    fn = np.where(pen > 0.0, np.maximum(law.stiffness * pen - law.damping * vn, 0.0), 0.0)
+    vt = v - vn[:, None] * normals
+    speed = np.sqrt(np.einsum("ij,ij->i", vt, vt) + law.slip_velocity ** 2)
+    return fn[:, None] * normals - (law.friction * fn / speed)[:, None] * vt
+
+
+def box_in_cavity(cavity: Cavity, box: MaleBox, law: ContactLaw, F_T_M: np.ndarray,
+                  F_T_M_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Contact of the male box posed at F_T_M (moving at dF_T_M/dt) in the cavity.
+
+    Returns (points in F (n, 3), forces on the male part at those points in F (n, 3)), or
+    None when the whole box is clearly above the opening plane."""
+    reach = abs(F_T_M[2, 0]) * box.half_x + abs(F_T_M[2, 1]) * box.half_y
+    if F_T_M[2, 3] - reach > 1e-4 and F_T_M[2, 2] > 0.0:
+        return None
+    pm = sample_points(box, F_T_M, cavity.chamfer)
+    p = pm @ F_T_M[:3, :3].T + F_T_M[:3, 3]
+    v = pm @ F_T_M_rate[:3, :3].T + F_T_M_rate[:3, 3]
+    return p, cavity_forces(cavity, law, p, v)

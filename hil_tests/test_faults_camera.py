@@ -1,0 +1,116 @@
+"""Camera faults mid-approach (controller/daemon/approach_mode.py), at the controller core:
+the closed-loop approach runs inside ControllerCore with a vision source that first sees the
+marker and then loses it (bad frames) or stops delivering frames. Expected: protective stop
+`vision_lost` after `lost_frames` bad frames (6 cycles at one frame per cycle) or after
+`no_frame_timeout` (10 s) without frames, no new setpoints afterwards, motion refused until
+reset. Core level (no bus): the camera is not yet a process of the HIL stack."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.hil
+
+PERIOD = 0.02
+
+
+class FakeVision:
+    """latest() -> (result, sync) like the VisionWorker; the test sets what it sees."""
+
+    def __init__(self):
+        self.mode = "marker"      # "marker" | "lost" | "stopped"
+        self.sync = None
+        self._latest = None
+
+    def expose(self, sync: int) -> None:
+        if self.mode == "marker":
+            T = np.eye(4)
+            T[2, 3] = 0.10                         # goal 100 mm ahead along the camera axis
+            self._latest = (SimpleNamespace(ok=True, camera_T_marker=T), sync)
+        elif self.mode == "lost":
+            self._latest = (SimpleNamespace(ok=False, reason="no_marker", message="marker out of view"), sync)
+
+    def latest(self):
+        return self._latest
+
+
+@pytest.fixture
+def cell():
+    from controller.config.arm import load_arm_config
+    from controller.daemon.approach_mode import ApproachMode
+    from controller.daemon.core import ControllerCore
+    from controller.daemon.state import Measurement
+    from controller.daemon.supervision import SupervisionLimits, Supervisor
+    from controller.kinematics.model import KinematicModel
+
+    arm = load_arm_config("configs/arm/oru_testbed_6dof.toml")
+    model = KinematicModel.from_config(arm)
+    names = list(model.joint_names)
+    core = ControllerCore(Supervisor(SupervisionLimits(np.array(model.q_min), np.array(model.q_max),
+                                                       np.array(model.v_max)), names), names, PERIOD)
+    vision = FakeVision()
+    q = np.array(arm.postures["ready"], float)
+    state = {"q": q, "sync": 0, "t": 0.0}
+
+    def measure():
+        state["sync"] += 1
+        state["t"] += PERIOD
+        return Measurement(state["t"], state["sync"], state["q"].copy(), np.zeros(6), np.zeros(6),
+                           np.ones(6, bool), np.zeros(6, bool), np.zeros(6))
+
+    def cycle():
+        m = measure()
+        cmd = core.update(m)
+        if cmd.enable:
+            state["q"] = cmd.q.copy()             # ideal drives: follow the target
+        vision.expose(m.sync_counter)             # a frame exposed at this SYNC, seen next cycle
+        return cmd
+
+    core.cmd_enable(0.0, measure())
+    cycle()
+    assert core.state == "enabled"
+    mode = ApproachMode(model, vision, np.eye(4), np.eye(4), arm.cartesian, PERIOD, target="store_a")
+    core.start_planned(state["t"], measure(), mode, None)
+    return SimpleNamespace(core=core, vision=vision, cycle=cycle, state=state, mode=mode)
+
+
+def run_until_stopped(cell, max_cycles: int) -> int:
+    for n in range(1, max_cycles + 1):
+        cell.cycle()
+        if cell.core.state == "stopped":
+            return n
+    raise AssertionError(f"no stop within {max_cycles} cycles (mode {cell.core.mode})")
+
+
+def assert_nothing_moves_until_reset(cell) -> None:
+    from controller.daemon.core import CommandRefused
+    q = cell.state["q"].copy()
+    for _ in range(20):
+        assert not cell.cycle().enable
+    assert np.array_equal(cell.state["q"], q)
+    with pytest.raises(CommandRefused, match="reset first"):
+        cell.core.cmd_enable(cell.state["t"], None)
+
+
+def test_marker_lost_mid_approach_stops_within_lost_frames(cell):
+    for _ in range(25):                            # approaching on good frames
+        cell.cycle()
+    assert cell.core.state == "enabled" and cell.mode.frames_used > 10
+    cell.vision.mode = "lost"
+    cycles = run_until_stopped(cell, 20)
+    assert cycles <= cell.mode.tuning.lost_frames + 2
+    assert cell.core.stop_reason.code == "vision_lost" and "marker lost" in cell.core.stop_reason.message
+    assert_nothing_moves_until_reset(cell)
+
+
+def test_camera_stopping_mid_approach_stops_after_the_frame_timeout(cell):
+    for _ in range(25):
+        cell.cycle()
+    cell.vision.mode = "stopped"                   # latest() keeps returning the old frame
+    timeout_cycles = round(cell.mode.tuning.no_frame_timeout / PERIOD)
+    cycles = run_until_stopped(cell, timeout_cycles + 10)
+    assert timeout_cycles - 2 <= cycles <= timeout_cycles + 3
+    assert cell.core.stop_reason.code == "vision_lost" and "no camera frame" in cell.core.stop_reason.message
+    assert_nothing_moves_until_reset(cell)

@@ -1,0 +1,78 @@
+"""The contact world and the contact subtasks on the plant without the bus (same controller
+code as the task flow: controller.oru.flow's ContactTask in an ImpedanceMode)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from controller.config.scene import load_scene
+from firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
+from firmware_sim.contact.trials import ContactTrials
+
+LAW = ContactLaw(2.5e3, 0.0, 0.0, 1e-3)
+SLOT = Cavity(0.0605, 0.0405, 0.010, 0.04)
+ORU = MaleBox(0.06, 0.04, 0.10)
+
+
+def pose(x=0.0, y=0.0, z=0.0):
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def total(hit):
+    return np.zeros(3) if hit is None else hit[1].sum(axis=0)
+
+
+def test_chamfer_pushes_an_offset_part_toward_the_slot_centre_and_up():
+    f = total(box_in_cavity(SLOT, ORU, LAW, pose(x=0.005, z=-0.008), np.zeros((4, 4))))
+    assert f[0] < 0.0 and f[2] > 0.0 and f[0] == pytest.approx(-f[2], rel=1e-6)   # 45-degree normal
+
+
+def test_centred_part_slides_freely_and_rests_on_the_floor():
+    assert np.allclose(total(box_in_cavity(SLOT, ORU, LAW, pose(z=-0.02), np.zeros((4, 4)))), 0.0)
+    f = total(box_in_cavity(SLOT, ORU, LAW, pose(z=-0.0402), np.zeros((4, 4))))
+    assert f[2] == pytest.approx(4 * 2.5e3 * 0.0002) and abs(f[0]) < 1e-12   # four bottom corners
+
+
+def test_no_contact_above_the_opening_or_beside_the_store():
+    assert box_in_cavity(SLOT, ORU, LAW, pose(z=0.002), np.zeros((4, 4))) is None
+    assert np.allclose(total(box_in_cavity(SLOT, ORU, LAW, pose(y=0.25, z=-0.01), np.zeros((4, 4)))), 0.0)
+
+
+def test_scene_geometry_places_a_captured_oru_in_its_slot():
+    scene = load_scene()
+    g = scene.geometry
+    slot = scene.store("exposed").pose.matrix()
+    tool = g.seated_tool_pose(slot)
+    np.testing.assert_allclose(tool @ g.tool_T_oru(), slot @ g.slot_T_oru(), atol=1e-12)
+    assert tool[2, 2] == pytest.approx(-1.0)         # tool points down into the slot
+
+
+@pytest.fixture(scope="module")
+def trials():
+    return ContactTrials()
+
+
+@pytest.mark.parametrize("lateral,angle_deg", [((0.008, 0.0), 0.0), ((0.0, -0.008), 0.0),
+                                               ((0.004, 0.004), 1.5), ((-0.005, 0.002), -1.5)])
+def test_insertion_corrected_by_the_chamfer_stops_at_F_tz(trials, lateral, angle_deg):
+    r = trials.run("insert", "airlock_empty", lateral, (math.radians(angle_deg), 0.0, 0.0))
+    assert r.success, r.failure
+    assert r.final_lateral_error < 1.0e-3                 # inside the 0.5 mm slot clearance
+    assert r.final_angle_error < math.radians(1.5)
+    assert 2.5 < r.peak_insert_force < 20.0               # stopped once F_z exceeded F_tz
+
+
+def test_capture_absorbs_open_loop_error_within_the_guide_tolerance(trials):
+    r = trials.run("capture", "exposed", (0.008, -0.003))
+    assert r.success, r.failure
+    assert r.final_lateral_error < 1.0e-3
+
+
+def test_capture_outside_the_guides_fails_with_a_reason(trials):
+    r = trials.run("capture", "exposed", (-0.014, 0.0))       # beyond the 12 mm arc guide
+    assert not r.success
+    assert "jammed or blocked" in r.failure
