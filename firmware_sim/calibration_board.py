@@ -2,8 +2,11 @@
 
 Each square is a polygon whose edges are subdivided before projection, so the lens distortion
 bends them as it bends real edges; polygons are filled anti-aliased with 1/16 px vertex
-precision, then optics blur and sensor noise are applied. Real projective geometry through
-cv2.projectPoints with the camera's intrinsics and distortion.
+precision. Real projective geometry through cv2.projectPoints with the camera's intrinsics
+and distortion. `board_layer` gives the board alone (albedo and coverage) for the camera
+simulator to composite into its scene (firmware_sim/camera/service.py: defocus, lighting and
+sensor noise of the marker scene); `render_board` puts it on a plain background with a simple
+blur and noise for offline tests.
 """
 from __future__ import annotations
 
@@ -26,33 +29,54 @@ def _outline(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
     return np.c_[pts, np.zeros(len(pts))]
 
 
-def render_board(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, dist: np.ndarray,
-                 size: tuple[int, int], rng: np.random.Generator, background: float = 0.25,
-                 blur_px: float = 0.8, noise: float = 2.0) -> np.ndarray:
-    """8-bit mono image (height, width) of the board seen from `camera_T_board` (m)."""
+def board_layer(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, dist: np.ndarray,
+                size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The board alone in the (distorted) image: albedo premultiplied by coverage and the
+    coverage (alpha), float32 (height, width); None when the camera sees its back or it is
+    behind the camera. Composited over any background, it is the board in that scene."""
     width, height = size
-    canvas = np.full((height, width), background * 255.0, np.float32)
     R, t = camera_T_board[:3, :3], camera_T_board[:3, 3]
     if (R @ np.array([0.0, 0.0, -1.0]))[2] > 0:    # the camera sees the board's back
-        return _finish(canvas, blur_px, noise, rng)
+        return None
     rvec = cv2.Rodrigues(R)[0]
     s, (nx, ny), m = board.square, board.squares, board.margin
+    albedo = np.zeros((height, width), np.float32)
+    alpha = np.zeros_like(albedo)
 
-    def fill(poly_board: np.ndarray, value: float) -> None:
+    def fill(canvas: np.ndarray, poly_board: np.ndarray, value: float) -> bool:
         cam = poly_board @ R.T + t
         if np.any(cam[:, 2] <= 0.01):
-            return
+            return False
         px, _ = cv2.projectPoints(poly_board, rvec, t, K, dist)
         pts = np.round(px.reshape(-1, 2) * (1 << SHIFT)).astype(np.int32)
-        cv2.fillPoly(canvas, [pts], float(value * 255.0), lineType=cv2.LINE_AA, shift=SHIFT)
+        cv2.fillPoly(canvas, [pts], float(value), lineType=cv2.LINE_AA, shift=SHIFT)
+        return True
 
     # Board frame origin is the first inner corner: squares start one square before it.
-    fill(_outline(-s - m, -s - m, (nx - 1) * s + m, (ny - 1) * s + m), board.light)
+    outline = _outline(-s - m, -s - m, (nx - 1) * s + m, (ny - 1) * s + m)
+    if not fill(alpha, outline, 1.0):
+        return None
+    fill(albedo, outline, board.light)
     for j in range(ny):
         for i in range(nx):
             if (i + j) % 2 == 0:
-                fill(_outline((i - 1) * s, (j - 1) * s, i * s, j * s), board.dark)
-    return _finish(canvas, blur_px, noise, rng)
+                fill(albedo, _outline((i - 1) * s, (j - 1) * s, i * s, j * s), board.dark)
+    return albedo, alpha
+
+
+def render_board(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, dist: np.ndarray,
+                 size: tuple[int, int], rng: np.random.Generator, background: float = 0.25,
+                 blur_px: float = 0.8, noise: float = 2.0) -> np.ndarray:
+    """8-bit mono image (height, width) of the board seen from `camera_T_board` (m), on a
+    uniform background, with a Gaussian blur and additive noise (offline tests; the camera
+    simulator composites `board_layer` into its own scene and sensor model)."""
+    width, height = size
+    canvas = np.full((height, width), background, np.float32)
+    layer = board_layer(camera_T_board, board, K, dist, size)
+    if layer is not None:
+        albedo, alpha = layer
+        canvas = albedo + (1.0 - alpha) * canvas
+    return _finish(canvas * 255.0, blur_px, noise, rng)
 
 
 def _finish(canvas: np.ndarray, blur_px: float, noise: float, rng: np.random.Generator) -> np.ndarray:

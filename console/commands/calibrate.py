@@ -1,4 +1,5 @@
-"""`spacearm calibrate ...`: kinematic identification studies, fits of data files, FR3 real data."""
+"""`spacearm calibrate ...`: kinematic identification studies, fits of data files, FR3 real data,
+and the on-orbit routines on the running daemon (laser ranger, eye-in-hand camera)."""
 from __future__ import annotations
 
 import json
@@ -13,6 +14,9 @@ from console.client import DEFAULT_API
 from console.errors import CommandFailed, friendly_errors
 
 STUDIES = ("laser-ranger", "ekf")
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+DEFAULT_BOARD = CONFIGS / "calibration" / "board.toml"
+DEFAULT_MOUNT = CONFIGS / "vision" / "mount.toml"
 
 
 def _fmt_value(name: str, value: float) -> str:
@@ -202,4 +206,154 @@ def register(app: typer.Typer) -> None:
         if apply is not None:
             print(f"calibrated arm file written: {apply} (start the daemon with --arm {apply})")
 
+    @cal.command("camera")
+    @friendly_errors
+    def camera(camera_name: str = typer.Option("spacearm-camera", "--camera", envvar="SPACEARM_CAMERA",
+                                               help="Shared-memory frame ring (`spacearm sim --camera NAME "
+                                                    "--board ...`)."),
+               arm: Path = typer.Option(Path("configs/arm/oru_testbed_6dof.toml"), "--arm",
+                                        help="Nominal arm file the daemon runs."),
+               board_file: Path = typer.Option(DEFAULT_BOARD, "--board", help="Checkerboard file (nominal pose)."),
+               mount_file: Path = typer.Option(DEFAULT_MOUNT, "--mount", help="Nominal camera mount file."),
+               configs: int = typer.Option(40, "--configs", min=10, max=500,
+                                           help="Identification postures (O3-optimal)."),
+               candidates: int = typer.Option(120, "--candidates", min=10, max=10000),
+               validation: int = typer.Option(15, "--validation", min=0, max=500, help="Held-out postures."),
+               speed: float = typer.Option(1.0, "--speed", min=0.05, max=1.0, help="Fraction of the joint limits."),
+               seed: int = typer.Option(0, "--seed"),
+               frame_timeout: float = typer.Option(10.0, "--frame-timeout", min=0.1,
+                                                   help="s to wait for a frame exposed after the arm settled."),
+               apply: Optional[Path] = typer.Option(None, "--apply", help="Write the calibrated arm file here."),
+               data_out: Optional[Path] = typer.Option(None, "--data-out",
+                                                       help="Save the views (CSV, pose kind: q + board_T_camera)."),
+               truth: Optional[Path] = typer.Option(None, "--truth", help="Simulation only: score against this plant "
+                                                    "file's true geometry and the board's true_offset."),
+               api: str = typer.Option(DEFAULT_API, "--api", envvar="SPACEARM_API"),
+               token: Optional[str] = typer.Option(None, "--token", envvar="SPACEARM_TOKEN"),
+               as_json: bool = typer.Option(False, "--json")) -> None:
+        """On-orbit camera-pose calibration on the running daemon: checkerboard views, identify, validate."""
+        from console.arm_session import DaemonArm
+        from console.client import ApiClient
+        from controller.calibration.camera_routine import (camera_calibration_section, run_camera_calibration,
+                                                           score_against_truth, setup_from_files,
+                                                           write_camera_calibrated_arm)
+        from controller.calibration.datafile import write_measurements
+        from controller.calibration.laser_routine import CalibrationRunError
+
+        st = setup_from_files(arm, board_file, mount_file)
+        ring = attach_ring(camera_name, st.image_size)
+        try:
+            with ApiClient(api, token) as client:
+                session = DaemonArm(client, speed=speed)
+                status = session.status()
+                if len(status.get("joints", [])) != st.kin.nq or status.get("arm") != st.kin.name:
+                    raise CommandFailed(f"the daemon runs arm {status.get('arm')!r}, not {st.kin.name!r} ({arm})")
+                grab = settled_frame_grabber(ring, session, camera_name, frame_timeout)
+
+                def progress(phase: str, step: int, total: int) -> None:
+                    if not as_json:
+                        print(f"\r  {phase:<14} posture {step:3d}/{total}", end="", file=sys.stderr, flush=True)
+
+                session.enable()
+                q_start = session.q()
+                try:
+                    result = run_camera_calibration(st, session.move_to, grab, q_start, m=configs,
+                                                    n_candidates=candidates, n_validation=validation, seed=seed,
+                                                    progress=progress)
+                except CalibrationRunError as exc:
+                    hint = (f" (simulator: `spacearm sim --camera {camera_name} --board FILE`)"
+                            if "not seen" in str(exc) else "")
+                    raise CommandFailed(f"{exc}{hint}") from None
+                finally:
+                    if not as_json:
+                        print(file=sys.stderr)
+        finally:
+            ring.close()
+        if data_out is not None:
+            write_measurements(data_out, result.Q, "pose", result.board_T_camera)
+        if apply is not None:
+            try:
+                write_camera_calibrated_arm(arm, camera_calibration_section(result, str(data_out or "")), result, apply)
+            except CalibrationRunError as exc:
+                raise CommandFailed(str(exc)) from None
+        scores = None
+        if truth is not None:
+            from controller.calibration.board import load_board
+            from firmware_sim.plant import load_plant_config
+            board = load_board(board_file)
+            scores = score_against_truth(st, result, load_plant_config(truth).geometry.true_model(),
+                                         board.pose.matrix() @ board.true_offset.matrix(), st.tool_T_camera, q_start)
+        _print_camera_result(result, scores, apply, as_json)
+
     app.add_typer(cal, name="calibrate")
+
+
+def attach_ring(name: str, image_size: tuple[int, int]):
+    """The camera's frame ring, attached read-only (the simulator or camera driver owns it)."""
+    from controller.vision.frames import ShmFrameRing
+    try:
+        ring = ShmFrameRing.attach(name, timeout=0.5)
+    except FileNotFoundError:
+        raise CommandFailed(f"no camera frame ring {name!r}: start the simulator with `spacearm sim --camera "
+                            f"{name} --board configs/calibration/board.toml` (or pass --camera NAME)") from None
+    except ValueError as exc:
+        raise CommandFailed(str(exc)) from None
+    if (ring.width, ring.height) != tuple(image_size):
+        ring.close()
+        raise CommandFailed(f"camera ring {name!r} carries {ring.width}x{ring.height} frames, the camera file "
+                            f"says {image_size[0]}x{image_size[1]}")
+    return ring
+
+
+def settled_frame_grabber(ring, session, name: str, timeout: float):
+    """grab() for the routine: the first frame exposed after the arm settled. The daemon's
+    SYNC number after the move (settling included) is the bound: frames carry the SYNC of
+    their exposure. A frame newer (seq) than the one on hand when the move ended is required
+    too, so a camera that stops streaming is noticed even if its SYNC numbers are off."""
+    import time
+
+    def grab():
+        settled_sync = int(session.status()["sync_counter"])
+        first = ring.latest()
+        seq0 = first.seq if first is not None else 0
+        deadline = time.monotonic() + timeout
+        while True:
+            frame = ring.latest()
+            if frame is not None and frame.seq > seq0 and frame.sync >= settled_sync:
+                return frame.image
+            if time.monotonic() > deadline:
+                seen = (f"newest frame seq {frame.seq} exposed at SYNC {frame.sync}" if frame is not None
+                        else "no frame at all")
+                raise CommandFailed(f"camera {name!r}: no frame exposed after the arm settled (SYNC {settled_sync}) "
+                                    f"within {timeout:g} s; {seen}. Is the simulator rendering?")
+            time.sleep(0.005)
+    return grab
+
+
+def _print_camera_result(result, scores, apply: Optional[Path], as_json: bool) -> None:
+    summary = {"configurations": len(result.Q), "validation_views": len(result.Q_validation),
+               "skipped": result.skipped, "status": result.fit.status,
+               "residual": result.residual, "validation_before": result.validation_before,
+               "validation_after": result.validation_after, "seconds": result.seconds,
+               "errors": result.errors, "frames": result.frames, "applied_to": str(apply) if apply else None,
+               "truth": vars(scores) if scores is not None else None}
+    if as_json:
+        print(json.dumps(summary))
+        return
+    print(f"identified {len(result.errors)} D-H and {len(result.frames)} frame parameters from {len(result.Q)} views "
+          f"({result.skipped} skipped) in {result.seconds:.1f} s: {result.fit.status}")
+    print(f"  identification residual RMS {result.residual[0] * 1e3:.3f} mm, {result.residual[1] * 1e3:.3f} mrad")
+    (pb, rb), (pa, ra) = result.validation_before, result.validation_after
+    print(f"  held-out board_T_camera RMS ({len(result.Q_validation)} views): nominal {pb * 1e3:.3f} mm / "
+          f"{rb * 1e3:.3f} mrad -> calibrated {pa * 1e3:.3f} mm / {ra * 1e3:.3f} mrad")
+    if scores is not None:
+        (tb, trb), (ta, tra) = scores.board_T_camera_before, scores.board_T_camera_after
+        print(f"  against the true geometry, {scores.postures} fresh board views: board_T_camera RMS "
+              f"{tb * 1e3:.3f} mm / {trb * 1e3:.3f} mrad -> {ta * 1e3:.3f} mm / {tra * 1e3:.3f} mrad")
+        print(f"  against the true geometry, {scores.postures} random poses: mean absolute tool position error "
+              f"{scores.tool_position_before * 1e3:.3f} mm -> {scores.tool_position_after * 1e3:.3f} mm "
+              "(arm file with the D-H corrections; the frames absorb base and last-joint errors)")
+    for name, v in sorted({**result.errors, **result.frames}.items()):
+        print(f"  {name:<10} {_fmt_value(name, v):>16}")
+    if apply is not None:
+        print(f"calibrated arm file written: {apply} (start the daemon with --arm {apply})")

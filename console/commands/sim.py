@@ -2,6 +2,8 @@
 
     spacearm sim --bus loopback:arm [--plant PLANT.toml] [--bus-config configs/bus/arm.toml]
 
+With `--camera NAME` it renders the eye-in-hand camera into a shared-memory frame ring, and
+with `--board FILE` that camera also sees the calibration checkerboard.
 With a `[laser]` section in the plant file it also serves the tool's laser ranger on a
 pseudo-terminal and prints "spacearm sim: laser ranger on /dev/pts/N" first.
 Prints one line "spacearm sim: N nodes ready on BUS" when all nodes have sent their boot-up
@@ -27,11 +29,21 @@ CAMERA_LINE = "spacearm sim: camera frames in shared memory {name}"   # printed 
 
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
             duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
-            camera: Optional[str] = None) -> int:
+            camera: Optional[str] = None, board: Optional[Path] = None) -> int:
     from controller.config.errors import ConfigError
     from drivers.transport import BusSpecError
     from firmware_sim.runner import Simulator
 
+    board_config = None
+    if board is not None:
+        from controller.calibration.board import load_board
+        try:
+            if not camera:
+                raise ValueError("--board needs --camera (the board is only seen through the camera)")
+            board_config = load_board(board)
+        except (ConfigError, ValueError) as exc:
+            typer.echo(f"spacearm sim: {exc}", err=True)
+            return 2
     try:
         sim = Simulator(bus, bus_config, plant, control_node)
         sim.start()
@@ -61,7 +73,9 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
             sim.stop()
             typer.echo(f"spacearm sim: shared memory {camera!r} exists (another sim running?)", err=True)
             return 1
-        sim.attach_camera(ring)
+        service = sim.attach_camera(ring)
+        if board_config is not None:
+            service.show_board(board_config)
         typer.echo(CAMERA_LINE.format(name=ring.name))
     if sim.laser is not None:
         typer.echo(LASER_LINE.format(port=sim.laser.port))
@@ -93,6 +107,9 @@ def register(app: typer.Typer) -> None:
         camera: Optional[str] = typer.Option(
             None, "--camera", help="render the eye-in-hand camera into this shared-memory frame ring "
                                    "(give the daemon the same --camera NAME)"),
+        board: Optional[Path] = typer.Option(
+            None, "--board", help="also show this calibration checkerboard in the camera's view "
+                                  "(e.g. configs/calibration/board.toml; for `spacearm calibrate camera`)"),
     ) -> None:
         """Run the simulated CANopen nodes (6 joint drives, end effector, F/T sensor)."""
-        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node, camera))
+        raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node, camera, board))

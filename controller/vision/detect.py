@@ -26,6 +26,7 @@ from controller.vision.config import PipelineConfig
 
 TILE = 32                                # px (search scale) tiles of the noise estimate
 NOISE_FLOOR = 0.5                        # DN, 8-bit quantisation noise is 0.29 DN
+DUPLICATE_PX = 1.0                       # full-res px: refined centres this close are one circle
 
 
 @dataclass(frozen=True)
@@ -149,7 +150,9 @@ class CircleDetector:
         out: list[Candidate] = []
         for contrast, (bx, by, bwi, bhi, ratio, touches, diam) in cands[: cfg.max_candidates]:
             c = self._refine(full, x0 + bx * k, y0 + by * k, bwi * k, bhi * k, touches)
-            if c is not None:
+            # two search-scale blobs (a circle split by the threshold) can refine to the same
+            # full-res component; a duplicate would make every labelling with it ambiguous
+            if c is not None and not any(np.hypot(*(c[0] - o.centre)) < DUPLICATE_PX for o in out):
                 out.append(Candidate(c[0], c[1], float(diam), float(contrast), float(ratio),
                                      touches or c[2]))
         return Detection(out, n_blobs, n_small, noise)

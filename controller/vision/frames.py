@@ -7,9 +7,10 @@ never returns a torn frame and never blocks the writer.
 """
 from __future__ import annotations
 
+import sys
 import time
 from dataclasses import dataclass
-from multiprocessing import shared_memory
+from multiprocessing import resource_tracker, shared_memory
 from typing import Protocol
 
 import numpy as np
@@ -33,6 +34,9 @@ class FrameSource(Protocol):
     def latest(self) -> Frame | None:
         """Newest complete frame, or None before the first one."""
         ...
+
+
+_CREATED_HERE: set[str] = set()     # rings this process owns (their tracker entry must stay)
 
 
 class ShmFrameRing:
@@ -59,6 +63,7 @@ class ShmFrameRing:
         header[:] = 0
         header[1:5] = (width, height, slots, slot_bytes)
         header[0] = MAGIC
+        _CREATED_HERE.add(shm.name)
         return cls(shm, owner=True)
 
     @classmethod
@@ -66,11 +71,18 @@ class ShmFrameRing:
         deadline = time.monotonic() + timeout
         while True:
             try:
-                return cls(shared_memory.SharedMemory(name=name, create=False), owner=False)
+                shm = shared_memory.SharedMemory(name=name, create=False)
             except FileNotFoundError:
                 if time.monotonic() > deadline:
                     raise
                 time.sleep(0.01)
+                continue
+            # Python < 3.13 registers an attached segment with this process's resource
+            # tracker, which unlinks it at exit: the owner's ring would vanish for every
+            # later reader (and the owner's own unlink would fail).
+            if sys.version_info < (3, 13) and shm.name not in _CREATED_HERE:
+                resource_tracker.unregister(shm._name, "shared_memory")
+            return cls(shm, owner=False)
 
     @property
     def name(self) -> str:

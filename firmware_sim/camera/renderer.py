@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Sequence
 
 import cv2
 import numpy as np
@@ -35,6 +36,15 @@ ONE = 1 << SHIFT
 NEAR = 1e-3       # m, polygons with a vertex nearer than this are not drawn
 CIRCLE_SEGMENTS = 128
 MAX_BLUR = 20.0   # px, largest Gaussian sigma of a defocused layer
+
+
+@dataclass(frozen=True)
+class FlatLayer:
+    """A flat object drawn straight into the output (distorted) image, parallel to the wall:
+    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at."""
+    albedo: np.ndarray     # float32 (H, W)
+    alpha: np.ndarray      # float32 (H, W)
+    depth: float
 
 
 @dataclass(frozen=True)
@@ -266,8 +276,11 @@ class Renderer:
         return abs(p[0] / p[2]) < half_w + margin and abs(p[1] / p[2]) < half_h + margin
 
     # ------------------------------------------------------------------ public
-    def render(self, scene: Scene, camera_T_marker: np.ndarray) -> np.ndarray:
-        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose."""
+    def render(self, scene: Scene, camera_T_marker: np.ndarray,
+               flat_layers: Sequence[FlatLayer] = ()) -> np.ndarray:
+        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose.
+        `flat_layers` (e.g. a calibration board) lie in front of the wall and behind the
+        marker/ORU; none (the default) renders the marker scene exactly as before."""
         cv = self.canvas
         bg = self._background(scene, camera_T_marker)
         fg_ideal = np.zeros((cv.height, cv.width), np.float32)
@@ -287,6 +300,10 @@ class Renderer:
         sb = min(self.coc_sigma_px(max(wall_depth, 0.01)), MAX_BLUR)
         sf = min(self.coc_sigma_px(max(marker_depth, 0.01)), MAX_BLUR)
         bg_d = cv2.GaussianBlur(bg_d, (0, 0), sb)
+        for flat in flat_layers:
+            sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
+            shaded = flat.albedo * self._wall_shade(scene)     # parallel to the wall: lit alike
+            bg_d = cv2.GaussianBlur(shaded, (0, 0), sl) + (1.0 - cv2.GaussianBlur(flat.alpha, (0, 0), sl)) * bg_d
         if layer is not None:
             fg_d = cv2.GaussianBlur(fg_d, (0, 0), sf)
             al_d = cv2.GaussianBlur(al_d, (0, 0), sf)

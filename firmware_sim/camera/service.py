@@ -10,7 +10,13 @@ exposure. Rendering is slower than 30 Hz here; the effective rate is what the re
 manages (frames are dropped, never queued).
 
     service = CameraService.from_files(plant, sink)      # sink: ShmFrameRing or LocalFrameSource
+    service.show_board(load_board())                     # optional: calibration checkerboard in the cell
     service.start(); ...; service.stop()
+
+With a board (`spacearm sim --camera NAME --board FILE`) every frame also shows the
+checkerboard at its true pose (nominal pose @ true_offset of the board file), drawn with the
+same lens distortion, defocus, lighting and sensor noise as the marker scene; frames still
+carry the marker truth only.
 """
 from __future__ import annotations
 
@@ -23,6 +29,8 @@ import numpy as np
 
 from controller.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
 from controller.kinematics.transforms import inv_transform
+from firmware_sim.calibration_board import board_layer
+from firmware_sim.camera.renderer import FlatLayer
 from firmware_sim.camera.scene import OruShape, Scene
 from firmware_sim.camera.simulator import CameraSimulator
 
@@ -63,6 +71,13 @@ class CameraService:
         self._thread: threading.Thread | None = None
         self.frames = 0
         self.errors = 0
+        self.board = None                    # BoardConfig once show_board() was called
+        self.base_T_board = None             # its true pose
+
+    def show_board(self, board) -> None:
+        """Put the calibration checkerboard (controller.calibration.board.BoardConfig) in the cell."""
+        self.base_T_board = board.pose.matrix() @ board.true_offset.matrix()
+        self.board = board
 
     @classmethod
     def from_files(cls, plant, sink, scene: str | Path = DEFAULT_SCENE, frame_rate: float | None = None,
@@ -101,10 +116,23 @@ class CameraService:
         site = self._site_in_view(base_T_camera)
         camera_T_marker = inv_transform(base_T_camera) @ site.base_T_marker
         self.camera.scene.oru = self._oru if site.holds_oru else None
-        irradiance = self.camera.renderer.render(self.camera.scene, camera_T_marker)
+        irradiance = self.camera.renderer.render(self.camera.scene, camera_T_marker,
+                                                 self._board_layers(base_T_camera))
         image = self.camera.sensor.expose(irradiance, self.camera.rng, self.render_noise)
         self.frames += 1
         return self.sink.publish(image, t, camera_T_marker, sync)
+
+    def _board_layers(self, base_T_camera: np.ndarray) -> list[FlatLayer]:
+        if self.board is None:
+            return []
+        cam = self.camera.camera
+        camera_T_board = inv_transform(base_T_camera) @ self.base_T_board
+        layer = board_layer(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height))
+        if layer is None:
+            return []
+        nx, ny = self.board.inner
+        centre = camera_T_board @ np.array([(nx - 1) * self.board.square / 2, (ny - 1) * self.board.square / 2, 0, 1])
+        return [FlatLayer(layer[0], layer[1], float(centre[2]))]
 
     def _site_in_view(self, base_T_camera: np.ndarray) -> MarkerSite:
         """The marker nearest to the optical axis in front of the camera."""
