@@ -100,12 +100,15 @@ class Supervisor:
         return findings
 
     def _check_ft_signal(self, m: Measurement) -> list[Finding]:
-        """Jump and frozen checks on the F/T reading (skipped while any node's data is missing,
-        when the measurement repeats the last received values)."""
+        """Jump and frozen checks on the F/T reading. A cycle with any node's data missing
+        repeats the last received values: it is no evidence either way, so the frozen count is
+        held (a reset there let a loaded machine's occasional late TPDO postpone the stop)."""
         lim = self.limits
         last, self._last_wrench = self._last_wrench, m.wrench.copy()
-        if last is None or m.missing:
+        if last is None:
             self._wrench_same = 0
+            return []
+        if m.missing:
             return []
         findings = []
         step = m.wrench - last

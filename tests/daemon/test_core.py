@@ -148,3 +148,26 @@ def test_skipped_cycles_slow_a_motion_down_instead_of_jumping_ahead(core):
     # The next cycle comes 10 periods late (overrun): the target advances by one period only.
     late = core.update(measurement(0.30, q=first)).q
     assert np.max(np.abs(late - first)) <= LIMITS.v_max[0] * 0.02 * 1.01
+
+
+def test_frozen_ft_count_holds_across_cycles_with_missing_data():
+    """A late TPDO repeats the last values: it must neither count as 'frozen' nor restart the
+    count, so a frozen sensor is stopped after ft_frozen_cycles real identical readings."""
+    limits = SupervisionLimits(LIMITS.q_min, LIMITS.q_max, LIMITS.v_max)
+    sup = Supervisor(limits, NAMES)
+    rng = np.random.default_rng(0)
+    t = 0.0
+    for _ in range(limits.ft_live_changes + 5):                 # live noise arms the check
+        t += 0.02
+        assert not sup.check(measurement(t, wrench=rng.normal(0, 0.3, 6)), None, False)
+    frozen = rng.normal(0, 0.3, 6)
+    found, identical, cycle = [], 0, 0
+    while not found:
+        t += 0.02
+        cycle += 1
+        late = cycle % 5 == 0                                   # every 5th cycle: a node late
+        found = [f for f in sup.check(measurement(t, wrench=frozen, missing=("joint_3",) if late else ()),
+                                      None, False) if f.code == "ft_frozen"]
+        identical += 0 if late else 1
+        assert identical <= limits.ft_frozen_cycles + 1, "frozen count restarted by missing data"
+    assert identical == limits.ft_frozen_cycles + 1             # first frozen reading is the reference
