@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import socket
 import subprocess
 import sys
 import tempfile
@@ -40,6 +39,7 @@ from controller.kinematics.forward import fk_batch  # noqa: E402
 from controller.kinematics.transforms import inv_transform  # noqa: E402
 from drivers.transport.hub import HubProcess  # noqa: E402
 from firmware_sim.plant import load_plant_config  # noqa: E402
+from hil_tests.harness import free_port  # noqa: E402
 
 PLANT = ROOT / "configs/plant/oru_testbed_errors.toml"
 ARM = ROOT / "configs/arm/oru_testbed_6dof.toml"
@@ -59,12 +59,6 @@ def patient_bus(out: Path) -> Path:
     text = (ROOT / "configs/bus/arm.toml").read_text().replace("heartbeat_period = 0.1", "heartbeat_period = 0.4")
     out.write_text(text.replace("[bus]\n", "[bus]\nmaster_heartbeat_timeout = 1.5\nlockstep_timeout = 2.0\n", 1))
     return out
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> subprocess.Popen:

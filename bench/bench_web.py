@@ -18,7 +18,6 @@ import os
 import platform
 import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -33,18 +32,7 @@ sys.path.insert(0, str(ROOT))
 from console.client import ApiClient  # noqa: E402
 from controller.recording.mcap_reader import read_recording  # noqa: E402
 from drivers.transport.hub import HubProcess  # noqa: E402
-
-CHROMIUM = os.environ.get("SPACEARM_CHROMIUM", "/usr/bin/chromium")
-# No GPU here: WebGL on SwiftShader, but the page itself rastered and composited by Skia on
-# the CPU (rastering it through SwiftShader costs about 3x the CPU, measured).
-CHROMIUM_ARGS = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--ignore-gpu-blocklist", "--disable-gpu-rasterization", "--disable-gpu-compositing"]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
+from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, free_port  # noqa: E402
 
 
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:

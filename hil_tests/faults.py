@@ -40,7 +40,6 @@ from __future__ import annotations
 import json
 import os
 import random
-import socket
 import subprocess
 import sys
 import threading
@@ -52,6 +51,7 @@ import numpy as np
 
 from console.client import ApiClient
 from drivers.transport.hub import LoopbackHub
+from hil_tests.harness import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 # The daemon's cycle. (Tried 50 ms to give an overloaded machine room: full-speed CSP moves
@@ -63,12 +63,6 @@ READY = [-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648
 RESOLVER_STEP = np.radians(25 / 3600)
 HOME = [0.0, np.pi / 2, -np.pi / 2, 0.0, -np.pi / 2, 0.0]   # where the nominal plant starts
 RESULTS_ENV = "SPACEARM_FAULT_RESULTS"   # JSON-lines file the tests append measurements to
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 def child_env() -> dict:

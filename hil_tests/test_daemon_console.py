@@ -7,7 +7,6 @@ import json
 import math
 import os
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -18,16 +17,11 @@ import pytest
 from controller.recording.csv_export import export_csv
 from controller.recording.mcap_reader import read_recording
 from hil_tests.conftest import ROOT, child_env
+from hil_tests.harness import free_port
 
 pytestmark = pytest.mark.hil
 READY = [-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648103310305,
          -0.22888135613941607, 1.2827321288823015]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 class Console:

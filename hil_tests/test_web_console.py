@@ -10,7 +10,6 @@ import math
 import os
 import re
 import shutil
-import socket
 import time
 import urllib.error
 import urllib.request
@@ -19,20 +18,9 @@ from pathlib import Path
 import pytest
 
 from hil_tests.conftest import TIME_SCALE
+from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, free_port
 
 pytestmark = [pytest.mark.hil, pytest.mark.slow]
-
-CHROMIUM = os.environ.get("SPACEARM_CHROMIUM", "/usr/bin/chromium")
-# No GPU here: WebGL on SwiftShader, but the page itself rastered and composited by Skia on
-# the CPU (rastering it through SwiftShader costs about 3x the CPU, measured).
-CHROMIUM_ARGS = ["--use-gl=angle", "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                 "--ignore-gpu-blocklist", "--disable-gpu-rasterization", "--disable-gpu-compositing"]
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture

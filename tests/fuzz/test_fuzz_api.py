@@ -15,16 +15,11 @@ import pytest
 from hypothesis import given, strategies as st
 
 from tests.fuzz.conftest import CaseCounter
+from hil_tests.harness import free_port
 
 COMMANDS = ["ping", "status", "control.take", "control.release", "stop", "enable", "disable", "reset",
             "jog", "move_joints", "move_pose", "record.start", "record.stop"]
 MOVING = {"enable", "jog", "move_joints", "move_pose", "reset", "record.start"}
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
