@@ -61,6 +61,14 @@ class Step:
     def fail(self, code: str, message: str) -> None:
         self._failure = Finding(code, f"stage {self.stage + 1} subtask {self.number} ({self.title}): {message}")
 
+    def _follow(self, mode, t: float, m: Measurement) -> JointSetpoint:
+        """The mode's setpoint; its first failure becomes this step's."""
+        sp = mode.setpoint(t, m)
+        failure = mode.failure()
+        if failure is not None and self._failure is None:
+            self.fail(failure.code, failure.message)
+        return sp
+
 
 @dataclass
 class ModeStep(Step):
@@ -93,11 +101,7 @@ class ModeStep(Step):
             except Exception as exc:   # planning refused: unreachable, limits, ...
                 self.fail("planning_failed", str(exc))
                 return hold(self.q_hold)
-        sp = self.mode.setpoint(t, m)
-        failure = self.mode.failure()
-        if failure is not None and self._failure is None:
-            self.fail(failure.code, failure.message)
-        return sp
+        return self._follow(self.mode, t, m)
 
     def finished(self, t: float) -> bool:
         return self.mode is not None and self._failure is None and self.mode.finished(t)
@@ -175,11 +179,7 @@ class ContactStep(Step):
         self.mode = ImpedanceMode(self.model, self.params, self.task_of(), self.q_hold, self.title)
 
     def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
-        sp = self.mode.setpoint(t, m)
-        failure = self.mode.failure()
-        if failure is not None and self._failure is None:
-            self.fail(failure.code, failure.message)
-        return sp
+        return self._follow(self.mode, t, m)
 
     def finished(self, t: float) -> bool:
         return self._failure is None and self.mode.finished(t)
