@@ -349,11 +349,9 @@ def write_camera_calibrated_arm(nominal_arm: str | Path, calibration: Calibratio
                                 out: str | Path) -> None:
     """The nominal arm file plus [calibration] (as the laser routine writes it), the orientation
     residuals and the frame corrections as comments for provenance."""
-    write_calibrated_arm(Path(nominal_arm), calibration, Path(out))
-    text = Path(out).read_text().replace("`spacearm calibrate laser --apply`", "`spacearm calibrate camera --apply`")
     (_, rb), (_, ra) = result.validation_before, result.validation_after
-    notes = [f"# camera calibration: {len(result.Q)} views ({result.skipped} skipped), identification rotation "
+    notes = [f"camera calibration: {len(result.Q)} views ({result.skipped} skipped), identification rotation "
              f"residual RMS {result.residual[1]:.6f} rad; held-out rotation RMS {rb:.6f} -> {ra:.6f} rad",
-             "# identified board and camera frame corrections (m, rad), not used by the controller:"]
-    notes += [f"#   {name} = {value!r}" for name, value in sorted(result.frames.items())]
-    Path(out).write_text(text + "\n".join(notes) + "\n")
+             "identified board and camera frame corrections (m, rad), not used by the controller:"]
+    notes += [f"  {name} = {value!r}" for name, value in sorted(result.frames.items())]
+    write_calibrated_arm(Path(nominal_arm), calibration, Path(out), "calibrate camera", notes)

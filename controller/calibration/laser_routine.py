@@ -145,9 +145,11 @@ def calibration_section(setup: LaserSetup, result: LaserRunResult, data: str = "
         dbeta=per_joint("beta"))
 
 
-def write_calibrated_arm(nominal_arm: Path, calibration: Calibration, out: Path) -> None:
+def write_calibrated_arm(nominal_arm: Path, calibration: Calibration, out: Path, command: str = "calibrate laser",
+                         comments: list[str] = ()) -> None:
     """Copy of the nominal arm file with the [calibration] table appended (the nominal rows stay
-    as they are; the model adds the corrections)."""
+    as they are; the model adds the corrections). `command` names the routine that identified
+    it; `comments` (lines without '#') follow the table as provenance."""
     text = Path(nominal_arm).read_text()
     if any(line.strip() == "[calibration]" for line in text.splitlines()):
         raise CalibrationRunError(f"{nominal_arm} already has a [calibration] table; start from the nominal file")
@@ -159,7 +161,8 @@ def write_calibrated_arm(nominal_arm: Path, calibration: Calibration, out: Path)
             return "[" + ", ".join(repr(float(x)) for x in v) + "]"
         return repr(v)
 
-    lines = ["", "# Identified by `spacearm calibrate laser --apply`; remove this table to fly the nominal model.",
+    lines = ["", f"# Identified by `spacearm {command} --apply`; remove this table to fly the nominal model.",
              "[calibration]"]
     lines += [f"{key} = {value(v)}" for key, v in calibration.model_dump().items() if v is not None]
+    lines += [f"# {c}" for c in comments]
     Path(out).write_text(text.rstrip("\n") + "\n" + "\n".join(lines) + "\n")
