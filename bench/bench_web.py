@@ -84,12 +84,12 @@ def main() -> None:
     from playwright.sync_api import sync_playwright
 
     work = Path(tempfile.mkdtemp(prefix="bench_web_"))
-    hub = HubProcess(ready_timeout=15.0)
+    hub = HubProcess(ready_timeout=15.0, rt_priority=50)
     bus = hub.spec(f"bench-web-{os.getpid()}")
     api = f"tcp:127.0.0.1:{free_port()}"
     procs = []
     try:
-        sim, _ = start(["sim", "--bus", bus, "--plant", "configs/plant/oru_testbed_nominal.toml"],
+        sim, _ = start(["sim", "--bus", bus, "--plant", "configs/plant/oru_testbed_nominal.toml", "--rt-priority", "50"],
                        "nodes ready", work / "sim.log")
         procs.append(sim)
         daemon, line = start(["daemon", "--bus", bus, "--api", api, "--record-dir", str(work / "runs")],

@@ -46,6 +46,8 @@ class Sample:
     period_error_p99_ms: float
     execution_p99_ms: float
     tpdo_timeouts: int
+    tpdos_expected: int
+    tpdos_received: int
     polls: int
 
 
@@ -130,7 +132,7 @@ def slope_per_hour(ts: list[float], ys: list[float]) -> float:
 
 
 def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = False) -> dict:
-    hub = HubProcess()
+    hub = HubProcess(rt_priority=50)
     work = Path(tempfile.mkdtemp(prefix="spacearm-soak-"))
     stack = start_stack(hub, work, name=f"soak-{os.getpid()}", rig=False)
     samples: list[Sample] = []
@@ -154,7 +156,8 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
                     time.monotonic() - t0, proc_rss_mb(pid), open_files(pid),
                     Path(rec["path"]).stat().st_size / 1e6 if rec else float("nan"),
                     s["cycle"], st["overruns"], st["skipped_cycles"], st["period_error_p99"] * 1e3,
-                    st["execution_p99"] * 1e3, s["network"]["tpdo_timeouts"], poller.polls))
+                    st["execution_p99"] * 1e3, s["network"]["tpdo_timeouts"],
+                    s["network"]["expected_tpdos"], s["network"]["tpdos"], poller.polls))
                 if not quiet:
                     x = samples[-1]
                     print(f"  t={x.t:7.1f} s  rss {x.rss_mb:6.1f} MB  fds {x.open_files:3d}  rec {x.recording_mb:7.2f} MB"
@@ -164,6 +167,7 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
             time.sleep(0.2)
         poller.stop_flag.set()
         poller.join(2)
+        recording = sampler.call("status")["recording"]
     finally:
         sampler.close()
         stack.close()
@@ -188,9 +192,25 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
         "execution_p99_ms_max": max(x.execution_p99_ms for x in samples),
         "tpdo_timeouts": last.tpdo_timeouts, "protective_stops": sum(stops.values()),
         "stop_reasons": dict(stops), "interrupted": counts["interrupted"], "errors": counts["errors"],
+        # Each sample's SYNC may still have TPDOs in flight: at most one SYNC's worth.
+        "tpdos_lost": last.tpdos_expected - last.tpdos_received,
+        "tpdos_expected": last.tpdos_expected,
+        **recording_check(Path(recording["path"])),
         "workdir": str(work),
     }
     return result
+
+
+def recording_check(path: Path) -> dict:
+    """Cycles in the closed recording and SYNC-counter gaps the clock did not skip on purpose."""
+    from controller.recording.csv_export import find_cycle_gaps
+    from controller.recording.mcap_reader import read_recording
+    rec = read_recording(path, topics={"/cycle"})
+    cycles = rec.messages
+    gaps = find_cycle_gaps([m.data["cycle"] for m in cycles], [m.data["t"] for m in cycles])
+    sync_gaps = sum(1 for a, b in zip(cycles, cycles[1:]) if b.data["sync"] != a.data["sync"] + 1)
+    return {"recorded_cycles": len(cycles), "recording_complete": rec.complete,
+            "cycle_gaps": len(gaps), "sync_gaps": sync_gaps}
 
 
 def print_table(r: dict) -> None:
@@ -205,6 +225,10 @@ def print_table(r: dict) -> None:
         ("worst 60 s window p99 period error", f"{r['period_error_p99_ms_max']:.2f} ms", "<= 1 ms"),
         ("worst 60 s window p99 execution", f"{r['execution_p99_ms_max']:.2f} ms", "<= 3 ms"),
         ("cycles with missing process data", f"{r['tpdo_timeouts']}", "0"),
+        ("TPDO frames lost (expected - received)", f"{r['tpdos_lost']} of {r['tpdos_expected']}", "0"),
+        ("recording: cycles / complete / SYNC gaps",
+         f"{r['recorded_cycles']} / {r['recording_complete']} / {r['sync_gaps']} "
+         f"(cycle gaps {r['cycle_gaps']} = overruns)", "every SYNC"),
         ("protective stops", f"{r['protective_stops']} {r['stop_reasons'] or ''}", "0"),
     ]
     w = max(len(a) for a, _, _ in rows)

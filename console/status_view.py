@@ -28,8 +28,9 @@ def status_lines(status: dict[str, Any]) -> list[str]:
         lines.append(
             f"cycle: period error median {1e3 * stats['period_error_median']:.3f} ms, "
             f"p99 {1e3 * stats['period_error_p99']:.3f} ms, max {1e3 * stats['period_error_max']:.3f} ms; "
-            f"execution p99 {1e3 * stats['execution_p99']:.3f} ms; overruns {stats['overruns']} "
-            f"[{stats['level']}]")
+            f"execution p99 {1e3 * stats['execution_p99']:.3f} ms "
+            f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']} "
+            f"[{stats['level']}]" + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
     wrench = status.get("wrench")
     if wrench:
         lines.append("wrench: F " + " ".join(f"{v:7.2f}" for v in wrench[:3]) + " N   T "

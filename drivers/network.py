@@ -90,6 +90,7 @@ class ArmCommand:
 class NetworkStats:
     rx_frames: int = 0
     tpdos: int = 0
+    expected_tpdos: int = 0   # TPDOs the SYNCs sent so far asked for (live OPERATIONAL nodes)
     syncs_sent: int = 0
     tpdo_timeouts: int = 0
     unknown: int = 0      # standard frames nobody listens to
@@ -362,6 +363,7 @@ class ArmNetwork:
             self._sync += 1
             self._received = set()
             self._expected = self._expected_tpdos()
+            self.stats.expected_tpdos += len(self._expected)
         self.network.send_message(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync

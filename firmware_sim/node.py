@@ -147,12 +147,18 @@ class SimNode:
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
-        obj = self.local._find_object(index, sub)
+        return self.local._find_object(index, sub).decode_raw(self.raw(index, sub))
+
+    def raw(self, index: int, sub: int = 0) -> bytes:
+        """The object's bytes as an SDO upload would return them."""
         # Fast path (hot every SYNC): a stored value, no read callbacks installed.
-        stored = self.local.data_store.get(index)
-        if stored is not None and sub in stored and not self.local._read_callbacks:
-            return obj.decode_raw(stored[sub])
-        return obj.decode_raw(self.local.get_data(index, sub))
+        if not self.local._read_callbacks:
+            stored = self.local.data_store.get(index)
+            if stored is not None:
+                data = stored.get(sub)
+                if data is not None:
+                    return data
+        return self.local.get_data(index, sub)
 
     def put(self, index: int, sub: int, value) -> None:
         """Firmware-side write: no access checks, no callbacks (updates read-only values)."""
@@ -344,7 +350,7 @@ class SimNode:
             if not (0 <= t <= 240) or (t > 1 and self._sync_counter % t):
                 continue
             with self._lock:
-                data = b"".join(self.local.get_data(index, sub) for index, sub, _ in pdo.entries)
+                data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
             if self.faults.drop_tx > 0:
                 self.faults.drop_tx -= 1
                 self.stats.dropped_tx += 1

@@ -110,7 +110,7 @@ from drivers.transport.hub import HubProcess  # noqa: E402
 
 @pytest.fixture(scope="session")
 def loopback_hub():
-    hub = HubProcess(ready_timeout=15.0 * TIME_SCALE)
+    hub = HubProcess(ready_timeout=15.0 * TIME_SCALE, rt_priority=50)
     old = os.environ.get("SPACEARM_HUB")
     os.environ["SPACEARM_HUB"] = hub.address
     try:

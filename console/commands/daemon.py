@@ -30,6 +30,9 @@ def register(app: typer.Typer) -> None:
                record_dir: Path = typer.Option(Path("runs"), help="Where recordings go."),
                record: bool = typer.Option(True, "--record/--no-record", help="Record every cycle from start."),
                max_cycles: int = typer.Option(0, help="Stop after this many cycles (0: run until signalled)."),
+               rt_priority: int = typer.Option(50, min=0, max=99, help="SCHED_FIFO priority of the cycle with "
+                                               "--clock realtime (0: normal scheduling); needs root or an "
+                                               "rtprio limit, else the daemon runs on and says so."),
                camera: str = typer.Option(None, "--camera", help="Shared-memory frame ring of the eye-in-hand "
                                           "camera (spacearm sim --camera NAME); enables `approach`.")) -> None:
         """Run the controller daemon until SIGINT/SIGTERM; the arm starts disabled, brakes on."""
@@ -40,7 +43,7 @@ def register(app: typer.Typer) -> None:
         options = DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock, period=period,
                                 api=api, expose=expose, token=token,
                                 record_dir=record_dir if record else None,
-                                thresholds=CycleThresholds(), camera=camera)
+                                thresholds=CycleThresholds(), camera=camera, rt_priority=rt_priority)
         try:
             controller = Daemon(options)
         except ApiError as exc:
@@ -54,7 +57,7 @@ def register(app: typer.Typer) -> None:
             raise CommandFailed(str(exc)) from None
         where = f"API on {api}" if api else "no API"
         print(f"spacearm daemon: {controller.model.name} on {bus}, {clock} clock, "
-              f"{1e3 * period:.1f} ms cycle, {where}"
+              f"{1e3 * period:.1f} ms cycle ({controller.scheduling}), {where}"
               + (f", recording {controller.recorder.path}" if controller.recorder else ""), flush=True)
         try:
             controller.run(max_cycles or None)

@@ -2,6 +2,10 @@
 
 Percentiles come from a fixed-size window of recent cycles, so memory stays constant over
 arbitrarily long runs; totals (count, maxima, overruns) cover the whole run.
+
+Execution time is wake-up to RPDOs written, so it includes waiting for this SYNC's TPDOs
+(the bus and the nodes' answer time); compute time is execution minus that wait: what the
+controller itself spends.
 """
 from __future__ import annotations
 
@@ -29,6 +33,8 @@ class CycleSummary:
     execution_median: float
     execution_p99: float
     execution_max: float
+    compute_median: float
+    compute_p99: float
     warnings: int
     errors: int
     level: str            # "ok" | "warn" | "error": worst threshold crossed in the window
@@ -42,6 +48,7 @@ class CycleStats:
         self.thresholds = thresholds
         self._period_error = np.zeros(window)
         self._execution = np.zeros(window)
+        self._compute = np.zeros(window)
         self._filled = 0
         self._next = 0
         self.cycles = 0
@@ -52,11 +59,13 @@ class CycleStats:
         self.warnings = 0
         self.errors = 0
 
-    def add(self, period_error: float, execution: float, skipped: int = 0) -> str:
-        """Record one cycle; returns its level ("ok", "warn" or "error")."""
+    def add(self, period_error: float, execution: float, skipped: int = 0, io_wait: float = 0.0) -> str:
+        """Record one cycle (`io_wait`: the part of `execution` spent waiting for TPDOs);
+        returns its level ("ok", "warn" or "error")."""
         period_error = abs(period_error)
         self._period_error[self._next] = period_error
         self._execution[self._next] = execution
+        self._compute[self._next] = execution - io_wait
         self._next = (self._next + 1) % len(self._period_error)
         self._filled = min(self._filled + 1, len(self._period_error))
         self.cycles += 1
@@ -77,8 +86,9 @@ class CycleStats:
     def summary(self) -> CycleSummary:
         pe = self._period_error[: self._filled]
         ex = self._execution[: self._filled]
+        co = self._compute[: self._filled]
         if self._filled == 0:
-            pe = ex = np.zeros(1)
+            pe = ex = co = np.zeros(1)
         t = self.thresholds
         pe99, ex99 = float(np.percentile(pe, 99)), float(np.percentile(ex, 99))
         if pe99 > t.period_error_error or ex99 > t.execution_error:
@@ -93,4 +103,5 @@ class CycleStats:
             period_error_max=self.period_error_max,
             execution_median=float(np.median(ex)), execution_p99=ex99,
             execution_max=self.execution_max,
+            compute_median=float(np.median(co)), compute_p99=float(np.percentile(co, 99)),
             warnings=self.warnings, errors=self.errors, level=level)

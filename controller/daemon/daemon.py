@@ -6,6 +6,7 @@ API runs on its own threads and only reads the published snapshot or queues comm
 """
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from controller.kinematics.model import KinematicModel
 from controller.planning.motion_planner import MotionPlanner
 from drivers.bus_config import DEFAULT_BUS_CONFIG, load_bus_config
 from drivers.network import ArmNetwork
+from drivers.priority import describe, use_fifo
 
 
 @dataclass
@@ -46,6 +48,13 @@ class DaemonOptions:
     record_dir: Path | None = Path("runs")       # None: do not record
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
+    # The cycle shares the GIL with the CANopen receive thread, the API and the recorder. A
+    # thread waiting for the GIL gets it after at most this long (CPython's default, 5 ms, is
+    # a quarter of a cycle); None leaves the interpreter's setting alone.
+    gil_switch_interval: float | None = 0.0005
+    # SCHED_FIFO priority of the daemon's threads with the real-time clock (drivers/priority.py);
+    # 0: normal scheduling. `spacearm daemon` asks for 50.
+    rt_priority: int = 0
 
 
 @dataclass(frozen=True)
@@ -93,6 +102,8 @@ class Daemon:
         self.recorder: RecorderThread | None = None
         self.snapshot: Snapshot | None = None
         self.event_log: list[dict[str, Any]] = []    # last events, for status
+        self.scheduling_problem: str | None = None   # why real-time priority was not granted
+        self._policy = "normal"
         self._stop = threading.Event()
         self._last_stats_time = -1.0
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
@@ -109,6 +120,13 @@ class Daemon:
     def start(self) -> None:
         """Boot the CAN network (all nodes configured and operational), start recording and
         the command API. The arm comes up disabled with brakes on."""
+        if self.options.gil_switch_interval is not None:
+            sys.setswitchinterval(self.options.gil_switch_interval)
+        if self.options.clock == "realtime" and self.options.rt_priority:
+            # Before any thread starts, so the receive, API and recorder threads inherit it and
+            # never hold the GIL at a lower priority than the waiting cycle.
+            self.scheduling_problem = use_fifo(self.options.rt_priority)
+        self._policy = describe()
         self.hardware.start()
         if self.options.camera:
             from controller.vision.frames import ShmFrameRing
@@ -164,7 +182,7 @@ class Daemon:
         if any(e.kind == "reset" for e in events):
             self.network.fault_reset()
         execution = time.monotonic() - tick.woke_at
-        self.stats.add(tick.period_error, execution, tick.skipped)
+        self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
         mode = self.core.mode
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
@@ -187,7 +205,8 @@ class Daemon:
             "t": s.tick.time, "sync": m.sync_counter, "cycle": s.tick.cycle,
             "q_cmd": s.command.q.tolist(), "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
             "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
-            "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution})
+            "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
+            "io_wait": self.hardware.last_io_wait})
         for event in events:
             recorder.put("/events", event.time, {"t": event.time, "kind": event.kind,
                                                       "message": event.message})
@@ -231,6 +250,7 @@ class Daemon:
             "time": s.tick.time, "cycle": s.tick.cycle, "sync_counter": m.sync_counter,
             "woke_at": s.tick.woke_at,   # monotonic s (machine-wide): state latency, web console timing
             "clock": self.options.clock, "period": self.options.period, "bus": self.options.bus,
+            "scheduling": self.scheduling,
             "arm": self.model.name,
             "joints": [{"name": name, "q": float(m.q[i]), "q_cmd": float(s.command.q[i]),
                         "dq": float(m.dq[i]), "tau": float(m.tau[i]),
@@ -243,6 +263,11 @@ class Daemon:
             "events": list(self.event_log),
             "network": vars(self.network.stats),
         }
+
+    @property
+    def scheduling(self) -> str:
+        """The cycle's scheduling policy, or why it is not the one asked for."""
+        return self.scheduling_problem or self._policy
 
     def _session_closed(self, session: Session) -> None:
         pass  # the control lease is keyed, not tied to a connection (see leases.py)

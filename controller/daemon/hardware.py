@@ -7,6 +7,8 @@ controller's command into drive state-machine requests and RPDOs.
 """
 from __future__ import annotations
 
+import time as time_module
+
 import numpy as np
 
 from controller.daemon.state import DeviceEvent, JointCommand, Measurement
@@ -44,6 +46,7 @@ class CanopenHardware:
         self.realtime_budget = realtime_budget
         self._enabled = False
         self.info_events: list[str] = []
+        self.last_io_wait = 0.0    # s the last read() waited for its SYNC's TPDOs
 
     @property
     def dof(self) -> int:
@@ -59,7 +62,9 @@ class CanopenHardware:
     def read(self, time: float) -> Measurement:
         sync = self.network.send_sync()
         timeout = None if self.lockstep else self.realtime_budget
+        waited = time_module.monotonic()
         complete = self.network.wait_all_tpdos(timeout)
+        self.last_io_wait = time_module.monotonic() - waited
         state = self.network.read(complete)
         events = []
         for event in self.network.poll_events():

@@ -1,8 +1,7 @@
 """Recording off the control thread: the cycle hands over plain values, a writer thread
 encodes them into MCAP and flushes once per second, so disk stalls never delay a cycle.
 
-A raw CAN trace (candump .log) is taken by a passive tap: a second bus handle on the same
-bus sees every frame, the controller's own included, exactly as candump would.
+The raw CAN trace (candump .log) next to it comes from controller/recording/can_trace.py.
 """
 from __future__ import annotations
 
@@ -12,11 +11,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import can
-
+from controller.recording.can_trace import CanTrace
 from controller.recording.channels import CHANNELS
 from controller.recording.mcap_recorder import McapRecorder
-from drivers.transport import open_bus
 
 QUEUE_LIMIT = 10_000  # cycles buffered if the disk stalls (200 s at 50 Hz) before dropping
 
@@ -41,21 +38,13 @@ class RecorderThread:
         self.dropped = 0
         self._thread = threading.Thread(target=self._run, name="recorder", daemon=True)
         self._thread.start()
-        self._tap: can.BusABC | None = None
-        self._notifier: can.Notifier | None = None
-        self._can_writer: can.CanutilsLogWriter | None = None
+        self._can_trace: CanTrace | None = None
         if bus_spec is not None:
-            self._start_can_trace(bus_spec)
-
-    def _start_can_trace(self, bus_spec: str) -> None:
-        try:
-            self._tap = open_bus(bus_spec)
-        except Exception as exc:  # a trace is a bonus; the MCAP recording must not depend on it
-            self.put("/events", 0.0, {"t": 0.0, "kind": "recording",
-                                                   "message": f"no raw CAN trace: {exc}"})
-            return
-        self._can_writer = can.CanutilsLogWriter(str(self.can_log), channel="can0", append=False)
-        self._notifier = can.Notifier(self._tap, [self._can_writer], timeout=0.1)
+            try:
+                self._can_trace = CanTrace(bus_spec, self.can_log)
+            except Exception as exc:  # a trace is a bonus; the MCAP recording must not depend on it
+                self.put("/events", 0.0, {"t": 0.0, "kind": "recording",
+                                          "message": f"no raw CAN trace: {exc}"})
 
     def put(self, topic: str, t: float, message: dict[str, Any]) -> None:
         try:
@@ -91,8 +80,6 @@ class RecorderThread:
         self._queue.put(None)
         self._thread.join(timeout=30)
         self._recorder.close()
-        if self._notifier is not None:
-            self._notifier.stop()
-            self._tap.shutdown()
-            self._can_writer.stop()
+        if self._can_trace is not None:
+            self._can_trace.stop()
         return self.info()

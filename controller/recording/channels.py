@@ -28,6 +28,7 @@ CYCLE_SCHEMA: dict[str, Any] = {
         "mode": {"type": "string"},
         "period_error": {"type": "number", "description": "s"},
         "execution": {"type": "number", "description": "s"},
+        "io_wait": {"type": "number", "description": "s of execution spent waiting for this SYNC's TPDOs"},
         "extra": {"type": "object", "description": "further channels, name -> number"},
     },
     "required": ["t", "sync", "cycle", "q_cmd", "q", "dq", "tau", "wrench"],
@@ -46,7 +47,7 @@ STATS_SCHEMA: dict[str, Any] = {
     "properties": {k: {"type": "number"} for k in (
         "cycles", "overruns", "skipped_cycles", "period_error_median", "period_error_p99",
         "period_error_max", "execution_median", "execution_p99", "execution_max",
-        "warnings", "errors")} | {"level": {"type": "string"}},
+        "compute_median", "compute_p99", "warnings", "errors")} | {"level": {"type": "string"}},
 }
 
 CHANNELS = {"/cycle": CYCLE_SCHEMA, "/events": EVENT_SCHEMA, "/stats": STATS_SCHEMA}

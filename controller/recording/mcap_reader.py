@@ -34,8 +34,8 @@ class Recording:
         return [m for m in self.messages if m.topic == name]
 
 
-def read_recording(path: str | Path) -> Recording:
-    """Read every message that reached the disk, in file order.
+def read_recording(path: str | Path, topics: set[str] | None = None) -> Recording:
+    """Read every message that reached the disk (of `topics` if given), in file order.
 
     A truncated file (killed writer) yields the messages of every complete chunk and
     `complete=False` with the reason in `problem`; a file that is not MCAP at all raises.
@@ -58,7 +58,7 @@ def read_recording(path: str | Path) -> Recording:
                     channels[record.id] = record
                 elif isinstance(record, Message):
                     channel = channels.get(record.channel_id)
-                    if channel is None:
+                    if channel is None or topics is not None and channel.topic not in topics:
                         continue
                     recording.messages.append(RecordedMessage(
                         channel.topic, record.log_time / 1e9, record.sequence,

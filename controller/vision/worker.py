@@ -13,6 +13,7 @@ import numpy as np
 
 from controller.vision.frames import FrameSource
 from controller.vision.pipeline import VisionPipeline, VisionResult
+from drivers.priority import use_normal
 
 PRIOR_MAX_AGE = 0.5          # s (frame time): an older good pose is not used as prior
 
@@ -62,6 +63,7 @@ class VisionWorker:
             self._thread.join(2.0)
 
     def _run(self) -> None:
+        use_normal()   # tens of ms of CPU per frame: never at the cycle's real-time priority
         while not self._stop.is_set():
             try:
                 busy = self.step()

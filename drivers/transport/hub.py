@@ -27,6 +27,7 @@ import uuid
 from pathlib import Path
 
 from . import wire
+from drivers.priority import use_fifo
 
 log = logging.getLogger("spacearm.hub")
 
@@ -286,12 +287,13 @@ class LoopbackHub:
 class HubProcess:
     """A hub in its own process on a free 127.0.0.1 port (for the session or one test)."""
 
-    def __init__(self, port: int = 0, ready_timeout: float = 15.0):
+    def __init__(self, port: int = 0, ready_timeout: float = 15.0, rt_priority: int = 0):
         root = Path(__file__).resolve().parents[2]
         env = dict(os.environ)
         env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "drivers.transport.hub", "--host", "127.0.0.1", "--port", str(port)],
+            [sys.executable, "-m", "drivers.transport.hub", "--host", "127.0.0.1", "--port", str(port),
+             "--rt-priority", str(rt_priority)],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(root), env=env)
         line: list[str] = []
         t = threading.Thread(target=lambda: line.append(self.proc.stdout.readline()), daemon=True)
@@ -338,8 +340,14 @@ def main(argv: list[str] | None = None) -> int:
                         help="exit after this many seconds without clients (0 = never)")
     parser.add_argument("--quiet-if-running", action="store_true",
                         help="exit 0 silently if the port is already taken (used by auto-start)")
+    parser.add_argument("--rt-priority", type=int, default=0,
+                        help="SCHED_FIFO priority 1..99 (0 = normal scheduling; drivers/priority.py)")
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
+    if args.rt_priority:
+        problem = use_fifo(args.rt_priority)
+        if problem:
+            print(f"spacearm hub: {problem}", file=sys.stderr)
     return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose)
 
 

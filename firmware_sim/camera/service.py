@@ -33,6 +33,7 @@ from firmware_sim.calibration_board import board_layer
 from firmware_sim.camera.renderer import FlatLayer
 from firmware_sim.camera.scene import OruShape, Scene
 from firmware_sim.camera.simulator import CameraSimulator
+from drivers.priority import use_normal
 
 
 @dataclass(frozen=True)
@@ -142,6 +143,7 @@ class CameraService:
         return min(self.sites, key=off_axis)
 
     def _run(self) -> None:
+        use_normal()   # rendering takes tens of ms: never at the nodes' real-time priority
         while True:
             with self._wake:
                 while self._pending is None and not self._stop:

@@ -1,0 +1,53 @@
+"""The raw CAN trace sees every frame on the bus, in-process (virtual) or as a child process."""
+from __future__ import annotations
+
+import time
+
+import can
+import pytest
+
+from controller.recording.can_trace import CanTrace
+from drivers.transport import BusSpecError, open_bus
+from drivers.transport.hub import LoopbackHub
+
+
+def _frames(n: int) -> list[can.Message]:
+    return [can.Message(arbitration_id=0x180 + i % 8, data=bytes([i % 256, 1, 2]), is_extended_id=False)
+            for i in range(n)]
+
+
+def _send_and_trace(spec: str, path, n: int = 200) -> list[can.Message]:
+    trace = CanTrace(spec, path)
+    sender = open_bus(spec)
+    try:
+        for msg in _frames(n):
+            sender.send(msg)
+        time.sleep(0.5)      # frames reach the tap before it is told to stop
+    finally:
+        sender.shutdown()
+        trace.stop()
+    return list(can.CanutilsLogReader(str(path)))
+
+
+@pytest.mark.parametrize("kind", ["virtual", "loopback"])
+def test_trace_has_every_frame_in_order(kind, tmp_path):
+    hub = LoopbackHub("127.0.0.1", 0).start() if kind == "loopback" else None
+    try:
+        spec = f"loopback:trace@127.0.0.1:{hub.port}" if hub else f"virtual:trace-{time.monotonic_ns()}"
+        logged = _send_and_trace(spec, tmp_path / "run.can.log")
+    finally:
+        if hub:
+            hub.stop()
+    sent = _frames(200)
+    assert [(m.arbitration_id, bytes(m.data)) for m in logged] == [(m.arbitration_id, bytes(m.data)) for m in sent]
+
+
+def test_bus_the_child_cannot_open_is_a_clear_error(tmp_path):
+    # no such SocketCAN interface (or no SocketCAN at all): the child says why and exits
+    with pytest.raises(RuntimeError, match="CAN trace did not start: can_trace: cannot open socketcan:nosuchcan7"):
+        CanTrace("socketcan:nosuchcan7", tmp_path / "x.can.log")
+
+
+def test_bad_bus_spec_is_refused_before_starting(tmp_path):
+    with pytest.raises(BusSpecError):
+        CanTrace("carrier-pigeon:1", tmp_path / "x.can.log")
