@@ -144,10 +144,15 @@ class SimNode:
         self.next_heartbeat = 0.0
         self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
+        self._codecs: dict[tuple[int, int], tuple] = {}
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
-        return self.local._find_object(index, sub).decode_raw(self.raw(index, sub))
+        obj, codec, _ = self._codec(index, sub)
+        data = self.raw(index, sub)
+        if codec is not None and len(data) == codec.size:
+            return codec.unpack(data)[0]
+        return obj.decode_raw(data)
 
     def raw(self, index: int, sub: int = 0) -> bytes:
         """The object's bytes as an SDO upload would return them."""
@@ -162,8 +167,25 @@ class SimNode:
 
     def put(self, index: int, sub: int, value) -> None:
         """Firmware-side write: no access checks, no callbacks (updates read-only values)."""
-        obj = self.local._find_object(index, sub)
-        self.local.data_store.setdefault(index, {})[sub] = obj.encode_raw(value)
+        obj, codec, integer = self._codec(index, sub)
+        if codec is None or isinstance(value, (bytes, bytearray)):
+            data = obj.encode_raw(value)
+        else:
+            try:
+                data = codec.pack(int(value) if integer else value)
+            except struct.error:
+                raise ValueError(f"0x{index:04X}:{sub:02X}: {value!r} does not fit {codec.format}") from None
+        self.local.data_store.setdefault(index, {})[sub] = data
+
+    def _codec(self, index: int, sub: int):
+        """(object, struct of its number type or None, integer type?), cached: the device code
+        reads and writes ~100 objects per SYNC and the OD never changes after loading."""
+        entry = self._codecs.get((index, sub))
+        if entry is None:
+            obj = self.local._find_object(index, sub)
+            entry = self._codecs[(index, sub)] = (obj, obj.STRUCT_TYPES.get(obj.data_type),
+                                                  obj.data_type in odlib.INTEGER_TYPES)
+        return entry
 
     # ------------------------------------------------------------------ lifecycle
     def power_on(self) -> None:

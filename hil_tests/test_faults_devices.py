@@ -62,6 +62,9 @@ def check_stopped(stack, safe, code: str, bound_cycles: float) -> None:
 
 
 def test_heartbeat_loss_stops_the_arm(enabled):
+    # The real-time daemon asks for SCHED_FIFO 50 (drivers/priority.py) and says if refused.
+    scheduling = enabled.status()["scheduling"]
+    assert scheduling == "SCHED_FIFO 50" or scheduling.startswith("SCHED_FIFO not permitted")
     t0 = time.monotonic()
     enabled.rig.stop_heartbeat("joint_3")
     safe = wait_safe(enabled, t0, "heartbeat lost")

@@ -1,6 +1,6 @@
 """`spacearm hub`: run the loopback CAN hub for `--bus loopback:...` in the foreground.
 
-    spacearm hub [--host 127.0.0.1] [--port 29536] [--idle-exit SECONDS]
+    spacearm hub [--host 127.0.0.1] [--port 29536] [--idle-exit SECONDS] [--rt-priority N]
 
 Optional: the first `loopback:` client on this machine starts a hub by itself when none
 answers (it exits after 30 s without clients). Run it explicitly to keep one up, to see its
@@ -22,8 +22,10 @@ def register(app: typer.Typer) -> None:
         idle_exit: float = typer.Option(0.0, "--idle-exit", min=0.0,
                                         help="exit after this many seconds without clients (0 = never)"),
         verbose: bool = typer.Option(False, "--verbose", "-v", help="log every client join/leave at debug level"),
+        rt_priority: int = typer.Option(0, "--rt-priority", min=0, max=99,
+                                        help="SCHED_FIFO priority (0: normal scheduling; README, real-time scheduling)"),
     ) -> None:
         """Run the loopback CAN hub (multi-process bus on one machine, 127.0.0.1 by default)."""
         from drivers.transport.hub import run
 
-        raise typer.Exit(run(host, port, idle_exit, verbose=verbose))
+        raise typer.Exit(run(host, port, idle_exit, verbose=verbose, rt_priority=rt_priority))

@@ -344,15 +344,15 @@ def main(argv: list[str] | None = None) -> int:
                         help="SCHED_FIFO priority 1..99 (0 = normal scheduling; drivers/priority.py)")
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
-    if args.rt_priority:
-        problem = use_fifo(args.rt_priority)
-        if problem:
-            print(f"spacearm hub: {problem}", file=sys.stderr)
-    return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose)
+    return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose, args.rt_priority)
 
 
 def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = False,
-        verbose: bool = False) -> int:
+        verbose: bool = False, rt_priority: int = 0) -> int:
+    if rt_priority:
+        problem = use_fifo(rt_priority)     # before the serving thread starts: it inherits it
+        if problem:
+            print(f"spacearm hub: {problem}", file=sys.stderr)
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if host in ("0.0.0.0", "::", ""):

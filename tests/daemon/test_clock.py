@@ -66,3 +66,12 @@ def test_cycle_stats_thresholds_and_bounded_window():
     assert summary.period_error_max == pytest.approx(0.002)
     assert summary.period_error_p99 == pytest.approx(0.0001)  # old spikes left the window
     assert summary.level == "ok" and summary.warnings == 1 and summary.errors == 1
+
+
+def test_compute_time_is_execution_without_the_wait_for_tpdos():
+    stats = CycleStats(window=100)
+    for _ in range(100):
+        stats.add(0.0001, execution=0.004, io_wait=0.003)
+    summary = stats.summary()
+    assert summary.execution_median == pytest.approx(0.004)
+    assert summary.compute_median == pytest.approx(0.001) and summary.compute_p99 == pytest.approx(0.001)
