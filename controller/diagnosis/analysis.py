@@ -6,12 +6,16 @@
    given simulation; row k of both answers the command of row k-1.
 2. Residual per channel; noise from the row-to-row differences (robust, MAD).
 3. Torque and F/T channels first: fit every candidate (and pairs) on the first 60 % of the
-   rows, keep the one with the lowest BIC among those that pass the significance test and
-   reduce the held-out (last 40 %) error; rank findings by explained variance over noise.
+   rows (torque: the rows where the joint moves), keep the one with the lowest BIC, at one
+   block length common to the channel's candidates, among those that pass the significance
+   test, reduce the held-out (last 40 %) error and simulate; refine its size by single-joint
+   replays (sim_refit); rank findings by explained variance over noise.
 4. Write the chosen effects into a copy of the plant, re-simulate, and look at the position
    channels again (feedback latency), so tracking errors that friction explains are not
    named twice.
-5. RMS before/after on the held-out rows from the re-simulation with the fitted plant.
+5. RMS before/after on the held-out rows from the re-simulation with the fitted plant; the
+   mismatch statistic of each channel against noise and against a second nominal replay
+   started half a resolver quantum away (the null: what differs without missing physics).
 """
 from __future__ import annotations
 
@@ -21,13 +25,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.diagnosis.candidates import FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, Signals, by_name
+from controller.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
+                                            by_name)
 from controller.diagnosis.direct_sim import SimTraces, simulate
-from controller.diagnosis.fitting import ChannelFit, fit_candidate, fit_pair
+from controller.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from controller.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
 from controller.diagnosis.recording_io import RecordingTable
+from controller.diagnosis.sim_refit import refine_size
 from controller.recording.csv_export import WRENCH_COLUMNS
-from firmware_sim.plant import PlantConfig
+from firmware_sim.plant import ARCSEC, PlantConfig
 
 TRAIN_FRACTION = 0.6
 
@@ -95,20 +101,24 @@ RAW_RATIO_LIMIT = 1.5      # residual RMS / noise: 1.0-1.3 without any effect (m
 SMOOTH_RATIO_LIMIT = 0.6   # 0.5 s moving-average RMS / noise: 0.2-0.45 without any effect
 
 
+NULL_MARGIN = 2.0          # one draw of the null replay's average, scattered up to about 1.7x (measured)
 HUNTING_RATIO = 5.0        # residual RMS / median noise of the torque channels: a drive that hunts
 
 
 def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 25,
-                       reference_noise: float | None = None) -> float:
+                       reference_noise: float | None = None, null_smooth: float = 0.0) -> float:
     """How far a residual is from noise, as a multiple of the limit (> 1: significant).
 
     Two views: the raw RMS against the row-to-row noise (catches ringing and hunting) and the
     0.5 s average (catches slow offsets hidden in noise). The limits hold for the servo's
-    resolver chatter, which is not white; measured on effect-free recordings."""
+    resolver chatter, which is not white; measured on effect-free recordings. `null_smooth`
+    is the 0.5 s average RMS between two equally valid nominal replays (see null_replay):
+    where the arm rests, the servo parks anywhere within a resolver quantum, and that
+    offset, not the chatter, sets what the average shows without any effect."""
     noise = max(noise_level(residual), noise_floor)
     raw = float(np.sqrt(np.mean(residual ** 2))) / noise
-    smooth = np.convolve(residual, np.ones(window) / window, mode="valid")
-    stat = max(raw / RAW_RATIO_LIMIT, float(np.sqrt(np.mean(smooth ** 2))) / noise / SMOOTH_RATIO_LIMIT)
+    smooth = float(np.sqrt(np.mean(np.convolve(residual, np.ones(window) / window, mode="valid") ** 2)))
+    stat = max(raw / RAW_RATIO_LIMIT, smooth / max(SMOOTH_RATIO_LIMIT * noise, NULL_MARGIN * null_smooth))
     if reference_noise:
         # dense ringing (a hunting drive) inflates the channel's own row-to-row noise estimate:
         # compare with the noise the other channels of the same kind show
@@ -118,6 +128,16 @@ def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 2
 
 def replay(table: RecordingTable, plant: PlantConfig, joints: list[int] | None = None) -> SimTraces:
     return simulate(plant, table.q_cmd, table.dt, q0=table.q[0], joints=joints, t0=0.0)
+
+
+def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
+    """The nominal replay from half a resolver quantum away: the recording's first position
+    is only known to a quantum, so this replay is as valid as the other, and how much the
+    two differ is what the recording may differ from either without any missing physics."""
+    n = table.q.shape[1]
+    quantum = np.array([(plant.joints[j] if j < len(plant.joints) else plant.joint).resolver_arcsec
+                        for j in range(n)]) * ARCSEC
+    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, t0=0.0)
 
 
 def _signals(table: RecordingTable, sim: SimTraces, j: int) -> Signals:
@@ -133,28 +153,59 @@ def _envelope_error(fit: ChannelFit, residual: np.ndarray, noise: float, rows: n
     return float(np.sqrt(np.mean((envelope(residual)[rows] - predicted[rows]) ** 2)))
 
 
-def _best_for_channel(fits: list[ChannelFit]) -> ChannelFit | None:
+def _ranked(fits: list[ChannelFit]) -> list[ChannelFit]:
+    """The significant fits, best (lowest BIC at one common block length) first."""
     good = [f for f in fits if f.significant]
-    return min(good, key=lambda f: f.bic) if good else None
+    block = common_block(good) if good else 1
+    return sorted(good, key=lambda f: f.bic_at(block))
+
+
+def _best_for_channel(fits: list[ChannelFit]) -> ChannelFit | None:
+    ranked = _ranked(fits)
+    return ranked[0] if ranked else None
 
 
 def _torque_fits(table: RecordingTable, sim: SimTraces, quiet: SimTraces, j: int,
-                 train: np.ndarray) -> ChannelFit | None:
+                 train: np.ndarray) -> list[ChannelFit]:
+    """Significant torque-channel explanations of joint j, best first."""
     s = _signals(table, quiet, j)
     y = table.tau[:, j] - sim.tau[:, j]
-    fits = {c.effect: fit_candidate(c, s, y, train, j) for c in JOINT_CANDIDATES if c.channel == "tau"}
-    best = _best_for_channel(list(fits.values()))
-    if best is None:
-        return None
+    # Rows where the nominal joint rests are left out of the fits: with static friction the
+    # real joint sticks wherever break-away left it, a torque offset no smooth model predicts
+    # and that, kept in, only dilutes the rows where friction shows (and the noise estimate).
+    fit_rows = train & (np.abs(s.dq) > VELOCITY_DEADBAND)
+    if fit_rows.sum() < 0.2 * train.sum():
+        fit_rows = train
+    held = ~train
+    fits = {c.effect: fit_candidate(c, s, y, fit_rows, j, held) for c in JOINT_CANDIDATES if c.channel == "tau"}
+    ranked = _ranked(list(fits.values()))
+    if not ranked:
+        return []
+    best = ranked[0]
     pairs = []
     for a, b in TORQUE_PAIRS:
         if best.effects[0] in (a, b):
-            pairs.append(fit_pair(by_name(a), by_name(b), s, y, train, j, fits[a].shape[0], fits[b].shape[0]))
+            pairs.append(fit_pair(by_name(a), by_name(b), s, y, fit_rows, j, fits[a].shape[0], fits[b].shape[0],
+                                  held))
     pair = _best_for_channel(pairs)
+    block = common_block([best, pair]) if pair is not None else 1
     # a second effect must earn its place: lower BIC and clearly lower held-out error
-    if pair is not None and pair.bic < best.bic and pair.rms_heldout_after < 0.9 * best.rms_heldout_after:
-        return pair
-    return best
+    if pair is not None and pair.bic_at(block) < best.bic_at(block) and \
+            pair.rms_heldout_after < 0.9 * best.rms_heldout_after:
+        return [pair] + ranked
+    return ranked
+
+
+def _simulates(table: RecordingTable, nominal: PlantConfig, fit: ChannelFit) -> bool:
+    """Whether the plant with this fit alone replays without diverging. A friction so stiff
+    that the simulator cannot integrate it is no usable model (and, on a one-way ramp, a
+    constant torque is explained as well by Coulomb or Stribeck friction, which simulate)."""
+    try:
+        with np.errstate(all="raise"):
+            sim = replay(table, apply_fits(nominal, [fit]), joints=[fit.index])
+        return bool(np.all(np.isfinite(sim.q)) and np.all(np.isfinite(sim.tau)))
+    except (OverflowError, FloatingPointError, ValueError):
+        return False
 
 
 def _ft_fit(table: RecordingTable, sim: SimTraces, axis: int, train: np.ndarray) -> ChannelFit | None:
@@ -168,6 +219,13 @@ def _latency_fit(table: RecordingTable, sim: SimTraces, j: int, train: np.ndarra
     s = _signals(table, sim, j)
     y = table.q[:, j] - sim.q[:, j]
     return _best_for_channel([fit_candidate(by_name("latency"), s, y, train, j)])
+
+
+def _reversals(v: np.ndarray) -> int:
+    """Velocity sign changes between real motions (a quarter of the top speed: the servo's
+    settling wiggle from the first measured position is no reversal)."""
+    moving = v[np.abs(v) > max(VELOCITY_DEADBAND, 0.25 * float(np.max(np.abs(v))))]
+    return int(np.count_nonzero(np.diff(np.sign(moving))))
 
 
 def _onset(t: np.ndarray, residual: np.ndarray, noise: float) -> float | None:
@@ -200,7 +258,10 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     quiet = replay(table, ideal_sensors(nominal))
     tau_noise = float(np.median([noise_level(table.tau[:, j] - sim.tau[:, j]) for j in range(n)]))
     for j in range(n):
-        fit = _torque_fits(table, sim, quiet, j, train)
+        fit = next((f for f in _torque_fits(table, sim, quiet, j, train) if _simulates(table, nominal, f)), None)
+        if fit is not None:
+            fit = refine_size(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j],
+                              train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits)
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         if mismatch_statistic(left, 1e-3, reference_noise=tau_noise) > 1.0 and \
@@ -231,18 +292,22 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
 
     held = ~train
     channels, before, after = [], {}, {}
-    quantum = [(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * 4.8481368e-6
+    quantum = [(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
                for j in range(n)]
     ref = {"ta": tau_noise}
+    null = dict((name, real - nom) for name, real, nom, _ in _channels(null_replay(table, nominal), sim, sim))
     for name, real, nom, fitted in _channels(table, sim, refit):
         r0, r1 = real - nom, real - fitted
+        null_smooth = float(np.sqrt(np.mean(np.convolve(null[name], np.ones(25) / 25, mode="valid") ** 2)))
         before[name], after[name] = r0, r1
         floor = (quantum[int(name[2:]) - 1] if name.startswith("q_") else 0.01 if name.startswith("f") else 0.001) \
             / math.sqrt(12.0) if not name.startswith("tau") else 1e-3
         channels.append(ChannelResult(name, max(noise_level(r0), floor), float(np.sqrt(np.mean(r0[held] ** 2))),
                                       float(np.sqrt(np.mean(r1[held] ** 2))), False,
-                                      mismatch_statistic(r0, floor, reference_noise=ref.get(name[:2])),
-                                      mismatch_statistic(r1, floor, reference_noise=ref.get(name[:2]))))
+                                      mismatch_statistic(r0, floor, reference_noise=ref.get(name[:2]),
+                                                         null_smooth=null_smooth),
+                                      mismatch_statistic(r1, floor, reference_noise=ref.get(name[:2]),
+                                                         null_smooth=null_smooth)))
     findings = []
     for fit in fits:
         name = _channel_name(fit)
@@ -254,7 +319,8 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                 "envelope", fit.rms_heldout_before, fit.rms_heldout_after, 0.0
         explained = max(fit.rms_heldout_before ** 2 - fit.rms_heldout_after ** 2, 0.0)
         params, errs = plant_parameters(fit)
-        findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, describe(fit, params, errs),
+        reversals = _reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
+        findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, describe(fit, params, errs, reversals),
                                 _onset(t, before[name], ch.noise)))
     findings.sort(key=lambda f: -f.score)
     timings["total_s"] = time.perf_counter() - started
@@ -291,7 +357,7 @@ def _channel_name(fit: ChannelFit) -> str:
 
 
 def _channels(table: RecordingTable, nom: SimTraces, fitted: SimTraces):
-    for j in range(table.n_joints):
+    for j in range(table.q.shape[1]):
         yield f"q_{j + 1}", table.q[:, j], nom.q[:, j], fitted.q[:, j]
         yield f"tau_{j + 1}", table.tau[:, j], nom.tau[:, j], fitted.tau[:, j]
     for i, name in enumerate(WRENCH_COLUMNS):
@@ -332,15 +398,19 @@ def plant_parameters(fit: ChannelFit) -> tuple[dict[str, float], dict[str, float
     return p, e
 
 
-def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float]) -> str:
+def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversals: int | None = None) -> str:
+    """The finding in a test engineer's words. `reversals`: velocity sign changes of the
+    joint in the recording; without any, friction laws cannot be told apart (each is a
+    constant drag at constant speed) and the text says so."""
     where = f"joint {fit.index + 1}" if fit.channel != "wrench" else f"F/T {WRENCH_COLUMNS[fit.index]}"
     unit = "N" if fit.index < 3 else "N m"
     parts = []
     pm = lambda k: f" +- {e[k]:.2g}" if k in e and np.isfinite(e[k]) else ""
     for effect in fit.effects:
         if effect == "coulomb":
-            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} N m, "
-                         "visible at every velocity reversal")
+            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} N m, " + (
+                "a constant drag (no velocity reversal in this recording: Coulomb, Stribeck and viscous friction "
+                "look alike here)" if reversals == 0 else "visible at every velocity reversal"))
         elif effect == "viscous":
             parts.append(f"viscous friction about {p['viscous_friction']:.3g}{pm('viscous_friction')} N m s/rad, "
                          "growing with speed")

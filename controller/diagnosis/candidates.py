@@ -40,6 +40,11 @@ class Candidate:
     fixed_gain: bool = False     # the prediction has no free size (latency, saturation)
 
 
+# Stribeck decay speeds tried, rad/s: roughly 25 % steps, from the slowest speed the drive
+# resolves smoothly to where the bump is as wide as the running speeds themselves
+STRIBECK_VELOCITIES = tuple(float(v) for v in np.geomspace(0.002, 0.06, 16))
+
+
 def _sign(v: np.ndarray) -> np.ndarray:
     return np.where(np.abs(v) > VELOCITY_DEADBAND, np.sign(v), 0.0)
 
@@ -58,7 +63,7 @@ def _saturation(s: Signals, limit: float) -> np.ndarray:
 JOINT_CANDIDATES: tuple[Candidate, ...] = (
     Candidate("coulomb", "tau", ("coulomb_friction",), (), lambda s, _: _sign(s.dq)[:, None]),
     Candidate("viscous", "tau", ("viscous_friction",), (), lambda s, _: s.dq[:, None]),
-    Candidate("stribeck", "tau", ("stribeck_friction",), (0.003, 0.006, 0.012, 0.025, 0.05),
+    Candidate("stribeck", "tau", ("stribeck_friction",), STRIBECK_VELOCITIES,
               lambda s, vs: (_sign(s.dq) * np.exp(-(s.dq / vs) ** 2))[:, None]),
     Candidate("gravity_load", "tau", ("load_cos", "load_sin"), (),
               lambda s, _: np.column_stack([np.cos(s.q), -np.sin(s.q)])),

@@ -31,10 +31,21 @@ class ChannelFit:
     sse_null_train: float
     rms_heldout_before: float
     rms_heldout_after: float
-    bic: float
+    bic: float                   # at this fit's own block length; compare candidates with bic_at
     p_value: float
     block: int
     prediction: np.ndarray = field(repr=False, default=None)   # over all rows
+    n_train: int = 0
+    n_params: int = 0
+
+    def bic_at(self, block: int) -> float:
+        """BIC with a given block length. Candidates on one channel must be compared at one
+        common block length: with each fit's own, a worse fit (longer correlated residual,
+        fewer effective samples) gets the lower BIC whenever the mean square error exceeds 1."""
+        if not np.isfinite(self.sse_train) or self.n_train == 0:
+            return np.inf
+        n_eff = max(self.n_train / block, self.n_params + 2.0)
+        return float(n_eff * np.log(max(self.sse_train, 1e-30) / self.n_train) + self.n_params * np.log(n_eff))
 
     @property
     def heldout_reduction(self) -> float:
@@ -72,8 +83,9 @@ def _lstsq(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
 
 def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tuple[str, ...],
                  shape: tuple[float, ...], X: np.ndarray, y: np.ndarray, train: np.ndarray,
-                 fixed_gain: bool = False) -> ChannelFit:
-    held = ~train
+                 fixed_gain: bool = False, held: np.ndarray | None = None) -> ChannelFit:
+    """Fit on the `train` rows; judge on `held` (default: all other rows)."""
+    held = ~train if held is None else held
     if fixed_gain:
         coef = np.ones(X.shape[1])
         sse = float(np.sum((y[train] - X[train] @ coef) ** 2))
@@ -106,10 +118,18 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
     return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, bic, p,
-                      block, pred)
+                      block, pred, n, k)
 
 
-def fit_candidate(candidate: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int) -> ChannelFit:
+def common_block(fits: list[ChannelFit]) -> int:
+    """The block length the best-fitting candidate's residual shows: the scale at which
+    all candidates of one channel are compared."""
+    finite = [f for f in fits if np.isfinite(f.sse_train)]
+    return min(finite, key=lambda f: f.sse_train).block if finite else 1
+
+
+def fit_candidate(candidate: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,
+                  held: np.ndarray | None = None) -> ChannelFit:
     grid = candidate.grid
     if grid == ("quantiles",):
         grid = tuple(float(np.quantile(np.abs(s.tau), q)) for q in (0.5, 0.7, 0.8, 0.9, 0.95, 0.98))
@@ -117,14 +137,14 @@ def fit_candidate(candidate: Candidate, s: Signals, y: np.ndarray, train: np.nda
     for value in grid or (np.nan,):
         X = candidate.features(s, value)
         fit = fit_features((candidate.effect,), candidate.channel, index, candidate.columns, (value,), X, y, train,
-                           candidate.fixed_gain)
+                           candidate.fixed_gain, held)
         if best is None or fit.sse_train < best.sse_train:
             best = fit
     return best
 
 
 def fit_pair(a: Candidate, b: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,
-             shape_a: float, shape_b: float) -> ChannelFit:
+             shape_a: float, shape_b: float, held: np.ndarray | None = None) -> ChannelFit:
     X = np.column_stack([a.features(s, shape_a), b.features(s, shape_b)])
     return fit_features((a.effect, b.effect), a.channel, index, a.columns + b.columns, (shape_a, shape_b), X, y,
-                        train)
+                        train, held=held)
