@@ -102,8 +102,7 @@ class Daemon:
         self.recorder: RecorderThread | None = None
         self.snapshot: Snapshot | None = None
         self.event_log: list[dict[str, Any]] = []    # last events, for status
-        self.scheduling_problem: str | None = None   # why real-time priority was not granted
-        self._policy = "normal"
+        self.scheduling = "normal"   # the cycle's policy, or why the one asked for was refused
         self._stop = threading.Event()
         self._last_stats_time = -1.0
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
@@ -122,11 +121,12 @@ class Daemon:
         the command API. The arm comes up disabled with brakes on."""
         if self.options.gil_switch_interval is not None:
             sys.setswitchinterval(self.options.gil_switch_interval)
+        problem = None
         if self.options.clock == "realtime" and self.options.rt_priority:
             # Before any thread starts, so the receive, API and recorder threads inherit it and
             # never hold the GIL at a lower priority than the waiting cycle.
-            self.scheduling_problem = use_fifo(self.options.rt_priority)
-        self._policy = describe()
+            problem = use_fifo(self.options.rt_priority)
+        self.scheduling = problem or describe()
         self.hardware.start()
         if self.options.camera:
             from controller.vision.frames import ShmFrameRing
@@ -263,11 +263,6 @@ class Daemon:
             "events": list(self.event_log),
             "network": vars(self.network.stats),
         }
-
-    @property
-    def scheduling(self) -> str:
-        """The cycle's scheduling policy, or why it is not the one asked for."""
-        return self.scheduling_problem or self._policy
 
     def _session_closed(self, session: Session) -> None:
         pass  # the control lease is keyed, not tied to a connection (see leases.py)
