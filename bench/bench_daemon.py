@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 from controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from drivers.priority import use_normal  # noqa: E402
-from hil_tests.harness import free_port  # noqa: E402
+from hil_tests.harness import CpuSteal, free_port  # noqa: E402
 
 POLLER = """
 import sys, time
@@ -94,13 +94,15 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
         # statistics of the run only, percentiles over all of its cycles
         daemon.stats = type(daemon.stats)(daemon.options.thresholds, window=cycles + 1)
         wall = time.monotonic()
+        steal = CpuSteal()
         daemon.run(max_cycles=cycles)
         wall = time.monotonic() - wall
+        steal_fraction = steal.fraction()
         sampler_stop.set()
         polls = int(poller.communicate(timeout=duration + 30)[0] or 0) if poller else 0
         s = daemon.stats.summary()
         return {"clock": clock, "period": period, "cycles": s.cycles, "wall": wall, "summary": s,
-                "scheduling": daemon.scheduling,
+                "scheduling": daemon.scheduling, "steal": steal_fraction,
                 "polls": polls, "rss_start": rss_start, "rss_end": rss_mb(),
                 "rss_mid": memory[len(memory) // 2] if memory else rss_start}
     finally:
@@ -144,6 +146,7 @@ def main() -> None:
             (f"real time {name}: overruns (skipped cycles)", f"{s.overruns} ({s.skipped_cycles}) of {s.cycles}",
              "0" if r["period"] == 0.02 else "", s.overruns == 0 if r["period"] == 0.02 else ""),
             (f"real time {name}: status polls answered", f"{r['polls']} in {r['wall']:.0f} s", "20 Hz", ""),
+            (f"real time {name}: host CPU steal during the run (VM)", f"{100 * r['steal']:.1f} %", "", ""),
             (f"real time {name}: daemon RSS start / mid / end",
              f"{r['rss_start']:.1f} / {r['rss_mid']:.1f} / {r['rss_end']:.1f} MB", "no growth", ""),
         ]

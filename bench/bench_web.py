@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 from console.client import ApiClient  # noqa: E402
 from controller.recording.mcap_reader import read_recording  # noqa: E402
 from drivers.transport.hub import HubProcess  # noqa: E402
-from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, free_port  # noqa: E402
+from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, CpuSteal, free_port  # noqa: E402
 
 
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:
@@ -67,12 +67,12 @@ def daemon_time(api: str) -> float:
         return float(client.call("status")["time"])
 
 
-def phase_stats(cycles: list[dict], t0: float, t1: float, load: float) -> dict:
+def phase_stats(cycles: list[dict], t0: float, t1: float, load: float, steal: float) -> dict:
     inside = [c for c in cycles if t0 <= c["t"] < t1]
     err = np.array([c["period_error"] for c in inside]) * 1e3
     numbers = np.array([c["cycle"] for c in inside])
     skipped = int(np.sum(np.diff(numbers) - 1)) if len(numbers) > 1 else 0
-    return {"load": load, "n": len(inside), "median": float(np.median(err)), "p99": float(np.percentile(err, 99)),
+    return {"load": load, "steal": steal, "n": len(inside), "median": float(np.median(err)), "p99": float(np.percentile(err, 99)),
             "max": float(err.max()), "skipped": skipped,
             "execution_p99": float(np.percentile([c["execution"] for c in inside], 99)) * 1e3}
 
@@ -98,18 +98,22 @@ def main() -> None:
         recording = re.search(r"recording (\S+\.mcap)", line).group(1)
         time.sleep(3.0)                                          # let the start-up settle
         bounds = [daemon_time(api)]
+        steal = CpuSteal()
         time.sleep(args.duration)                                # phase 0: no web server
         bounds.append(daemon_time(api))
         loads = [os.getloadavg()[0]]
+        steals = [steal.fraction()]
         web, line = start(["console-web", "--connect", api, "--port", "0"],
                           r"http://127\.0\.0\.1:\d+/", work / "web.log")
         procs.append(web)
         url = line
         time.sleep(2.0)
         bounds.append(daemon_time(api))
+        steal.fraction()
         time.sleep(args.duration)                                # phase 1: server, no page
         bounds.append(daemon_time(api))
         loads.append(os.getloadavg()[0])
+        steals.append(steal.fraction())
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
             pages = [browser.new_page(viewport={"width": 1400, "height": 900}) for _ in range(2)]
@@ -120,10 +124,12 @@ def main() -> None:
             for page in pages:
                 page.evaluate("() => { spacearm.latencies = []; spacearm.arrivals = []; }")
             bounds.append(daemon_time(api))
+            steal.fraction()
             t_wall = time.monotonic()
             time.sleep(args.duration)                            # phase 2: two pages open
             bounds.append(daemon_time(api))
             loads.append(os.getloadavg()[0])
+            steals.append(steal.fraction())
             wall = time.monotonic() - t_wall
             seen = [page.evaluate("() => ({lat: spacearm.latencies, arr: spacearm.arrivals})") for page in pages]
             browser.close()
@@ -137,9 +143,9 @@ def main() -> None:
         hub.stop()
 
     cycles = [m.data for m in read_recording(recording).topic("/cycle")]
-    none = phase_stats(cycles, bounds[0], bounds[1], loads[0])
-    server = phase_stats(cycles, bounds[2], bounds[3], loads[1])
-    two = phase_stats(cycles, bounds[4], bounds[5], loads[2])
+    none = phase_stats(cycles, bounds[0], bounds[1], loads[0], steals[0])
+    server = phase_stats(cycles, bounds[2], bounds[3], loads[1], steals[1])
+    two = phase_stats(cycles, bounds[4], bounds[5], loads[2], steals[2])
     lat = np.concatenate([np.array(s["lat"]) for s in seen]) * 1e3
     rates = [(len(s["arr"]) - 1) / (s["arr"][-1] - s["arr"][0]) for s in seen if len(s["arr"]) > 1]
     daemon_rate = two["n"] / wall       # cycles the daemon ran per wall-clock second (skips excluded)
@@ -155,7 +161,8 @@ def main() -> None:
     for name, s in (("no web server", none), ("server, no page", server), ("two pages open", two)):
         rows.append((f"period error {name}: median / p99 / max",
                      f"{s['median']:.3f} / {s['p99']:.3f} / {s['max']:.2f} ms, {s['skipped']} skipped, "
-                     f"exec p99 {s['execution_p99']:.2f} ms, load {s['load']:.1f}", "", ""))
+                     f"exec p99 {s['execution_p99']:.2f} ms, load {s['load']:.1f}, "
+                     f"steal {100 * s['steal']:.1f} %", "", ""))
     ratio = two["p99"] / none["p99"] if none["p99"] > 0 else float("nan")
     rows.append(("period error p99 ratio two pages / none", f"{ratio:.2f}", "<= 1.5", ratio <= 1.5))
     rows.append(("period error median ratio two pages / none", f"{two['median'] / none['median']:.2f}", "", ""))
@@ -166,7 +173,8 @@ def main() -> None:
     for figure, measured, target, ok in rows:
         result = "" if ok == "" else ("pass" if ok else "FAIL")
         print(f"{figure:<{width}}  {measured:<72}  {target:<9}  {result}")
-    print("load: 1-minute load average of this 2-core machine at the end of each phase (other jobs included)")
+    print("load: 1-minute load average of this 2-core machine at the end of each phase (other jobs included); "
+          "steal: CPU time the hypervisor gave to other guests during the phase")
 
 
 if __name__ == "__main__":

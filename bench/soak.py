@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT))
 from console.client import ApiClient  # noqa: E402
 from drivers.transport.hub import HubProcess  # noqa: E402
 from hil_tests.faults import HOME, READY, start_stack  # noqa: E402
+from hil_tests.harness import CpuSteal  # noqa: E402
 
 
 @dataclass
@@ -49,6 +50,7 @@ class Sample:
     tpdos_expected: int
     tpdos_received: int
     polls: int
+    steal_pct: float         # host CPU steal since the previous sample (VMs)
 
 
 def proc_rss_mb(pid: int) -> float:
@@ -148,6 +150,7 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
         operator = threading.Thread(target=operate, args=(stack, until, stops, counts), daemon=True)
         operator.start()
         next_sample = t0
+        steal = CpuSteal()
         while time.monotonic() < until or operator.is_alive():
             if time.monotonic() >= next_sample:
                 s = sampler.call("status")
@@ -157,11 +160,13 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
                     Path(rec["path"]).stat().st_size / 1e6 if rec else float("nan"),
                     s["cycle"], st["overruns"], st["skipped_cycles"], st["period_error_p99"] * 1e3,
                     st["execution_p99"] * 1e3, s["network"]["tpdo_timeouts"],
-                    s["network"]["expected_tpdos"], s["network"]["tpdos"], poller.polls))
+                    s["network"]["expected_tpdos"], s["network"]["tpdos"], poller.polls,
+                    100 * steal.fraction()))
                 if not quiet:
                     x = samples[-1]
                     print(f"  t={x.t:7.1f} s  rss {x.rss_mb:6.1f} MB  fds {x.open_files:3d}  rec {x.recording_mb:7.2f} MB"
-                          f"  overruns {x.overruns}  tpdo timeouts {x.tpdo_timeouts}  motions {counts['motions']}",
+                          f"  overruns {x.overruns}  tpdo timeouts {x.tpdo_timeouts}  motions {counts['motions']}"
+                          f"  steal {x.steal_pct:.1f} %",
                           flush=True)
                 next_sample += sample_every
             time.sleep(0.2)
@@ -191,6 +196,8 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
         "period_error_p99_ms_max": max(x.period_error_p99_ms for x in samples),
         "execution_p99_ms_max": max(x.execution_p99_ms for x in samples),
         "tpdo_timeouts": last.tpdo_timeouts, "protective_stops": sum(stops.values()),
+        "steal_pct_mean": float(np.mean([x.steal_pct for x in samples[1:]] or [0.0])),
+        "steal_pct_max": max([x.steal_pct for x in samples[1:]] or [0.0]),
         "stop_reasons": dict(stops), "interrupted": counts["interrupted"], "errors": counts["errors"],
         # Each sample's SYNC may still have TPDOs in flight: at most one SYNC's worth.
         "tpdos_lost": last.tpdos_expected - last.tpdos_received,
@@ -230,6 +237,7 @@ def print_table(r: dict) -> None:
          f"{r['recorded_cycles']} / {r['recording_complete']} / {r['sync_gaps']} "
          f"(cycle gaps {r['cycle_gaps']} = overruns)", "every SYNC"),
         ("protective stops", f"{r['protective_stops']} {r['stop_reasons'] or ''}", "0"),
+        ("host CPU steal (VM) mean / worst sample", f"{r['steal_pct_mean']:.1f} / {r['steal_pct_max']:.1f} %", "-"),
     ]
     w = max(len(a) for a, _, _ in rows)
     print(f"\nsoak on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}), "

@@ -16,3 +16,24 @@ def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
+
+
+class CpuSteal:
+    """Share of this machine's CPU time the hypervisor gave to other guests (the `st` column
+    of vmstat) since the last reading: on a VM, the vCPUs can stall for milliseconds no
+    matter what runs inside, and the benchmarks print it next to overruns."""
+
+    def __init__(self):
+        self._last = self._read()
+
+    @staticmethod
+    def _read() -> tuple[int, int]:
+        with open("/proc/stat") as handle:
+            fields = [int(v) for v in handle.readline().split()[1:9]]
+        return fields[7], sum(fields)          # steal, total (user .. steal)
+
+    def fraction(self) -> float:
+        steal, total = self._read()
+        d_steal, d_total = steal - self._last[0], total - self._last[1]
+        self._last = (steal, total)
+        return d_steal / d_total if d_total > 0 else 0.0
