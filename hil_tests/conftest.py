@@ -105,6 +105,7 @@ def pytest_collection_modifyitems(config, items):
 
 
 # --------------------------------------------------------------------------- loopback hub
+from drivers.child_process import module_env  # noqa: E402
 from drivers.transport.hub import HubProcess  # noqa: E402
 
 
@@ -166,8 +167,7 @@ def open_test_bus():
 
 
 def child_env(extra: dict | None = None) -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
+    env = module_env()
     env.setdefault("PYTHONUNBUFFERED", "1")
     if extra:
         env.update(extra)

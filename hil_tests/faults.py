@@ -50,6 +50,8 @@ from pathlib import Path
 import numpy as np
 
 from console.client import ApiClient
+from drivers.child_process import module_env
+from drivers.priority import GIL_SWITCH_INTERVAL
 from drivers.transport.hub import LoopbackHub
 from hil_tests.harness import free_port
 
@@ -66,10 +68,7 @@ RESULTS_ENV = "SPACEARM_FAULT_RESULTS"   # JSON-lines file the tests append meas
 
 
 def child_env() -> dict:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
-    env["PYTHONUNBUFFERED"] = "1"
-    return env
+    return {**module_env(), "PYTHONUNBUFFERED": "1"}
 
 
 # ------------------------------------------------------------------------ the bus itself
@@ -77,9 +76,9 @@ class FaultyHub:
     """A loopback hub in this process whose frames can be lost, reordered or cut off."""
 
     def __init__(self, seed: int = 1):
-        # The hub thread shares this process's GIL with the test: switch threads every 0.5 ms
-        # (default 5 ms) so a status poll here cannot hold frames back for a whole cycle.
-        sys.setswitchinterval(0.0005)
+        # The hub thread shares this process's GIL with the test: a status poll here must not
+        # hold frames back for a whole cycle.
+        sys.setswitchinterval(GIL_SWITCH_INTERVAL)
         self.hub = LoopbackHub("127.0.0.1", 0).start()
         self.rng = random.Random(seed)
         self.drop_prob = 0.0

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import can
 
+from drivers.child_process import module_env, readline_within
 from drivers.priority import use_normal
 from drivers.transport import open_bus, parse_bus_spec
 
@@ -41,18 +42,16 @@ class CanTrace:
         if parse_bus_spec(bus_spec)[0] == "virtual":
             self._in_process = _open_tap(bus_spec, self.path)
             return
-        root = Path(__file__).resolve().parents[2]
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")]))}
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "controller.recording.can_trace", bus_spec, str(self.path)],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=module_env(),
             preexec_fn=_below_the_cycle)
         # Wait for the tap to be on the bus so the trace covers the recording from its start.
-        line = _readline(self._proc, start_timeout)
-        if line.strip() != READY:
+        line = (readline_within(self._proc, start_timeout) or "").strip()
+        if line != READY:
             self._proc.kill()
             self._proc.wait()
-            raise RuntimeError(f"CAN trace did not start: {line.strip() or 'no answer'}")
+            raise RuntimeError(f"CAN trace did not start: {line or 'no answer'}")
 
     def stop(self, timeout: float = 5.0) -> None:
         if self._in_process is not None:
@@ -71,14 +70,6 @@ def _below_the_cycle() -> None:
     """In the child before exec: leave the daemon's real-time policy, then lower priority."""
     use_normal()
     os.nice(CHILD_NICENESS)
-
-
-def _readline(proc: subprocess.Popen, timeout: float) -> str:
-    line: list[str] = []
-    reader = threading.Thread(target=lambda: line.append(proc.stdout.readline()), daemon=True)
-    reader.start()
-    reader.join(timeout)
-    return line[0] if line else ""
 
 
 def _open_tap(bus_spec: str, path: Path) -> tuple[can.BusABC, can.Notifier, can.CanutilsLogWriter]:

@@ -24,9 +24,9 @@ import sys
 import threading
 import time
 import uuid
-from pathlib import Path
 
 from . import wire
+from drivers.child_process import REPO_ROOT, module_env, readline_within
 from drivers.priority import use_fifo
 
 log = logging.getLogger("spacearm.hub")
@@ -288,18 +288,12 @@ class HubProcess:
     """A hub in its own process on a free 127.0.0.1 port (for the session or one test)."""
 
     def __init__(self, port: int = 0, ready_timeout: float = 15.0, rt_priority: int = 0):
-        root = Path(__file__).resolve().parents[2]
-        env = dict(os.environ)
-        env["PYTHONPATH"] = str(root) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "drivers.transport.hub", "--host", "127.0.0.1", "--port", str(port),
              "--rt-priority", str(rt_priority)],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(root), env=env)
-        line: list[str] = []
-        t = threading.Thread(target=lambda: line.append(self.proc.stdout.readline()), daemon=True)
-        t.start()
-        t.join(ready_timeout)
-        m = re.search(r"listening on ([\d.]+):(\d+)", line[0] if line else "")
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO_ROOT), env=module_env())
+        line = readline_within(self.proc, ready_timeout)
+        m = re.search(r"listening on ([\d.]+):(\d+)", line or "")
         if not m:
             self.stop()
             err = self.proc.stderr.read() if self.proc.stderr else ""

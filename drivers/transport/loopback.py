@@ -29,9 +29,10 @@ import sys
 import threading
 import time
 from collections import deque
-from pathlib import Path
 
 import can
+
+from drivers.child_process import REPO_ROOT, module_env
 
 from . import wire
 from .hub import DEFAULT_HOST, DEFAULT_PORT
@@ -98,15 +99,12 @@ def spawn_hub(host: str, port: int, idle_exit: float | None = None) -> subproces
     """Start a detached hub process (it outlives this process; it exits when idle)."""
     if idle_exit is None:
         idle_exit = float(os.environ.get("SPACEARM_HUB_IDLE_EXIT", "30"))
-    root = str(Path(__file__).resolve().parents[2])
-    env = dict(os.environ)
-    env["PYTHONPATH"] = root + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     log.info("no loopback hub at %s:%d, starting one (exits after %.0f s idle)", host, port, idle_exit)
     return subprocess.Popen(
         [sys.executable, "-m", "drivers.transport.hub", "--host", host, "--port", str(port),
          "--idle-exit", str(idle_exit), "--quiet-if-running"],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        start_new_session=True, close_fds=True, env=env, cwd=root)
+        start_new_session=True, close_fds=True, env=module_env(), cwd=str(REPO_ROOT))
 
 
 def _wait(sock: socket.socket, event: int, timeout: float | None) -> bool:

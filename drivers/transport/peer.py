@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import subprocess
 import sys
 import threading
@@ -26,6 +25,8 @@ import time
 from pathlib import Path
 
 import can
+
+from drivers.child_process import module_env, readline_within
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -192,25 +193,16 @@ class Peer:
     """Parent-side handle: starts the peer process and waits for READY (with a timeout)."""
 
     def __init__(self, spec: str, mode: str, *extra: str, ready_timeout: float = 20.0, timeout: float = 30.0):
-        env = dict(os.environ)
-        env["PYTHONPATH"] = str(ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
         self.cmd = [sys.executable, "-m", "drivers.transport.peer", "--bus", spec, mode,
                     "--timeout", str(timeout), *extra]
         self.proc = subprocess.Popen(self.cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                     cwd=str(ROOT), env=env)
+                                     cwd=str(ROOT), env=module_env())
         self._lines: list[str] = []
-        line = self._readline(ready_timeout)
+        line = readline_within(self.proc, ready_timeout) or f"(no READY within {ready_timeout:.0f} s)"
         if line.strip() != "READY":
             self.kill()
             err = self.proc.stderr.read() if self.proc.stderr else ""
             raise RuntimeError(f"peer {' '.join(self.cmd)} did not start: {line.strip()} {err[-2000:]}")
-
-    def _readline(self, timeout: float) -> str:
-        result: list[str] = []
-        t = threading.Thread(target=lambda: result.append(self.proc.stdout.readline()), daemon=True)
-        t.start()
-        t.join(timeout)
-        return result[0] if result else "(no READY within %.0f s)" % timeout
 
     def result(self, timeout: float = 30.0) -> dict:
         try:
