@@ -16,6 +16,10 @@ from __future__ import annotations
 import os
 
 MAX_PRIORITY = 99
+# CPython hands the GIL to a waiting thread after this long (its default, 5 ms, is a quarter
+# of a 20 ms cycle): the processes on the control path share the GIL between the thread that
+# answers the bus and their other threads.
+GIL_SWITCH_INTERVAL = 0.0005   # s
 
 
 def use_fifo(priority: int) -> str | None:

@@ -20,7 +20,7 @@ from typing import Optional
 import typer
 
 from drivers.bus_config import DEFAULT_BUS_CONFIG
-from drivers.priority import use_fifo
+from drivers.priority import GIL_SWITCH_INTERVAL, use_fifo
 
 READY_LINE = "spacearm sim: {n} nodes ready on {bus}"
 LASER_LINE = "spacearm sim: laser ranger on {port}"   # printed before READY_LINE
@@ -46,9 +46,8 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
         except (ConfigError, ValueError) as exc:
             typer.echo(f"spacearm sim: {exc}", err=True)
             return 2
-    # The nodes answer SYNC on the bus thread while heartbeat and camera threads run; hand the
-    # GIL over within 0.5 ms (default 5 ms) so a SYNC is not left waiting behind them.
-    sys.setswitchinterval(0.0005)
+    # The nodes answer SYNC on the bus thread while heartbeat and camera threads run.
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     if rt_priority:
         problem = use_fifo(rt_priority)      # before the bus and heartbeat threads start
         if problem:

@@ -32,7 +32,7 @@ from controller.kinematics.model import KinematicModel
 from controller.planning.motion_planner import MotionPlanner
 from drivers.bus_config import DEFAULT_BUS_CONFIG, load_bus_config
 from drivers.network import ArmNetwork
-from drivers.priority import describe, use_fifo
+from drivers.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
 
 
 @dataclass
@@ -48,10 +48,9 @@ class DaemonOptions:
     record_dir: Path | None = Path("runs")       # None: do not record
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
-    # The cycle shares the GIL with the CANopen receive thread, the API and the recorder. A
-    # thread waiting for the GIL gets it after at most this long (CPython's default, 5 ms, is
-    # a quarter of a cycle); None leaves the interpreter's setting alone.
-    gil_switch_interval: float | None = 0.0005
+    # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
+    # (drivers/priority.py); None leaves the interpreter's setting alone.
+    gil_switch_interval: float | None = GIL_SWITCH_INTERVAL
     # SCHED_FIFO priority of the daemon's threads with the real-time clock (drivers/priority.py);
     # 0: normal scheduling. `spacearm daemon` asks for 50.
     rt_priority: int = 0
