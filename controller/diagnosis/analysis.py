@@ -105,6 +105,11 @@ NULL_MARGIN = 2.0          # one draw of the null replay's average, scattered up
 HUNTING_RATIO = 5.0        # residual RMS / median noise of the torque channels: a drive that hunts
 
 
+def smoothed_rms(residual: np.ndarray, window: int = 25) -> float:
+    """RMS of the residual's moving average over `window` rows (0.5 s at 50 Hz)."""
+    return float(np.sqrt(np.mean(np.convolve(residual, np.ones(window) / window, mode="valid") ** 2)))
+
+
 def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 25,
                        reference_noise: float | None = None, null_smooth: float = 0.0) -> float:
     """How far a residual is from noise, as a multiple of the limit (> 1: significant).
@@ -117,7 +122,7 @@ def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 2
     offset, not the chatter, sets what the average shows without any effect."""
     noise = max(noise_level(residual), noise_floor)
     raw = float(np.sqrt(np.mean(residual ** 2))) / noise
-    smooth = float(np.sqrt(np.mean(np.convolve(residual, np.ones(window) / window, mode="valid") ** 2)))
+    smooth = smoothed_rms(residual, window)
     stat = max(raw / RAW_RATIO_LIMIT, smooth / max(SMOOTH_RATIO_LIMIT * noise, NULL_MARGIN * null_smooth))
     if reference_noise:
         # dense ringing (a hunting drive) inflates the channel's own row-to-row noise estimate:
@@ -298,7 +303,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     null = dict((name, real - nom) for name, real, nom, _ in _channels(null_replay(table, nominal), sim, sim))
     for name, real, nom, fitted in _channels(table, sim, refit):
         r0, r1 = real - nom, real - fitted
-        null_smooth = float(np.sqrt(np.mean(np.convolve(null[name], np.ones(25) / 25, mode="valid") ** 2)))
+        null_smooth = smoothed_rms(null[name])
         before[name], after[name] = r0, r1
         floor = (quantum[int(name[2:]) - 1] if name.startswith("q_") else 0.01 if name.startswith("f") else 0.001) \
             / math.sqrt(12.0) if not name.startswith("tau") else 1e-3

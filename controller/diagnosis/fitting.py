@@ -31,7 +31,6 @@ class ChannelFit:
     sse_null_train: float
     rms_heldout_before: float
     rms_heldout_after: float
-    bic: float                   # at this fit's own block length; compare candidates with bic_at
     p_value: float
     block: int
     prediction: np.ndarray = field(repr=False, default=None)   # over all rows
@@ -108,8 +107,6 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     k = X.shape[1] + sum(1 for s in shape if not np.isnan(s))
     chi = max(sse0 - sse, 0.0) / sigma2 / block if np.isfinite(sse) else 0.0
     p = float(stats.chi2.sf(chi, k))
-    n_eff = max(n / block, k + 2.0)
-    bic = n_eff * np.log(max(sse, 1e-30) / n) + k * np.log(n_eff) if np.isfinite(sse) else np.inf
     try:
         cov = sigma2 * block * np.linalg.inv(X[train].T @ X[train])
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
@@ -117,7 +114,7 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
         stderr = np.full(X.shape[1], np.nan)
     before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
-    return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, bic, p,
+    return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
                       block, pred, n, k)
 
 

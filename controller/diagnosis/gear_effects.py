@@ -67,6 +67,5 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     at_bound = min(best.x - math.log(lo), math.log(hi) - best.x) < 0.1   # the search ran out of range
     significant = reduction >= MIN_HELDOUT_REDUCTION and sse < 0.5 * sse0 and not at_bound
     fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([value * rel]), (key,), (float("nan"),),
-                     sse, sse0, before, after, n_eff * math.log(max(sse, 1e-30) / n) + math.log(n_eff),
-                     0.0 if significant else 1.0, WINDOW, pred)
+                     sse, sse0, before, after, 0.0 if significant else 1.0, WINDOW, pred, n, 1)
     return fit
