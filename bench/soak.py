@@ -235,7 +235,7 @@ def print_table(r: dict) -> None:
         ("TPDO frames lost (expected - received)", f"{r['tpdos_lost']} of {r['tpdos_expected']}", "0"),
         ("recording: cycles / complete / SYNC gaps",
          f"{r['recorded_cycles']} / {r['recording_complete']} / {r['sync_gaps']} "
-         f"(cycle gaps {r['cycle_gaps']} = overruns)", "every SYNC"),
+         f"(cycle gaps {r['cycle_gaps']}: cycles the overruns skipped)", "every SYNC"),
         ("protective stops", f"{r['protective_stops']} {r['stop_reasons'] or ''}", "0"),
         ("host CPU steal (VM) mean / worst sample", f"{r['steal_pct_mean']:.1f} / {r['steal_pct_max']:.1f} %", "-"),
     ]
