@@ -37,9 +37,9 @@ sys.path.insert(0, str(ROOT))
 
 import can  # noqa: E402
 
-from drivers.transport.hub import HubProcess  # noqa: E402
-from drivers.transport.peer import STOP_ID, SYNC_ID, Peer, mode_pdo, pdo_layout  # noqa: E402
-from drivers.transport.peer import open_any as open_bus  # noqa: E402
+from spacearm.base.transport.hub import HubProcess  # noqa: E402
+from spacearm.base.transport.peer import STOP_ID, SYNC_ID, Peer, mode_pdo, pdo_layout  # noqa: E402
+from spacearm.base.transport.peer import open_any as open_bus  # noqa: E402
 
 LATENCY_TARGET_MS = 2.0
 BUSLOAD_TARGET_PCT = 70.0

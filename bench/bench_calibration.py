@@ -10,10 +10,10 @@ import time
 
 import numpy as np
 
-from controller.calibration import Problem, lm
-from controller.calibration import study_ekf as E
-from controller.calibration import study_laser as L
-from controller.calibration.studies import ekf_study, laser_study
+from spacearm.controller.calibration import Problem, lm
+from spacearm.controller.calibration import study_ekf as E
+from spacearm.controller.calibration import study_laser as L
+from spacearm.controller.calibration.studies import ekf_study, laser_study
 
 
 def bench_selection() -> None:

@@ -28,17 +28,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from console.arm_session import DaemonArm  # noqa: E402
-from console.client import ApiClient  # noqa: E402
-from console.commands.calibrate import attach_ring, settled_frame_grabber  # noqa: E402
-from controller.calibration.board import load_board  # noqa: E402
-from controller.calibration.camera_routine import (run_camera_calibration, score_against_truth,  # noqa: E402
+from spacearm.console.arm_session import DaemonArm  # noqa: E402
+from spacearm.console.client import ApiClient  # noqa: E402
+from spacearm.console.commands.calibrate import attach_ring, settled_frame_grabber  # noqa: E402
+from spacearm.controller.calibration.board import load_board  # noqa: E402
+from spacearm.controller.calibration.camera_routine import (run_camera_calibration, score_against_truth,  # noqa: E402
                                                    setup_from_files)
-from controller.calibration.validation import compare_poses  # noqa: E402
-from controller.kinematics.forward import fk_batch  # noqa: E402
-from controller.kinematics.transforms import inv_transform  # noqa: E402
-from drivers.transport.hub import HubProcess  # noqa: E402
-from firmware_sim.plant import load_plant_config  # noqa: E402
+from spacearm.controller.calibration.validation import compare_poses  # noqa: E402
+from spacearm.base.kinematics.forward import fk_batch  # noqa: E402
+from spacearm.base.kinematics.transforms import inv_transform  # noqa: E402
+from spacearm.base.transport.hub import HubProcess  # noqa: E402
+from spacearm.firmware_sim.plant import load_plant_config  # noqa: E402
 from hil_tests.harness import free_port  # noqa: E402
 
 PLANT = ROOT / "configs/plant/oru_testbed_errors.toml"
@@ -64,7 +64,7 @@ def patient_bus(out: Path) -> Path:
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> subprocess.Popen:
     env = dict(os.environ, PYTHONPATH=str(ROOT), PYTHONUNBUFFERED="1")
     with open(log, "w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "console.main", *args], stdout=fh, stderr=subprocess.STDOUT,
+        proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", *args], stdout=fh, stderr=subprocess.STDOUT,
                                 cwd=ROOT, env=env, start_new_session=True)
     deadline = time.monotonic() + timeout
     while ready not in log.read_text(errors="replace"):

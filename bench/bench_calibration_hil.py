@@ -24,17 +24,17 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from console.arm_session import DaemonArm  # noqa: E402
-from console.client import ApiClient  # noqa: E402
-from controller.calibration.laser_routine import calibration_section, run_laser_calibration, write_calibrated_arm  # noqa: E402
-from controller.calibration.study_laser import setup as laser_setup  # noqa: E402
-from controller.config.arm import load_arm_config  # noqa: E402
-from controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
-from controller.kinematics.forward import fk  # noqa: E402
-from controller.kinematics.model import KinematicData, KinematicModel  # noqa: E402
-from drivers.laser_ranger import LaserRanger, NoHit  # noqa: E402
-from firmware_sim.plant import load_plant_config  # noqa: E402
-from firmware_sim.runner import start_simulator  # noqa: E402
+from spacearm.console.arm_session import DaemonArm  # noqa: E402
+from spacearm.console.client import ApiClient  # noqa: E402
+from spacearm.controller.calibration.laser_routine import calibration_section, run_laser_calibration, write_calibrated_arm  # noqa: E402
+from spacearm.controller.calibration.study_laser import setup as laser_setup  # noqa: E402
+from spacearm.base.config.arm import load_arm_config  # noqa: E402
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
+from spacearm.base.kinematics.forward import fk  # noqa: E402
+from spacearm.base.kinematics.model import KinematicData, KinematicModel  # noqa: E402
+from spacearm.drivers.laser_ranger import LaserRanger, NoHit  # noqa: E402
+from spacearm.firmware_sim.plant import load_plant_config  # noqa: E402
+from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 
 PLANT = ROOT / "configs/plant/space_robot_laser_errors.toml"
 ARM = ROOT / "configs/arm/space_robot_6dof_laser.toml"

@@ -25,13 +25,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
-from drivers.priority import use_normal  # noqa: E402
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
+from spacearm.base.runtime.priority import use_normal  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
 
 POLLER = """
 import sys, time
-from console.client import ApiClient
+from spacearm.console.client import ApiClient
 client = ApiClient(sys.argv[1]); period = 1 / float(sys.argv[2]); end = time.monotonic() + float(sys.argv[3])
 n = 0
 while time.monotonic() < end:
@@ -51,10 +51,10 @@ def rss_mb() -> float:
 
 def start_sim(bus: str, rt_priority: int):
     if bus.startswith("virtual:"):
-        from firmware_sim.runner import start_simulator
+        from spacearm.firmware_sim.runner import start_simulator
         sim = start_simulator(bus, "configs/bus/arm.toml", "configs/plant/oru_testbed_nominal.toml")
         return sim.stop
-    proc = subprocess.Popen([sys.executable, "-m", "console.main", "sim", "--bus", bus, "--plant",
+    proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", "sim", "--bus", bus, "--plant",
                              "configs/plant/oru_testbed_nominal.toml", "--rt-priority", str(rt_priority)], cwd=ROOT,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     for line in proc.stdout:

@@ -34,14 +34,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controller.diagnosis.analysis import diagnose, noise_level  # noqa: E402
-from controller.diagnosis.direct_sim import simulate  # noqa: E402
-from controller.diagnosis.record import record_direct, starting_at  # noqa: E402
-from controller.diagnosis.recording_io import read_table  # noqa: E402
-from controller.diagnosis.report import write_report  # noqa: E402
-from controller.diagnosis.trajectory import Trajectory  # noqa: E402
-from controller.recording.csv_export import WRENCH_COLUMNS  # noqa: E402
-from firmware_sim.plant import PlantConfig, load_plant_config  # noqa: E402
+from spacearm.offline.diagnosis.analysis import diagnose, noise_level  # noqa: E402
+from spacearm.offline.diagnosis.direct_sim import simulate  # noqa: E402
+from spacearm.offline.diagnosis.record import record_direct, starting_at  # noqa: E402
+from spacearm.offline.diagnosis.recording_io import read_table  # noqa: E402
+from spacearm.offline.diagnosis.report import write_report  # noqa: E402
+from spacearm.offline.diagnosis.trajectory import Trajectory  # noqa: E402
+from spacearm.controller.recording.csv_export import WRENCH_COLUMNS  # noqa: E402
+from spacearm.firmware_sim.plant import PlantConfig, load_plant_config  # noqa: E402
 
 NOMINAL = ROOT / "configs/plant/oru_testbed_nominal.toml"
 DT = 0.02

@@ -21,7 +21,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controller.kinematics import (KinematicData, fk_batch, fk_jacobian, load_model,  # noqa: E402
+from spacearm.base.kinematics import (KinematicData, fk_batch, fk_jacobian, load_model,  # noqa: E402
                                    pose_errors_batch, solve_ik)
 
 ARMS = ("oru_testbed_6dof", "space_robot_6dof_laser", "ssrms_7dof")

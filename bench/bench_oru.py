@@ -4,7 +4,7 @@ full changeout (lockstep wall time, real-time cycle statistics). Prints one tabl
     .venv/bin/python bench/bench_oru.py [--trials 200] [--seed 1] [--skip-realtime]
 
 The stiffness experiment and the insertions run the plant and the controller's own contact
-code (controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
+code (spacearm.controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
 loop without the CAN transport (firmware_sim/contact/direct_loop.py) for speed; the full
 changeout runs the daemon and the simulated nodes over the embedded virtual CAN bus.
 """
@@ -23,11 +23,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
-from controller.scenarios.changeout import run_changeout  # noqa: E402
-from drivers.bus_config import DEFAULT_BUS_CONFIG  # noqa: E402
-from firmware_sim.contact.trials import PLANT, ContactTrials, run_stiffness_direct  # noqa: E402
-from firmware_sim.runner import start_simulator  # noqa: E402
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
+from spacearm.offline.scenarios.changeout import run_changeout  # noqa: E402
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG  # noqa: E402
+from spacearm.offline.contact.trials import PLANT, ContactTrials, run_stiffness_direct  # noqa: E402
+from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 
 
 def insertions(trials: ContactTrials, n: int, seed: int) -> dict:

@@ -4,8 +4,8 @@ beside open-loop positioning. Prints one table of measured figures and the issue
 
     .venv/bin/python bench/bench_vision.py [--renders 6] [--starts 3] [--timing-frames 30] [--seed 1]
 
-Renders come from firmware_sim.camera (clutter, uneven light, distortion, defocus, sensor
-noise; ~0.3 s each), measured by controller.vision.pipeline. The approach runs the in-process
+Renders come from spacearm.firmware_sim.camera (clutter, uneven light, distortion, defocus, sensor
+noise; ~0.3 s each), measured by spacearm.controller.vision.pipeline. The approach runs the in-process
 stack of tests/vision/approach_stack.py: plant with the arm's geometry errors
 (configs/plant/oru_testbed_errors.toml), daemon on the nominal model, lockstep clock.
 """
@@ -22,10 +22,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controller.kinematics.transforms import xyz_rpy_to_transform  # noqa: E402
-from controller.vision.pipeline import VisionPipeline  # noqa: E402
-from controller.vision.pnp import solve_pnp  # noqa: E402
-from firmware_sim.camera.simulator import CameraSimulator  # noqa: E402
+from spacearm.base.kinematics.transforms import xyz_rpy_to_transform  # noqa: E402
+from spacearm.controller.vision.pipeline import VisionPipeline  # noqa: E402
+from spacearm.controller.vision.pnp import solve_pnp  # noqa: E402
+from spacearm.firmware_sim.camera.simulator import CameraSimulator  # noqa: E402
 from tests.vision.views import pose_error, view  # noqa: E402
 
 DISTANCES = (0.15, 0.20, 0.30, 0.50, 0.80, 1.00, 1.50)

@@ -29,16 +29,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from console.client import ApiClient  # noqa: E402
-from controller.recording.mcap_reader import read_recording  # noqa: E402
-from drivers.transport.hub import HubProcess  # noqa: E402
+from spacearm.console.client import ApiClient  # noqa: E402
+from spacearm.controller.recording.mcap_reader import read_recording  # noqa: E402
+from spacearm.base.transport.hub import HubProcess  # noqa: E402
 from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, CpuSteal, free_port  # noqa: E402
 
 
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
     handle = open(log, "w")
-    proc = subprocess.Popen([sys.executable, "-m", "console.main", *args], cwd=ROOT, env=env,
+    proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", *args], cwd=ROOT, env=env,
                             stdout=handle, stderr=subprocess.STDOUT, start_new_session=True)
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

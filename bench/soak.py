@@ -29,8 +29,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from console.client import ApiClient  # noqa: E402
-from drivers.transport.hub import HubProcess  # noqa: E402
+from spacearm.console.client import ApiClient  # noqa: E402
+from spacearm.base.transport.hub import HubProcess  # noqa: E402
 from hil_tests.faults import HOME, READY, start_stack  # noqa: E402
 from hil_tests.harness import CpuSteal  # noqa: E402
 
@@ -210,8 +210,8 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
 
 def recording_check(path: Path) -> dict:
     """Cycles in the closed recording and SYNC-counter gaps the clock did not skip on purpose."""
-    from controller.recording.csv_export import find_cycle_gaps
-    from controller.recording.mcap_reader import read_recording
+    from spacearm.controller.recording.csv_export import find_cycle_gaps
+    from spacearm.controller.recording.mcap_reader import read_recording
     rec = read_recording(path, topics={"/cycle"})
     cycles = rec.messages
     gaps = find_cycle_gaps([m.data["cycle"] for m in cycles], [m.data["t"] for m in cycles])

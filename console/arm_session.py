@@ -10,9 +10,9 @@ import time
 
 import numpy as np
 
-from console.client import ApiClient
-from console.commands.operate import _controlled_call, _wait_for_motion
-from console.errors import CommandFailed
+from spacearm.console.client import ApiClient
+from spacearm.console.commands.operate import _controlled_call, _wait_for_motion
+from spacearm.console.errors import CommandFailed
 
 
 class DaemonArm:

@@ -7,7 +7,7 @@ import socket
 from itertools import count
 from typing import Any
 
-from console.errors import CommandFailed
+from spacearm.console.errors import CommandFailed
 
 DEFAULT_API = os.environ.get("SPACEARM_API", "tcp:127.0.0.1:7440")
 

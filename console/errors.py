@@ -5,7 +5,7 @@ import functools
 import sys
 from typing import Callable, TypeVar
 
-from controller.config.errors import ConfigError
+from spacearm.base.config.errors import ConfigError
 
 F = TypeVar("F", bound=Callable)
 

@@ -20,9 +20,9 @@ COMMAND_MODULES = ("config", "kinematics", "demo", "daemon", "operate", "export"
 
 for module_name in COMMAND_MODULES:
     try:
-        module = importlib.import_module(f"console.commands.{module_name}")
+        module = importlib.import_module(f"spacearm.console.commands.{module_name}")
     except ModuleNotFoundError as exc:
-        if exc.name != f"console.commands.{module_name}":
+        if exc.name != f"spacearm.console.commands.{module_name}":
             raise
         continue
     module.register(app)

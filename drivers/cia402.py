@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from enum import Enum
 
-from drivers.cia402_defs import (CW_DISABLE_VOLTAGE, CW_ENABLE_OPERATION, CW_FAULT_RESET, CW_QUICK_STOP,
+from spacearm.base.canopen.cia402_defs import (CW_DISABLE_VOLTAGE, CW_ENABLE_OPERATION, CW_FAULT_RESET, CW_QUICK_STOP,
                                  CW_SHUTDOWN, CW_SWITCH_ON, State, decode_statusword)
 
 FAULT_RESET_VERIFY_CYCLES = 5

@@ -9,14 +9,14 @@ from dataclasses import dataclass, field
 
 import canopen
 
-from drivers import od
-from drivers.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
-from drivers.bus_config import BusSettings, NodeConfig
-from drivers.cia402 import Cia402Axis
-from drivers.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
+from spacearm.base.canopen import od
+from spacearm.base.canopen.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
+from spacearm.base.config.bus import BusSettings, NodeConfig
+from spacearm.drivers.cia402 import Cia402Axis
+from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
-from drivers.pdo_maps import PDO_MAPS
+from spacearm.base.canopen.pdo_maps import PDO_MAPS
 
 
 @dataclass

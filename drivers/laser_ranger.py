@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import serial
 
-from firmware_sim.laser_ranger import frame, parse_frame
+from spacearm.firmware_sim.laser_ranger import frame, parse_frame
 
 
 class RangerError(Exception):

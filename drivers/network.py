@@ -34,14 +34,14 @@ import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from drivers import od
-from drivers.bus_config import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from drivers.cia402_defs import State
-from drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, EndEffectorState, FtDriver,
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
+from spacearm.base.canopen.cia402_defs import State
+from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, EndEffectorState, FtDriver,
                              FtState, JointDriver, JointState)
-from drivers.eds import load_od
-from drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from drivers.transport import open_bus
+from spacearm.base.canopen.eds import load_od
+from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
+from spacearm.base.transport import open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -50,7 +50,7 @@ logger = logging.getLogger(__name__)
 class NodeHealth:
     name: str
     node_id: int
-    nmt_state: int | None = None     # last heartbeat state (drivers.od.NMT_STATE_*)
+    nmt_state: int | None = None     # last heartbeat state (spacearm.base.canopen.od.NMT_STATE_*)
     alive: bool = False
     last_heartbeat: float | None = None
     emcy_code: int = 0               # last EMCY code (0 after an error reset)

@@ -1,4 +1,4 @@
-"""Client of the simulator's fault-injection unit (firmware_sim.control), over the bus.
+"""Client of the simulator's fault-injection unit (spacearm.firmware_sim.control), over the bus.
 
 Tests use it so fault scenarios run unchanged on every transport (the simulator may be in
 another process). It shares the ArmNetwork's bus connection and SDO timeout.
@@ -11,11 +11,11 @@ from __future__ import annotations
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from drivers import od
-from drivers.bus_config import EDS_DIR
-from drivers.eds import load_od
-from drivers.errors import DriverError, SdoError
-from drivers.network import ArmNetwork
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import EDS_DIR
+from spacearm.base.canopen.eds import load_od
+from spacearm.drivers.errors import DriverError, SdoError
+from spacearm.drivers.network import ArmNetwork
 
 
 class SimControl:

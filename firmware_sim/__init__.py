@@ -6,7 +6,7 @@ SDO server), answers NMT, produces heartbeat and EMCY, consumes the controller h
 SYNC period (exactly once per SYNC, never on a wall-clock timer) and sends its TPDOs
 (only in OPERATIONAL), sampled from the object dictionary.
 
-    from firmware_sim.runner import start_simulator
+    from spacearm.firmware_sim.runner import start_simulator
     sim = start_simulator("virtual:arm")                  # all nodes of configs/bus/arm.toml
     sim.node("joint_3").faults.silent = True              # fault injection (see node.Faults)
     sim.plant.joints[2].stalled = True                    # physics-level faults

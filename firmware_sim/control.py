@@ -1,7 +1,7 @@
 """Fault-injection unit of the simulated test rig: an SDO-only node (configs/eds/sim_control.eds)
 through which a test in another process injects faults into the simulated nodes, so the
 same fault scenarios run over every transport. Enabled by ``spacearm sim --control-node ID``
-(or ``Simulator(control_node_id=ID)``); the controller side is ``drivers.sim_control``.
+(or ``Simulator(control_node_id=ID)``); the controller side is ``spacearm.drivers.sim_control``.
 
 Write 2F00h (target node ID) first; the other objects act on that node when written.
 It has no NMT state, heartbeat or PDOs (it is not part of the arm).
@@ -13,13 +13,13 @@ from typing import TYPE_CHECKING
 
 from canopen.sdo import SdoAbortedError
 
-from drivers import od
-from drivers.bus_config import EDS_DIR
-from drivers.eds import load_od
-from firmware_sim.node import SimLocalNode, _NodeTx
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import EDS_DIR
+from spacearm.base.canopen.eds import load_od
+from spacearm.firmware_sim.node import SimLocalNode, _NodeTx
 
 if TYPE_CHECKING:
-    from firmware_sim.runner import Simulator
+    from spacearm.firmware_sim.runner import Simulator
 
 logger = logging.getLogger(__name__)
 
@@ -57,7 +57,7 @@ class SimControlNode:
         return node
 
     def _on_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
-        from drivers import od as ids
+        from spacearm.base.canopen import od as ids
         value = od.decode_raw(bytes(data))
         if index == ids.SIM_TARGET_NODE:
             if value not in self.sim.nodes:

@@ -1,9 +1,9 @@
-"""Generates configs/eds/*.eds from the object list below (indices from drivers.od).
+"""Generates configs/eds/*.eds from the object list below (indices from spacearm.base.canopen.od).
 
 The EDS files are the source of truth the simulator and the controller both load; this
 module only exists so they stay consistent and complete. Regenerate with
 
-    .venv/bin/python -m firmware_sim.eds_builder
+    .venv/bin/python -m spacearm.firmware_sim.eds_builder
 
 and commit the result (tests/canopen/test_eds.py checks the files are up to date).
 """
@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from drivers import od
-from drivers.pdo_maps import PDO_MAPS
+from spacearm.base.canopen import od
+from spacearm.base.canopen.pdo_maps import PDO_MAPS
 
 EDS_DIR = Path(__file__).resolve().parents[1] / "configs" / "eds"
 

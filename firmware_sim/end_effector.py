@@ -2,14 +2,14 @@
 
 Command (2100h): 0 none, 1 clamp and lock, 2 release, 3 stop, 4 fault reset. An SDO
 write always executes; an RPDO executes when the value changes (so a cyclic RPDO can
-hold the last command). The codes are drivers.od.EeCommand (2100h) and EeState (2101h).
+hold the last command). The codes are spacearm.base.canopen.od.EeCommand (2100h) and EeState (2101h).
 """
 from __future__ import annotations
 
 
-from drivers import od
-from drivers.od import EeCommand, EeState
-from firmware_sim.node import SimNode
+from spacearm.base.canopen import od
+from spacearm.base.canopen.od import EeCommand, EeState
+from spacearm.firmware_sim.node import SimNode
 
 STALL_TIMEOUT = 1.0   # s without progress while moving -> jam fault
 

@@ -7,8 +7,8 @@ above 2205h limits or saturated) raises an EMCY once per occurrence.
 """
 from __future__ import annotations
 
-from drivers import od
-from firmware_sim.node import SimNode
+from spacearm.base.canopen import od
+from spacearm.firmware_sim.node import SimNode
 
 
 class FtSensorNode(SimNode):

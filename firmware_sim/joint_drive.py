@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import math
 
-from drivers import od
-from drivers.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_FAULT_RESET, CW_HALT, CW_NEW_SETPOINT, CW_RELATIVE,
+from spacearm.base.canopen import od
+from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_FAULT_RESET, CW_HALT, CW_NEW_SETPOINT, CW_RELATIVE,
                                  STATE_BITS, SW_FOLLOWING_ERROR, SW_INTERNAL_LIMIT, SW_OP_MODE_12, SW_REMOTE,
                                  SW_TARGET_REACHED, SW_WARNING, Command, State, decode_controlword)
 from canopen.sdo import SdoAbortedError
 
-from firmware_sim.node import SimNode
+from spacearm.firmware_sim.node import SimNode
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -292,7 +292,7 @@ class JointDriveNode(SimNode):
 def servo_torque(joint, q_ref: float, v_ref: float, q_meas: float, qd: float) -> float:
     """The drive's position servo law (PD scaled by the joint's inertia): motor torque, N m.
 
-    Shared with the direct simulation path (controller.diagnosis.direct_sim) so the fast
+    Shared with the direct simulation path (spacearm.offline.diagnosis.direct_sim) so the fast
     replay and the CAN path run the same law."""
     p = joint.params
     w = 2.0 * math.pi * p.servo_bandwidth_hz

@@ -7,7 +7,7 @@ thread, an EMCY producer that maintains 1001h/1003h, TPDOs sampled from the obje
 dictionary on SYNC, RPDOs written into the object dictionary, stricter SDO checks
 (value range, PDO mapping rules) and fault injection.
 
-Frames reach a node from ``firmware_sim.runner.Simulator``, which owns the bus.
+Frames reach a node from ``spacearm.firmware_sim.runner.Simulator``, which owns the bus.
 """
 from __future__ import annotations
 
@@ -21,11 +21,11 @@ import canopen
 from canopen import objectdictionary as odlib
 from canopen.sdo import SdoAbortedError
 
-from drivers import od
-from drivers.eds import load_od
+from spacearm.base.canopen import od
+from spacearm.base.canopen.eds import load_od
 
 if TYPE_CHECKING:
-    from firmware_sim.plant import Plant
+    from spacearm.firmware_sim.plant import Plant
 
 logger = logging.getLogger(__name__)
 
@@ -398,7 +398,7 @@ class SimNode:
 
     # ------------------------------------------------------------------ OD write rules
     def _on_od_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
-        from drivers import od as ids
+        from spacearm.base.canopen import od as ids
         if ids.RPDO_MAP <= index < ids.RPDO_MAP + ids.N_PDOS or ids.TPDO_MAP <= index < ids.TPDO_MAP + ids.N_PDOS:
             comm = (ids.RPDO_COMM if index < ids.TPDO_MAP else ids.TPDO_COMM) + (index & 0xFF)
             if not self.get(comm, ids.PDO_COB_ID) & ids.PDO_COB_ID_INVALID:

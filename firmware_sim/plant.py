@@ -21,14 +21,14 @@ from typing import Callable, Protocol
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from controller.config.loader import load_toml_model
-from controller.kinematics.forward import fk
-from controller.kinematics.model import KinematicData, KinematicModel
-from firmware_sim.effects import (DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error,
+from spacearm.base.config.loader import load_toml_model
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.firmware_sim.effects import (DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error,
                                   static_friction, transmission_error, transmission_error_slope)
-from firmware_sim.geometry import GeometryErrors
-from firmware_sim.laser_ranger import LaserTarget
-from firmware_sim.contact.config import ContactConfig
+from spacearm.firmware_sim.geometry import GeometryErrors
+from spacearm.firmware_sim.laser_ranger import LaserTarget
+from spacearm.firmware_sim.contact.config import ContactConfig
 
 ARCSEC = math.pi / (180.0 * 3600.0)
 
@@ -310,7 +310,7 @@ class Plant:
         plant = cls(config=config, joints=joints, ee=EndEffectorModel(config.end_effector))
         plant._rng = random.Random(config.seed)
         if config.contact is not None:
-            from firmware_sim.contact.world import build_contact_world
+            from spacearm.firmware_sim.contact.world import build_contact_world
             plant.environment = build_contact_world(config.contact, plant)
         return plant
 

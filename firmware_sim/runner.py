@@ -19,14 +19,14 @@ from pathlib import Path
 
 import can
 
-from drivers import od
-from drivers.bus_config import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from drivers.transport import open_bus
-from firmware_sim.end_effector import EndEffectorNode
-from firmware_sim.ft_sensor import FtSensorNode
-from firmware_sim.joint_drive import JointDriveNode
-from firmware_sim.node import SimNode
-from firmware_sim.plant import Plant, PlantConfig, load_plant_config
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
+from spacearm.base.transport import open_bus
+from spacearm.firmware_sim.end_effector import EndEffectorNode
+from spacearm.firmware_sim.ft_sensor import FtSensorNode
+from spacearm.firmware_sim.joint_drive import JointDriveNode
+from spacearm.firmware_sim.node import SimNode
+from spacearm.firmware_sim.plant import Plant, PlantConfig, load_plant_config
 
 logger = logging.getLogger(__name__)
 
@@ -83,17 +83,17 @@ class Simulator:
             self.nodes[cfg.node_id] = node
         self.control = None
         if control_node_id is not None:
-            from firmware_sim.control import SimControlNode
+            from spacearm.firmware_sim.control import SimControlNode
             if control_node_id in self.nodes:
                 raise ValueError(f"control node ID {control_node_id} is used by a device of the bus config")
             self.control = SimControlNode(control_node_id, self)
         self.laser = None
         if self.plant.config.laser is not None:
-            from firmware_sim.laser_ranger import LaserRangerSim, tool_plane_distance
+            from spacearm.firmware_sim.laser_ranger import LaserRangerSim, tool_plane_distance
             target = self.plant.config.laser
             self.laser = LaserRangerSim(tool_plane_distance(self.plant.tool_pose, target.plane[:3], target.plane[3]),
                                         target.ranger_config())
-        self.camera = None        # firmware_sim.camera.service.CameraService, see attach_camera
+        self.camera = None        # spacearm.firmware_sim.camera.service.CameraService, see attach_camera
         self.stats = SimStats()
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
@@ -123,8 +123,8 @@ class Simulator:
     def attach_camera(self, sink, scene=None, frame_rate: float | None = None):
         """Serve the eye-in-hand camera from this plant into `sink` (ShmFrameRing for another
         process, LocalFrameSource in-process); renders on its own thread."""
-        from firmware_sim.camera.service import CameraService
-        from controller.config.scene import DEFAULT_SCENE
+        from spacearm.firmware_sim.camera.service import CameraService
+        from spacearm.base.config.scene import DEFAULT_SCENE
         self.camera = CameraService.from_files(self.plant, sink, scene or DEFAULT_SCENE, frame_rate).start()
         return self.camera
 
@@ -296,5 +296,5 @@ def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_
                     plant: Plant | PlantConfig | str | Path | None = None,
                     control_node_id: int | None = None) -> Simulator:
     """Start all simulated nodes of the bus config on the bus; returns the handle (.stop()).
-    control_node_id: also serve the fault-injection unit (firmware_sim.control) at this ID."""
+    control_node_id: also serve the fault-injection unit (spacearm.firmware_sim.control) at this ID."""
     return Simulator(bus_spec, bus_config, plant, control_node_id).start()

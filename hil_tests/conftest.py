@@ -105,8 +105,8 @@ def pytest_collection_modifyitems(config, items):
 
 
 # --------------------------------------------------------------------------- loopback hub
-from drivers.child_process import module_env  # noqa: E402
-from drivers.transport.hub import HubProcess  # noqa: E402
+from spacearm.base.runtime.child_process import module_env  # noqa: E402
+from spacearm.base.transport.hub import HubProcess  # noqa: E402
 
 
 @pytest.fixture(scope="session")
@@ -149,7 +149,7 @@ def time_scale() -> float:
 @pytest.fixture
 def open_test_bus():
     """open_test_bus(spec, **kw) -> bus; every bus opened is shut down at teardown."""
-    from drivers.transport import open_bus
+    from spacearm.base.transport import open_bus
 
     opened = []
 
@@ -237,8 +237,8 @@ def launch(tmp_path):
 
 @pytest.fixture
 def peer():
-    """peer(spec, mode, *args) -> drivers.transport.peer.Peer, killed at teardown."""
-    from drivers.transport.peer import Peer
+    """peer(spec, mode, *args) -> spacearm.base.transport.peer.Peer, killed at teardown."""
+    from spacearm.base.transport.peer import Peer
 
     made = []
 

@@ -49,10 +49,10 @@ from pathlib import Path
 
 import numpy as np
 
-from console.client import ApiClient
-from drivers.child_process import module_env
-from drivers.priority import GIL_SWITCH_INTERVAL
-from drivers.transport.hub import LoopbackHub
+from spacearm.console.client import ApiClient
+from spacearm.base.runtime.child_process import module_env
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL
+from spacearm.base.transport.hub import LoopbackHub
 from hil_tests.harness import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -152,7 +152,7 @@ class Stack:
     def _spawn(self, args: list[str], name: str, ready: str, timeout: float) -> subprocess.Popen:
         log = self.workdir / f"{name}{len(self.procs)}.log"
         out = open(log, "w")
-        proc = subprocess.Popen([sys.executable, "-m", "console.main", *args, "--bus", self.bus],
+        proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", *args, "--bus", self.bus],
                                 stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
                                 cwd=str(ROOT), env=child_env(), start_new_session=True)
         out.close()
@@ -187,9 +187,9 @@ class Stack:
     def rig(self):
         """The simulator's fault-injection node, over the same bus."""
         if self._rig is None:
-            from drivers.network import ArmNetwork
-            from drivers.sim_control import SimControl
-            from drivers.bus_config import load_bus_config, DEFAULT_BUS_CONFIG
+            from spacearm.drivers.network import ArmNetwork
+            from spacearm.drivers.sim_control import SimControl
+            from spacearm.base.config.bus import load_bus_config, DEFAULT_BUS_CONFIG
             config = load_bus_config(DEFAULT_BUS_CONFIG)
             # No controller heartbeat from the test: the drives must notice a killed daemon.
             config = config.model_copy(update={"bus": config.bus.model_copy(
@@ -401,7 +401,7 @@ def assert_stays_still(stack: Stack, seconds: float = 0.4, settle: float = 0.3) 
 
 
 def assert_motion_refused(stack: Stack) -> None:
-    from console.errors import CommandFailed
+    from spacearm.console.errors import CommandFailed
     for cmd, args in (("enable", {}), ("jog", {"joint": 1, "delta": 0.01})):
         try:
             stack.call(cmd, **args)
@@ -413,7 +413,7 @@ def assert_motion_refused(stack: Stack) -> None:
 
 def recorded_stop_events(path: str) -> list[str]:
     """The protective-stop messages in a (possibly still open) recording."""
-    from controller.recording.mcap_reader import RecordingError, read_recording
+    from spacearm.controller.recording.mcap_reader import RecordingError, read_recording
     try:
         rec = read_recording(path)
     except RecordingError:

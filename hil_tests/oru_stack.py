@@ -5,8 +5,8 @@ from __future__ import annotations
 import threading
 import time
 
-from controller.daemon.daemon import Daemon, DaemonOptions
-from firmware_sim.runner import start_simulator
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+from spacearm.firmware_sim.runner import start_simulator
 
 PLANT = "configs/oru/plant_cell.toml"
 # Slower heartbeats than configs/bus/arm.toml: see the file's header (shared, overloaded machine).

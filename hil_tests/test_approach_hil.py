@@ -12,14 +12,14 @@ import uuid
 import numpy as np
 import pytest
 
-from controller.config.arm import load_arm_config
-from controller.config.scene import load_scene
-from controller.daemon.approach_mode import marker_T_goal
-from controller.kinematics.inverse import solve_ik
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.transforms import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
-from controller.vision.config import load_marker, load_mount
-from controller.vision.frames import ShmFrameRing
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.config.scene import load_scene
+from spacearm.controller.daemon.approach_mode import marker_T_goal
+from spacearm.base.kinematics.inverse import solve_ik
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.transforms import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
+from spacearm.base.vision.config import load_marker, load_mount
+from spacearm.base.vision.frames import ShmFrameRing
 from hil_tests.test_daemon_console import Console, free_port
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
@@ -58,10 +58,10 @@ def true_error_from_ring(ring: ShmFrameRing, after_seq: int, timeout: float = 60
 def test_approach_command_converges_to_the_true_pre_contact_pose(loopback_hub, launch, tmp_path, time_scale):
     bus = loopback_hub.spec(f"approach-{uuid.uuid4().hex[:8]}")
     camera = f"spacearm-cam-{uuid.uuid4().hex[:8]}"
-    launch(["-m", "console.main", "sim", "--plant", PLANT, "--camera", camera,
+    launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--camera", camera,
             "--bus-config", BUS_CONFIG], bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "console.main", "daemon", "--clock", "lockstep", "--api", api, "--no-record",
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--no-record",
             "--camera", camera, "--bus-config", BUS_CONFIG], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     op = Console(api, tmp_path / "operator")
     ring = ShmFrameRing.attach(camera)

@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.config.arm import load_arm_config
-from controller.kinematics.forward import fk_batch
-from controller.kinematics.model import KinematicModel
-from firmware_sim.plant import load_plant_config
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.kinematics.forward import fk_batch
+from spacearm.base.kinematics.model import KinematicModel
+from spacearm.firmware_sim.plant import load_plant_config
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.test_daemon_console import free_port
 
@@ -54,7 +54,7 @@ def patient_bus(out: Path) -> Path:
 
 
 def calibrate(args: list[str], timeout: float = 400) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "console.main", "calibrate", "camera", *args],
+    return subprocess.run([sys.executable, "-m", "spacearm.console.main", "calibrate", "camera", *args],
                           capture_output=True, text=True, cwd=ROOT, env=child_env({}), timeout=timeout)
 
 
@@ -62,11 +62,11 @@ def test_camera_calibration_on_the_daemon_cuts_held_out_pose_error(loopback_hub,
     camera = f"spacearm-cal-{uuid.uuid4().hex[:8]}"
     bus = loopback_hub.spec(f"camcal-{free_port()}")
     bus_config = patient_bus(tmp_path / "bus.toml")
-    launch(["-m", "console.main", "sim", "--plant", str(PLANT), "--camera", camera, "--board", str(BOARD),
+    launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT), "--camera", camera, "--board", str(BOARD),
             "--bus-config", str(bus_config)], bus_spec=bus, ready="nodes ready")
     arm = fast_copy(ARM, tmp_path / "oru_arm_fast.toml")
     api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "console.main", "daemon", "--clock", "lockstep", "--arm", str(arm), "--api", api, "--no-record",
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--arm", str(arm), "--api", api, "--no-record",
             "--camera", camera, "--bus-config", str(bus_config)], bus_spec=bus, ready="spacearm daemon:", timeout=30)
 
     missing = calibrate(["--camera", "no-such-camera-ring", "--arm", str(arm), "--api", api])

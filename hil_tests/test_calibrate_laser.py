@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.config.arm import load_arm_config
-from controller.kinematics.forward import fk
-from controller.kinematics.model import KinematicData, KinematicModel
-from firmware_sim.plant import load_plant_config
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.firmware_sim.plant import load_plant_config
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.test_daemon_console import free_port
 
@@ -42,14 +42,14 @@ def tool_positions(model: KinematicModel, Q: np.ndarray) -> np.ndarray:
 
 def test_laser_calibration_on_the_daemon_cuts_absolute_error(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"laser-{free_port()}")
-    sim = launch(["-m", "console.main", "sim", "--plant", str(PLANT)], bus_spec=bus, ready="nodes ready")
+    sim = launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT)], bus_spec=bus, ready="nodes ready")
     port = re.search(r"laser ranger on (\S+)", sim.log_paths[0].read_text()).group(1)
     arm = fast_copy(ARM, tmp_path / "laser_arm_fast.toml")
     api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "console.main", "daemon", "--clock", "lockstep", "--arm", str(arm), "--api", api,
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--arm", str(arm), "--api", api,
             "--no-record"], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     calibrated = tmp_path / "laser_arm_calibrated.toml"
-    run = subprocess.run([sys.executable, "-m", "console.main", "calibrate", "laser", "--port", port,
+    run = subprocess.run([sys.executable, "-m", "spacearm.console.main", "calibrate", "laser", "--port", port,
                           "--arm", str(arm), "--configs", "40", "--validation", "10", "--apply", str(calibrated),
                           "--data-out", str(tmp_path / "readings.csv"), "--json", "--api", api],
                          capture_output=True, text=True, cwd=ROOT, env=child_env({}), timeout=600)

@@ -2,7 +2,7 @@
 socketcan with the simulator as a separate `spacearm sim` process).
 
 Faults are injected through the simulator's fault-injection unit (an SDO node at ID 126,
-drivers.sim_control.SimControl), so every scenario is the same code on every transport.
+spacearm.drivers.sim_control.SimControl), so every scenario is the same code on every transport.
 """
 from __future__ import annotations
 
@@ -16,14 +16,14 @@ from dataclasses import dataclass
 import can
 import pytest
 
-from drivers import od
-from drivers.bus_config import BusConfig, dump_toml, load_bus_config
-from drivers.cia402_defs import State
-from drivers.errors import BootError, SdoError
-from drivers.devices import EeCommand, EeState
-from drivers.network import ArmCommand, ArmNetwork
-from drivers.sim_control import SimControl
-from firmware_sim.runner import Simulator
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import BusConfig, dump_toml, load_bus_config
+from spacearm.base.canopen.cia402_defs import State
+from spacearm.drivers.errors import BootError, SdoError
+from spacearm.drivers.devices import EeCommand, EeState
+from spacearm.drivers.network import ArmCommand, ArmNetwork
+from spacearm.drivers.sim_control import SimControl
+from spacearm.firmware_sim.runner import Simulator
 
 pytestmark = pytest.mark.hil
 
@@ -57,7 +57,7 @@ def start_sim(bus_spec, launch, tmp_path):
         path = tmp_path / f"bus{len(started)}.toml"
         path.write_text(dump_toml(config))
         started.append(None)
-        proc = launch(["-m", "console.main", "sim", "--stats", "--bus-config", path,
+        proc = launch(["-m", "spacearm.console.main", "sim", "--stats", "--bus-config", path,
                        "--control-node", od.SIM_CONTROL_NODE_DEFAULT],
                       bus_spec=bus_spec, ready=r"nodes ready", timeout=30)
         return SimHandle(None, proc)

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from controller.recording.csv_export import export_csv
-from controller.recording.mcap_reader import read_recording
+from spacearm.controller.recording.csv_export import export_csv
+from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.harness import free_port
 
@@ -32,7 +32,7 @@ class Console:
         self.env = child_env({"SPACEARM_LEASE_DIR": str(lease_dir)})
 
     def run(self, *args: str, check: bool = True) -> subprocess.CompletedProcess:
-        result = subprocess.run([sys.executable, "-m", "console.main", *args, "--api", self.api],
+        result = subprocess.run([sys.executable, "-m", "spacearm.console.main", *args, "--api", self.api],
                                 capture_output=True, text=True, cwd=ROOT, env=self.env, timeout=120)
         if check and result.returncode != 0:
             raise AssertionError(f"spacearm {' '.join(args)} failed: {result.stdout}{result.stderr}")
@@ -45,10 +45,10 @@ class Console:
 @pytest.fixture
 def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"daemon-{os.getpid()}-{time.monotonic_ns()}")
-    launch(["-m", "console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml",
+    launch(["-m", "spacearm.console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml",
             "--control-node", "126"], bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
-    daemon = launch(["-m", "console.main", "daemon", "--clock", "lockstep", "--api", api,
+    daemon = launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
                      "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     return {"bus": bus, "api": api, "daemon": daemon, "runs": tmp_path / "runs",
             "alice": Console(api, tmp_path / "alice"), "bob": Console(api, tmp_path / "bob")}
@@ -123,14 +123,14 @@ def test_console_commands_end_to_end(stack):
 
 
 def test_device_fault_causes_protective_stop_with_reason(stack):
-    from drivers.network import ArmNetwork  # noqa: F401  (SimControl needs a network handle)
+    from spacearm.drivers.network import ArmNetwork  # noqa: F401  (SimControl needs a network handle)
     alice = stack["alice"]
     alice.run("enable")
     time.sleep(0.5)
     # Silence joint 4 through the simulator's test-rig node, over the same bus.
     probe = subprocess.run([sys.executable, "-c", f"""
-from drivers.network import ArmNetwork
-from drivers.sim_control import SimControl
+from spacearm.drivers.network import ArmNetwork
+from spacearm.drivers.sim_control import SimControl
 net = ArmNetwork({stack['bus']!r}).connect()
 SimControl(net).silence('joint_4')
 net.close()

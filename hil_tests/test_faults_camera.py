@@ -38,12 +38,12 @@ class FakeVision:
 
 @pytest.fixture
 def cell():
-    from controller.config.arm import load_arm_config
-    from controller.daemon.approach_mode import ApproachMode
-    from controller.daemon.core import ControllerCore
-    from controller.daemon.state import Measurement
-    from controller.daemon.supervision import SupervisionLimits, Supervisor
-    from controller.kinematics.model import KinematicModel
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.controller.daemon.approach_mode import ApproachMode
+    from spacearm.controller.daemon.core import ControllerCore
+    from spacearm.controller.daemon.state import Measurement
+    from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
+    from spacearm.base.kinematics.model import KinematicModel
 
     arm = load_arm_config("configs/arm/oru_testbed_6dof.toml")
     model = KinematicModel.from_config(arm)
@@ -85,7 +85,7 @@ def run_until_stopped(cell, max_cycles: int) -> int:
 
 
 def assert_nothing_moves_until_reset(cell) -> None:
-    from controller.daemon.core import CommandRefused
+    from spacearm.controller.daemon.core import CommandRefused
     q = cell.state["q"].copy()
     for _ in range(20):
         assert not cell.cycle().enable

@@ -104,7 +104,7 @@ def test_ft_jump_stops_the_arm(enabled):
 
 
 def test_jogging_console_that_vanishes_stops_the_jog(enabled):
-    from console.client import ApiClient
+    from spacearm.console.client import ApiClient
     jogger = ApiClient(enabled.api)
     jogger.call("jog", lease=enabled.lease, joint=1, delta=0.5, speed=0.1)
     time.sleep(0.3)
@@ -117,8 +117,8 @@ def test_jogging_console_that_vanishes_stops_the_jog(enabled):
 
 
 def test_silent_jogging_console_stops_after_the_keepalive(enabled):
-    from console.client import ApiClient
-    from controller.daemon.watchdog import JOG_KEEPALIVE
+    from spacearm.console.client import ApiClient
+    from spacearm.controller.daemon.watchdog import JOG_KEEPALIVE
     jogger = ApiClient(enabled.api)
     try:
         jogger.call("jog", lease=enabled.lease, joint=1, delta=0.5, speed=0.1)
@@ -137,7 +137,7 @@ def test_waiting_console_keeps_its_jog_alive(enabled):
 
 
 def _jog_with_keepalive(stack):
-    from console.client import ApiClient
+    from spacearm.console.client import ApiClient
     if stack.status()["state"] != "enabled":
         stack.enable()
     jogger = ApiClient(stack.api)
@@ -158,7 +158,7 @@ def _jog_with_keepalive(stack):
 
 
 def test_planned_move_runs_to_its_end_without_its_console(enabled):
-    from console.client import ApiClient
+    from spacearm.console.client import ApiClient
 
     def attempt():
         if enabled.status()["state"] != "enabled":
@@ -200,7 +200,7 @@ def test_frozen_ft_sensor_stops_the_arm(hub, tmp_path_factory):
 def test_joint_limit_hit_stops_the_arm(hub, tmp_path_factory):
     """The plant starts joint 1 beyond its soft limit: enabling stops at once, nothing moves."""
     import tomllib
-    from controller.config.arm import load_arm_config
+    from spacearm.base.config.arm import load_arm_config
     work = tmp_path_factory.mktemp("limit")
     arm = load_arm_config("configs/arm/oru_testbed_6dof.toml")
     text = open("configs/plant/oru_testbed_nominal.toml").read()

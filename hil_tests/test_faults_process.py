@@ -10,7 +10,7 @@ import time
 import numpy as np
 import pytest
 
-from controller.recording.mcap_reader import read_recording
+from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.faults import (FaultyHub, assert_motion_refused, assert_stays_still,
                               recorded_stop_events, retry_on_load_stop, start_stack, wait_for, wait_safe)
 
@@ -118,7 +118,7 @@ def test_daemon_killed_mid_motion_restarts_disabled_with_brakes_on(stack):
     # The drives consume the controller's heartbeat: they stop and brake by themselves.
     # Read their brake status over SDO from here (this test's network sends no controller
     # heartbeat, see faults.Stack.rig).
-    from drivers import od
+    from spacearm.base.canopen import od
     net = stack._net
 
     def all_braked() -> bool:
@@ -140,7 +140,7 @@ def test_daemon_killed_mid_motion_restarts_disabled_with_brakes_on(stack):
         clock.join()
     assert to_brakes < 1.0, to_brakes
     # The interrupted recording is readable up to its last flush, every SYNC present.
-    from controller.recording.csv_export import export_csv
+    from spacearm.controller.recording.csv_export import export_csv
     rec = read_recording(path)
     cycles = [m.data["cycle"] for m in rec.topic("/cycle")]
     assert not rec.complete and len(cycles) > 20

@@ -9,8 +9,8 @@ import time
 
 import pytest
 
-from drivers.laser_ranger import LaserRanger, RangerError
-from firmware_sim.laser_ranger import LaserRangerSim, RangerConfig
+from spacearm.drivers.laser_ranger import LaserRanger, RangerError
+from spacearm.firmware_sim.laser_ranger import LaserRangerSim, RangerConfig
 
 pytestmark = pytest.mark.hil
 DISTANCE = 0.75

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.impedance.gravity import GravityModel
-from firmware_sim.contact.trials import force_ramp, stiffness_task
+from spacearm.controller.impedance.gravity import GravityModel
+from spacearm.offline.contact.trials import force_ramp, stiffness_task
 from hil_tests.oru_stack import OruStack
 
 pytestmark = pytest.mark.hil

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers import od
+from spacearm.base.canopen import od
 from hil_tests.oru_stack import OruStack
 
 pytestmark = pytest.mark.hil

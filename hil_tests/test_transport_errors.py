@@ -8,9 +8,9 @@ import time
 import can
 import pytest
 
-from drivers.transport import BusSpecError, open_bus, parse_bus_spec
-from drivers.transport.loopback import HubUnavailableError, LoopbackBus, parse_spec
-from drivers.transport.hub import HubProcess
+from spacearm.base.transport import BusSpecError, open_bus, parse_bus_spec
+from spacearm.base.transport.loopback import HubUnavailableError, LoopbackBus, parse_spec
+from spacearm.base.transport.hub import HubProcess
 
 
 def _free_port() -> int:
@@ -205,7 +205,7 @@ def test_loopback_bus_is_a_python_can_bus(loopback_hub):
 def test_corrupt_stream_from_the_hub_is_detected_not_delivered():
     """A 'hub' that answers the hello correctly and then sends garbage: the client drops the
     connection, tries to reconnect, and raises a CanOperationError instead of returning junk."""
-    from drivers.transport import wire
+    from spacearm.base.transport import wire
 
     srv = socket.socket()
     srv.bind(("127.0.0.1", 0))

@@ -41,8 +41,8 @@ def camera_ring():
     """A frame ring holding one simulated eye-in-hand frame of the marker 300 mm ahead."""
     import numpy as np
 
-    from controller.vision.frames import ShmFrameRing
-    from firmware_sim.camera.simulator import CameraSimulator
+    from spacearm.base.vision.frames import ShmFrameRing
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
 
     frame = CameraSimulator.from_configs(noise_seed=1).render(
         np.array([[1, 0, 0, 0.01], [0, -1, 0, -0.005], [0, 0, -1, 0.30], [0, 0, 0, 1]], float))
@@ -57,15 +57,15 @@ def camera_ring():
 @pytest.fixture
 def web_stack(loopback_hub, launch, tmp_path, camera_ring):
     bus = loopback_hub.spec(f"web-{os.getpid()}-{time.monotonic_ns()}")
-    launch(["-m", "console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml"],
+    launch(["-m", "spacearm.console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml"],
            bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
     # Lockstep, like the other daemon HIL tests: on a loaded two-core machine a real-time
     # 20 ms cycle may miss process data and stop; bench/bench_web.py measures real time.
-    launch(["-m", "console.main", "daemon", "--clock", "lockstep", "--api", api,
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
             "--record-dir", str(tmp_path / "runs")],
            bus_spec=bus, ready="spacearm daemon:", timeout=30)
-    web = launch(["-m", "console.main", "console-web", "--connect", api, "--port", "0",
+    web = launch(["-m", "spacearm.console.main", "console-web", "--connect", api, "--port", "0",
                   "--camera", camera_ring.name],
                  ready=r"console-web: http://127\.0\.0\.1:\d+/", timeout=30,
                  env={"SPACEARM_LEASE_DIR": str(tmp_path / "lease")})
@@ -256,9 +256,9 @@ def test_presimulation_uses_the_daemons_planner_and_checks():
     """No browser: the checks the page shows, from the same planner and limits as the daemon."""
     import numpy as np
 
-    from console.web.presim import Presimulator
-    from controller.config.arm import load_arm_config
-    from controller.kinematics.model import KinematicModel
+    from spacearm.console.web.presim import Presimulator
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.base.kinematics.model import KinematicModel
 
     model = KinematicModel.from_config(load_arm_config("configs/arm/oru_testbed_6dof.toml"))
     presim = Presimulator(model, 0.02)

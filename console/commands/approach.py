@@ -13,10 +13,10 @@ import time
 
 import typer
 
-from console.client import ApiClient
-from console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, _controlled_call, _emit
-from console.errors import CommandFailed, friendly_errors
-from console.units import UnitError, parse_length
+from spacearm.console.client import ApiClient
+from spacearm.console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, _controlled_call, _emit
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.units import UnitError, parse_length
 
 
 def register(app: typer.Typer) -> None:

@@ -10,8 +10,8 @@ from typing import Optional
 import numpy as np
 import typer
 
-from console.client import DEFAULT_API
-from console.errors import CommandFailed, friendly_errors
+from spacearm.console.client import DEFAULT_API
+from spacearm.console.errors import CommandFailed, friendly_errors
 
 STUDIES = ("laser-ranger", "ekf")
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
               out: Path = typer.Option(Path("calibration_plots"), help="Folder for PNG plots (ekf)."),
               as_json: bool = typer.Option(False, "--json", help="Also print the headline numbers as JSON.")) -> None:
         """Reproduce a paper's simulation study and print our tables beside the paper's."""
-        from controller.calibration.studies import ekf_study, laser_study
+        from spacearm.controller.calibration.studies import ekf_study, laser_study
         if which not in STUDIES:
             raise CommandFailed(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
         if which == "laser-ranger":
@@ -63,12 +63,12 @@ def register(app: typer.Typer) -> None:
             frames: bool = typer.Option(False, help="Also consider base/tool frame parameters."),
             as_json: bool = typer.Option(False, "--json")) -> None:
         """Identify the identifiable parameters of MODEL from a measurement file."""
-        from controller.calibration.datafile import DataFileError, read_measurements
-        from controller.calibration.errormodel import ErrorModel
-        from controller.calibration.identifiability import find_identifiable
-        from controller.calibration.residuals import PlaneTarget, Problem
-        from controller.calibration.solvers import EKFTuning, ekf, lm, lse
-        from controller.kinematics import load_model
+        from spacearm.controller.calibration.datafile import DataFileError, read_measurements
+        from spacearm.controller.calibration.errormodel import ErrorModel
+        from spacearm.controller.calibration.identifiability import find_identifiable
+        from spacearm.controller.calibration.residuals import PlaneTarget, Problem
+        from spacearm.controller.calibration.solvers import EKFTuning, ekf, lm, lse
+        from spacearm.base.kinematics import load_model
         kin = load_model(model)
         try:
             mf = read_measurements(data, kin.nq)
@@ -120,7 +120,7 @@ def register(app: typer.Typer) -> None:
             seed: int = typer.Option(0),
             data: Path = typer.Option(None, help="samples.csv (default ../shared/data/fr3_eye_in_hand).")) -> None:
         """Fit the real FR3 eye-in-hand data; held-out error, registration-only vs full."""
-        from controller.calibration.fr3 import DATA, fr3_study
+        from spacearm.controller.calibration.fr3 import DATA, fr3_study
         path = data or DATA
         if not Path(path).exists():
             raise CommandFailed(f"FR3 data not found: {path}")
@@ -145,13 +145,13 @@ def register(app: typer.Typer) -> None:
               token: Optional[str] = typer.Option(None, "--token", envvar="SPACEARM_TOKEN"),
               as_json: bool = typer.Option(False, "--json")) -> None:
         """On-orbit laser-ranger calibration on the running daemon: move, measure, identify, validate."""
-        from console.arm_session import DaemonArm
-        from console.client import ApiClient
-        from controller.calibration.datafile import write_measurements
-        from controller.calibration.laser_routine import (CalibrationRunError, calibration_section,
+        from spacearm.console.arm_session import DaemonArm
+        from spacearm.console.client import ApiClient
+        from spacearm.controller.calibration.datafile import write_measurements
+        from spacearm.controller.calibration.laser_routine import (CalibrationRunError, calibration_section,
                                                           run_laser_calibration, write_calibrated_arm)
-        from controller.calibration.study_laser import setup as laser_setup
-        from drivers.laser_ranger import LaserRanger, NoHit, RangerError
+        from spacearm.controller.calibration.study_laser import setup as laser_setup
+        from spacearm.drivers.laser_ranger import LaserRanger, NoHit, RangerError
 
         st = laser_setup(arm)
         with ApiClient(api, token) as client, LaserRanger(port) as ranger:
@@ -232,13 +232,13 @@ def register(app: typer.Typer) -> None:
                token: Optional[str] = typer.Option(None, "--token", envvar="SPACEARM_TOKEN"),
                as_json: bool = typer.Option(False, "--json")) -> None:
         """On-orbit camera-pose calibration on the running daemon: checkerboard views, identify, validate."""
-        from console.arm_session import DaemonArm
-        from console.client import ApiClient
-        from controller.calibration.camera_routine import (camera_calibration_section, run_camera_calibration,
+        from spacearm.console.arm_session import DaemonArm
+        from spacearm.console.client import ApiClient
+        from spacearm.controller.calibration.camera_routine import (camera_calibration_section, run_camera_calibration,
                                                            score_against_truth, setup_from_files,
                                                            write_camera_calibrated_arm)
-        from controller.calibration.datafile import write_measurements
-        from controller.calibration.laser_routine import CalibrationRunError
+        from spacearm.controller.calibration.datafile import write_measurements
+        from spacearm.controller.calibration.laser_routine import CalibrationRunError
 
         st = setup_from_files(arm, board_file, mount_file)
         ring = attach_ring(camera_name, st.image_size)
@@ -278,8 +278,8 @@ def register(app: typer.Typer) -> None:
                 raise CommandFailed(str(exc)) from None
         scores = None
         if truth is not None:
-            from controller.calibration.board import load_board
-            from firmware_sim.plant import load_plant_config
+            from spacearm.controller.calibration.board import load_board
+            from spacearm.firmware_sim.plant import load_plant_config
             board = load_board(board_file)
             scores = score_against_truth(st, result, load_plant_config(truth).geometry.true_model(),
                                          board.pose.matrix() @ board.true_offset.matrix(), st.tool_T_camera, q_start)
@@ -290,7 +290,7 @@ def register(app: typer.Typer) -> None:
 
 def attach_ring(name: str, image_size: tuple[int, int]):
     """The camera's frame ring, attached read-only (the simulator or camera driver owns it)."""
-    from controller.vision.frames import ShmFrameRing
+    from spacearm.base.vision.frames import ShmFrameRing
     try:
         ring = ShmFrameRing.attach(name, timeout=0.5)
     except FileNotFoundError:

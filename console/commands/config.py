@@ -5,8 +5,8 @@ from pathlib import Path
 
 import typer
 
-from console.errors import CommandFailed, friendly_errors
-from controller.config.arm import load_arm_config
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.base.config.arm import load_arm_config
 
 
 def register(app: typer.Typer) -> None:

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import typer
 
-from console.errors import CommandFailed, friendly_errors
-from controller.daemon.command_api import ApiError
-from controller.daemon.cycle_stats import CycleThresholds
-from controller.daemon.daemon import Daemon, DaemonOptions
-from drivers.bus_config import DEFAULT_BUS_CONFIG
-from drivers.errors import DriverError
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.controller.daemon.command_api import ApiError
+from spacearm.controller.daemon.cycle_stats import CycleThresholds
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.drivers.errors import DriverError
 
 
 def register(app: typer.Typer) -> None:

@@ -16,15 +16,15 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from console.errors import CommandFailed, friendly_errors
-from controller.daemon.command_api import ApiError
-from controller.daemon.daemon import Daemon, DaemonOptions
-from controller.recording.csv_export import export_csv
-from controller.scenarios.changeout import ChangeoutFailed, run_changeout
-from controller.scenarios.checkout import CheckoutFailed, run_checkout
-from drivers.bus_config import DEFAULT_BUS_CONFIG
-from drivers.errors import DriverError
-from firmware_sim.runner import start_simulator
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.controller.daemon.command_api import ApiError
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+from spacearm.controller.recording.csv_export import export_csv
+from spacearm.offline.scenarios.changeout import ChangeoutFailed, run_changeout
+from spacearm.offline.scenarios.checkout import CheckoutFailed, run_checkout
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.drivers.errors import DriverError
+from spacearm.firmware_sim.runner import start_simulator
 
 
 def register(app: typer.Typer) -> None:

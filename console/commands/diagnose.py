@@ -7,12 +7,12 @@ from pathlib import Path
 
 import typer
 
-from console.errors import EXIT_USAGE, friendly_errors
-from controller.diagnosis.analysis import diagnose as run_diagnosis
-from controller.diagnosis.direct_sim import SimTraces
-from controller.diagnosis.recording_io import RecordingFormatError, parse_column_map, read_table
-from controller.diagnosis.report import write_report
-from firmware_sim.plant import load_plant_config
+from spacearm.console.errors import EXIT_USAGE, friendly_errors
+from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
+from spacearm.offline.diagnosis.direct_sim import SimTraces
+from spacearm.offline.diagnosis.recording_io import RecordingFormatError, parse_column_map, read_table
+from spacearm.offline.diagnosis.report import write_report
+from spacearm.firmware_sim.plant import load_plant_config
 
 DEFAULT_NOMINAL = Path("configs/plant/oru_testbed_nominal.toml")
 

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import typer
 
-from console.errors import CommandFailed, friendly_errors
-from controller.recording.csv_export import export_csv
-from controller.recording.mcap_reader import RecordingError
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.controller.recording.csv_export import export_csv
+from spacearm.controller.recording.mcap_reader import RecordingError
 
 
 def register(app: typer.Typer) -> None:

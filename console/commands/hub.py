@@ -13,7 +13,7 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    from drivers.transport.hub import DEFAULT_HOST, DEFAULT_PORT
+    from spacearm.base.transport.hub import DEFAULT_HOST, DEFAULT_PORT
 
     @app.command("hub")
     def hub(
@@ -26,6 +26,6 @@ def register(app: typer.Typer) -> None:
                                         help="SCHED_FIFO priority (0: normal scheduling; README, real-time scheduling)"),
     ) -> None:
         """Run the loopback CAN hub (multi-process bus on one machine, 127.0.0.1 by default)."""
-        from drivers.transport.hub import run
+        from spacearm.base.transport.hub import run
 
         raise typer.Exit(run(host, port, idle_exit, verbose=verbose, rt_priority=rt_priority))

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from console.errors import CommandFailed, friendly_errors
-from console.units import UnitError, parse_angle, parse_length
-from controller.kinematics import (KinematicData, analytic_ik, fk, load_model, matrix_to_rpy,
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.units import UnitError, parse_angle, parse_length
+from spacearm.base.kinematics import (KinematicData, analytic_ik, fk, load_model, matrix_to_rpy,
                                    rpy_to_matrix, solve_ik)
 
 ARM_ARGUMENT = typer.Argument(..., help="Arm file, e.g. configs/arm/oru_testbed_6dof.toml.")
@@ -57,7 +57,7 @@ def register(app: typer.Typer) -> None:
                 all_solutions: bool = typer.Option(False, "--all", help="List every closed-form solution."),
                 as_json: bool = typer.Option(False, "--json")) -> None:
         """Joint angles that put the tool at POSE (nearest to the seed posture)."""
-        from controller.config.arm import load_arm_config
+        from spacearm.base.config.arm import load_arm_config
         if len(pose) != 6:
             raise CommandFailed(f"pose needs 6 values (x y z roll pitch yaw), got {len(pose)}")
         try:

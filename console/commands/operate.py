@@ -17,11 +17,11 @@ from typing import Any
 
 import typer
 
-from console import lease_store
-from console.client import DEFAULT_API, ApiClient
-from console.errors import CommandFailed, friendly_errors
-from console.status_view import render_status
-from console.units import UnitError, parse_angle, parse_length
+from spacearm.console import lease_store
+from spacearm.console.client import DEFAULT_API, ApiClient
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.status_view import render_status
+from spacearm.console.units import UnitError, parse_angle, parse_length
 
 API_OPTION = typer.Option(DEFAULT_API, "--api", help="Daemon API address (tcp:HOST:PORT or unix:PATH).",
                           envvar="SPACEARM_API")
@@ -218,7 +218,7 @@ def register(app: typer.Typer) -> None:
               count: int = typer.Option(0, help="Stop after this many refreshes (0: until Ctrl-C).")) -> None:
         """Live view of joints, forces and cycle statistics, refreshing in the terminal."""
         from rich.live import Live
-        from console.status_view import status_table
+        from spacearm.console.status_view import status_table
         shown = 0
         with ApiClient(api, token) as client, Live(auto_refresh=False) as live:
             try:

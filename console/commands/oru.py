@@ -13,9 +13,9 @@ from typing import Any
 
 import typer
 
-from console.client import ApiClient
-from console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, WAIT_OPTION, _controlled_call, _emit
-from console.errors import CommandFailed, friendly_errors
+from spacearm.console.client import ApiClient
+from spacearm.console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, WAIT_OPTION, _controlled_call, _emit
+from spacearm.console.errors import CommandFailed, friendly_errors
 
 
 def _stages(text: str | None) -> list[int] | None:

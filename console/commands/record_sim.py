@@ -6,12 +6,12 @@ from pathlib import Path
 
 import typer
 
-from console.errors import EXIT_USAGE, CommandFailed, friendly_errors
-from controller.diagnosis.record import DEFAULT_ARM, RecordSimError, record_can, record_direct
-from controller.diagnosis.trajectory import TrajectoryError, load_trajectory
-from drivers.bus_config import DEFAULT_BUS_CONFIG
-from drivers.errors import DriverError
-from firmware_sim.plant import load_plant_config
+from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
+from spacearm.offline.diagnosis.record import DEFAULT_ARM, RecordSimError, record_can, record_direct
+from spacearm.offline.diagnosis.trajectory import TrajectoryError, load_trajectory
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.drivers.errors import DriverError
+from spacearm.firmware_sim.plant import load_plant_config
 
 
 def register(app: typer.Typer) -> None:

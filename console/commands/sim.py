@@ -19,8 +19,8 @@ from typing import Optional
 
 import typer
 
-from drivers.bus_config import DEFAULT_BUS_CONFIG
-from drivers.priority import GIL_SWITCH_INTERVAL, use_fifo
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, use_fifo
 
 READY_LINE = "spacearm sim: {n} nodes ready on {bus}"
 LASER_LINE = "spacearm sim: laser ranger on {port}"   # printed before READY_LINE
@@ -32,13 +32,13 @@ CAMERA_LINE = "spacearm sim: camera frames in shared memory {name}"   # printed 
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
             duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
             camera: Optional[str] = None, board: Optional[Path] = None, rt_priority: int = 0) -> int:
-    from controller.config.errors import ConfigError
-    from drivers.transport import BusSpecError
-    from firmware_sim.runner import Simulator
+    from spacearm.base.config.errors import ConfigError
+    from spacearm.base.transport import BusSpecError
+    from spacearm.firmware_sim.runner import Simulator
 
     board_config = None
     if board is not None:
-        from controller.calibration.board import load_board
+        from spacearm.controller.calibration.board import load_board
         try:
             if not camera:
                 raise ValueError("--board needs --camera (the board is only seen through the camera)")
@@ -72,8 +72,8 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
             previous[sig] = signal.signal(sig, _stop)
     ring = None
     if camera:
-        from controller.vision.config import load_camera
-        from controller.vision.frames import ShmFrameRing
+        from spacearm.base.vision.config import load_camera
+        from spacearm.base.vision.frames import ShmFrameRing
         cam = load_camera()
         try:
             ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height, name=camera)

@@ -8,11 +8,11 @@ from pathlib import Path
 
 import typer
 
-from console.client import DEFAULT_API, ApiClient
-from console.errors import CommandFailed, friendly_errors
-from controller.config.arm import load_arm_config
-from controller.config.scene import DEFAULT_SCENE
-from controller.kinematics.model import KinematicModel
+from spacearm.console.client import DEFAULT_API, ApiClient
+from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.config.scene import DEFAULT_SCENE
+from spacearm.base.kinematics.model import KinematicModel
 
 
 def _loopback(host: str) -> bool:
@@ -37,8 +37,8 @@ def register(app: typer.Typer) -> None:
             camera: str = typer.Option(None, "--camera", help="Shared-memory frame ring of the eye-in-hand camera."),
     ) -> None:
         """Serve the browser console: 3-D scene with presimulation, live state, stop/reset, camera."""
-        from console.web.scene_model import load_scene_description
-        from console.web.server import WebOptions, serve
+        from spacearm.console.web.scene_model import load_scene_description
+        from spacearm.console.web.server import WebOptions, serve
 
         if not _loopback(host):
             # The page carries the operator's control lease; it is not for other machines.
@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
                                 "presimulation needs the daemon's arm file")
         camera_feed = None
         if camera:
-            from console.web.camera_feed import CameraFeed
+            from spacearm.console.web.camera_feed import CameraFeed
             try:
                 camera_feed = CameraFeed(camera)
             except (OSError, ValueError, TimeoutError) as exc:

@@ -20,8 +20,8 @@ AXIS_LENGTH = 0.03    # m, marker axes drawn from the estimated pose
 
 class CameraFeed:
     def __init__(self, ring_name: str, attach_timeout: float = 5.0, ring: Any = None):
-        from controller.vision.frames import ShmFrameRing
-        from controller.vision.pipeline import VisionPipeline
+        from spacearm.base.vision.frames import ShmFrameRing
+        from spacearm.controller.vision.pipeline import VisionPipeline
         self.ring_name = ring_name
         self.ring = ring if ring is not None else ShmFrameRing.attach(ring_name, timeout=attach_timeout)
         self.pipeline = VisionPipeline.from_configs()

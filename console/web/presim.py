@@ -14,11 +14,11 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from controller.config.loader import format_location
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.planning.errors import PlanningError
-from controller.planning.motion_planner import MotionPlanner
-from console.web.state_feed import arm_frames
+from spacearm.base.config.loader import format_location
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.motion_planner import MotionPlanner
+from spacearm.console.web.state_feed import arm_frames
 
 GHOST_SAMPLES = 60   # arm poses sent to the page along a planned motion
 

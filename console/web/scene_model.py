@@ -8,8 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from controller.config.scene import SceneConfig, load_scene
-from controller.kinematics.model import KinematicModel
+from spacearm.base.config.scene import SceneConfig, load_scene
+from spacearm.base.kinematics.model import KinematicModel
 
 STORE_WALL = 0.01   # m, drawn wall thickness of a store slot
 
@@ -21,7 +21,7 @@ def _flat(T: np.ndarray) -> list[float]:
 def marker_description() -> dict[str, Any] | None:
     """Marker plate and circles (configs/vision/marker.toml), None if the vision config is absent."""
     try:
-        from controller.vision.config import load_marker
+        from spacearm.base.vision.config import load_marker
         marker = load_marker()
     except Exception:  # noqa: BLE001 - vision config absent or invalid: the scene shows no marker
         return None

@@ -23,14 +23,14 @@ from typing import Any
 
 from aiohttp import WSMsgType, web
 
-from console import lease_store
-from console.client import ApiClient
-from console.commands.operate import _controlled_call, _take
-from console.errors import CommandFailed
-from console.web.camera_feed import CameraFeed
-from console.web.presim import Presimulator
-from console.web.state_feed import StateFeed, StateUpdate
-from controller.kinematics.model import KinematicModel
+from spacearm.console import lease_store
+from spacearm.console.client import ApiClient
+from spacearm.console.commands.operate import _controlled_call, _take
+from spacearm.console.errors import CommandFailed
+from spacearm.console.web.camera_feed import CameraFeed
+from spacearm.console.web.presim import Presimulator
+from spacearm.console.web.state_feed import StateFeed, StateUpdate
+from spacearm.base.kinematics.model import KinematicModel
 
 STATIC_DIR = Path(__file__).resolve().parent / "static"
 THREE_DIR = Path("/usr/share/javascript/three")          # Debian libjs-three (scripts/bootstrap.sh)

@@ -17,10 +17,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from console.client import ApiClient
-from console.errors import CommandFailed
-from controller.kinematics.forward import frames
-from controller.kinematics.model import KinematicData, KinematicModel
+from spacearm.console.client import ApiClient
+from spacearm.console.errors import CommandFailed
+from spacearm.base.kinematics.forward import frames
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
 
 SLOW_KEYS = ("stats", "network", "recording", "control")   # sent at most every SLOW_EVERY updates
 SLOW_EVERY = 10

@@ -8,15 +8,15 @@ Typical use::
     res = lm(Problem(..., free=rep.kept, ...))     # or lse(...), ekf(..., EKFTuning.paper(pr))
     stats = compare_poses(T_true, em.poses(res.x[:em.n_params], Q_valid))
 """
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.identifiability import (Dropped, IdentifiabilityReport,
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.identifiability import (Dropped, IdentifiabilityReport,
                                                     find_identifiable)
-from controller.calibration.observability import (Selection, board_in_view, configuration_blocks,
+from spacearm.controller.calibration.observability import (Selection, board_in_view, configuration_blocks,
                                                   laser_ok, observability, random_subsets_best,
                                                   select_configurations)
-from controller.calibration.residuals import PlaneTarget, Problem, laser_distance, rotvec_batch
-from controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
-from controller.calibration.validation import ValidationStats, compare_poses, mean_stats
+from spacearm.controller.calibration.residuals import PlaneTarget, Problem, laser_distance, rotvec_batch
+from spacearm.controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
+from spacearm.controller.calibration.validation import ValidationStats, compare_poses, mean_stats
 
 __all__ = [
     "ErrorModel", "Problem", "PlaneTarget", "laser_distance", "rotvec_batch",

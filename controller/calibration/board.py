@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from controller.config.loader import load_toml_model
-from controller.config.scene import ScenePose
+from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.scene import ScenePose
 
 DEFAULT_BOARD = Path(__file__).resolve().parents[2] / "configs" / "calibration" / "board.toml"
 

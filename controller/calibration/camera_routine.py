@@ -33,20 +33,20 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.board import DEFAULT_BOARD, BoardConfig, BoardNotFound, board_pose, load_board
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.fr3 import camera_covariances
-from controller.calibration.identifiability import find_identifiable, identifiability_jacobian
-from controller.calibration.laser_routine import CalibrationRunError, nearest_neighbour_order, write_calibrated_arm
-from controller.calibration.observability import configuration_blocks, select_configurations
-from controller.calibration.residuals import Problem
-from controller.calibration.solvers import CalibrationResult, lm
-from controller.calibration.validation import compare_poses
-from controller.config.arm import Calibration, load_arm_config
-from controller.kinematics.forward import fk_batch
-from controller.kinematics.inverse import solve_ik
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.transforms import inv_transform
+from spacearm.controller.calibration.board import DEFAULT_BOARD, BoardConfig, BoardNotFound, board_pose, load_board
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.fr3 import camera_covariances
+from spacearm.controller.calibration.identifiability import find_identifiable, identifiability_jacobian
+from spacearm.controller.calibration.laser_routine import CalibrationRunError, nearest_neighbour_order, write_calibrated_arm
+from spacearm.controller.calibration.observability import configuration_blocks, select_configurations
+from spacearm.controller.calibration.residuals import Problem
+from spacearm.controller.calibration.solvers import CalibrationResult, lm
+from spacearm.controller.calibration.validation import compare_poses
+from spacearm.base.config.arm import Calibration, load_arm_config
+from spacearm.base.kinematics.forward import fk_batch
+from spacearm.base.kinematics.inverse import solve_ik
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.transforms import inv_transform
 
 Array = NDArray[np.float64]
 
@@ -317,8 +317,8 @@ def score_against_truth(st: CameraSetup, result: CameraRunResult, true_kin: Kine
 def setup_from_files(arm: str | Path, board: str | Path = DEFAULT_BOARD,
                      mount: str | Path | None = None, camera: str | Path | None = None) -> CameraSetup:
     """The routine's setup from the controller's own files (nominal values only)."""
-    from controller.vision.camera import CameraModel
-    from controller.vision.config import load_camera, load_mount
+    from spacearm.base.vision.camera import CameraModel
+    from spacearm.base.vision.config import load_camera, load_mount
     kin = KinematicModel.from_config(load_arm_config(arm))
     board_config = load_board(board)
     cam = CameraModel.from_config(load_camera(camera) if camera else load_camera())

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from controller.kinematics import KinematicModel
-from controller.kinematics.transforms import rotx, roty, rotz, trans
+from spacearm.base.kinematics import KinematicModel
+from spacearm.base.kinematics.transforms import rotx, roty, rotz, trans
 
 Array = NDArray[np.float64]
 

@@ -17,13 +17,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.identifiability import find_identifiable
-from controller.calibration.residuals import Problem
-from controller.calibration.solvers import CalibrationResult, lm
-from controller.calibration.validation import compare_poses
-from controller.kinematics import KinematicModel
-from controller.kinematics.transforms import rotz, trans
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.identifiability import find_identifiable
+from spacearm.controller.calibration.residuals import Problem
+from spacearm.controller.calibration.solvers import CalibrationResult, lm
+from spacearm.controller.calibration.validation import compare_poses
+from spacearm.base.kinematics import KinematicModel
+from spacearm.base.kinematics.transforms import rotz, trans
 
 Array = NDArray[np.float64]
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "fr3_eye_in_hand" / "samples.csv"

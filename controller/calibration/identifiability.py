@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.residuals import Problem
+from spacearm.controller.calibration.residuals import Problem
 
 Array = NDArray[np.float64]
 

@@ -24,10 +24,10 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.observability import configuration_blocks, laser_ok, sample_valid, select_configurations
-from controller.calibration.solvers import CalibrationResult, lm
-from controller.calibration.study_laser import LaserSetup
-from controller.config.arm import Calibration
+from spacearm.controller.calibration.observability import configuration_blocks, laser_ok, sample_valid, select_configurations
+from spacearm.controller.calibration.solvers import CalibrationResult, lm
+from spacearm.controller.calibration.study_laser import LaserSetup
+from spacearm.base.config.arm import Calibration
 
 Array = NDArray[np.float64]
 MoveTo = Callable[[Array], Array]

@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.residuals import Problem
+from spacearm.controller.calibration.residuals import Problem
 
 Array = NDArray[np.float64]
 

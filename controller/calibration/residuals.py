@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.errormodel import ErrorModel
 
 Array = NDArray[np.float64]
 ROWS = {"pose": 6, "position": 3, "plane": 1}

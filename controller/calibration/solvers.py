@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from controller.calibration.residuals import Problem
+from spacearm.controller.calibration.residuals import Problem
 
 Array = NDArray[np.float64]
 

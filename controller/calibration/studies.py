@@ -10,10 +10,10 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.calibration import study_ekf as E
-from controller.calibration import study_laser as L
-from controller.calibration.plots import box_panels, error_vs_configs
-from controller.calibration.validation import mean_stats
+from spacearm.controller.calibration import study_ekf as E
+from spacearm.controller.calibration import study_laser as L
+from spacearm.controller.calibration.plots import box_panels, error_vs_configs
+from spacearm.controller.calibration.validation import mean_stats
 
 
 # ------------------------------------------------------------------------------- laser ranger

@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.residuals import Problem
-from controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
-from controller.calibration.validation import ValidationStats, compare_poses
-from controller.kinematics import KinematicData, jacobian, load_model, rotvec_to_matrix
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.residuals import Problem
+from spacearm.controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
+from spacearm.controller.calibration.validation import ValidationStats, compare_poses
+from spacearm.base.kinematics import KinematicData, jacobian, load_model, rotvec_to_matrix
 
 Array = NDArray[np.float64]
 REPO = Path(__file__).resolve().parents[2]

@@ -15,15 +15,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
-from controller.calibration.observability import (configuration_blocks, laser_ok, observability,
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
+from spacearm.controller.calibration.observability import (configuration_blocks, laser_ok, observability,
                                                   random_subsets_best, sample_valid,
                                                   select_configurations)
-from controller.calibration.residuals import PlaneTarget, Problem
-from controller.calibration.solvers import CalibrationResult, lm, lse
-from controller.calibration.validation import ValidationStats, compare_poses
-from controller.kinematics import load_model
+from spacearm.controller.calibration.residuals import PlaneTarget, Problem
+from spacearm.controller.calibration.solvers import CalibrationResult, lm, lse
+from spacearm.controller.calibration.validation import ValidationStats, compare_poses
+from spacearm.base.kinematics import load_model
 
 Array = NDArray[np.float64]
 REPO = Path(__file__).resolve().parents[2]

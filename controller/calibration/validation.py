@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.calibration.residuals import rotvec_batch
+from spacearm.controller.calibration.residuals import rotvec_batch
 
 Array = NDArray[np.float64]
 

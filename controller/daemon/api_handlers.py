@@ -15,13 +15,13 @@ from typing import Any, Callable, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from controller.config.loader import format_location
-from controller.daemon.command_api import ApiError, Session
-from controller.daemon.core import CommandRefused, ControllerCore
-from controller.daemon.leases import ControlLease, LeaseError
-from controller.daemon.modes import PlannedMode
-from controller.daemon.watchdog import KeepAliveMode
-from controller.planning.errors import PlanningError
+from spacearm.base.config.loader import format_location
+from spacearm.controller.daemon.command_api import ApiError, Session
+from spacearm.controller.daemon.core import CommandRefused, ControllerCore
+from spacearm.controller.daemon.leases import ControlLease, LeaseError
+from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.daemon.watchdog import KeepAliveMode
+from spacearm.controller.planning.errors import PlanningError
 
 
 class Args(BaseModel):

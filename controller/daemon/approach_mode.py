@@ -37,18 +37,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.config.arm import CartesianLimits
-from controller.config.scene import SceneConfig
-from controller.daemon.modes import ModeBase
-from controller.daemon.state import Measurement
-from controller.daemon.supervision import Finding
-from controller.kinematics.jacobian import fk_jacobian
-from controller.kinematics.forward import fk
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.pose_error import twist_error
-from controller.kinematics.transforms import inv_transform, trans
-from controller.planning.joint_move import JointSetpoint
-from controller.planning.resolved_rate import damped_pinv
+from spacearm.base.config.arm import CartesianLimits
+from spacearm.base.config.scene import SceneConfig
+from spacearm.controller.daemon.modes import ModeBase
+from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.daemon.supervision import Finding
+from spacearm.base.kinematics.jacobian import fk_jacobian
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.pose_error import twist_error
+from spacearm.base.kinematics.transforms import inv_transform, trans
+from spacearm.controller.planning.joint_move import JointSetpoint
+from spacearm.controller.planning.resolved_rate import damped_pinv
 
 
 @dataclass(frozen=True)

@@ -16,10 +16,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from controller.daemon.modes import HoldMode, Mode
-from controller.daemon.state import JointCommand, Measurement
-from controller.daemon.supervision import Finding, Supervisor
-from controller.planning.errors import PlanningError
+from spacearm.controller.daemon.modes import HoldMode, Mode
+from spacearm.controller.daemon.state import JointCommand, Measurement
+from spacearm.controller.daemon.supervision import Finding, Supervisor
+from spacearm.controller.planning.errors import PlanningError
 
 ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
 

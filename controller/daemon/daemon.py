@@ -16,23 +16,23 @@ from typing import Any, Callable
 
 import numpy as np
 
-from controller.config.arm import ArmConfig, load_arm_config
-from controller.daemon.api_handlers import CommandHandlers
-from controller.daemon.clock import LockstepClock, RealTimeClock, Tick
-from controller.daemon.command_api import ApiAddress, CommandServer, Session
-from controller.daemon.core import ControllerCore, Event
-from controller.daemon.cycle_stats import CycleStats, CycleThresholds
-from controller.daemon.hardware import CanopenHardware, with_drive_limits
-from controller.daemon.leases import ControlLease
-from controller.daemon.modes import Mode
-from controller.daemon.recorder_thread import RecorderThread
-from controller.daemon.state import JointCommand, Measurement
-from controller.daemon.supervision import SupervisionLimits, Supervisor
-from controller.kinematics.model import KinematicModel
-from controller.planning.motion_planner import MotionPlanner
-from drivers.bus_config import DEFAULT_BUS_CONFIG, load_bus_config
-from drivers.network import ArmNetwork
-from drivers.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
+from spacearm.base.config.arm import ArmConfig, load_arm_config
+from spacearm.controller.daemon.api_handlers import CommandHandlers
+from spacearm.controller.daemon.clock import LockstepClock, RealTimeClock, Tick
+from spacearm.controller.daemon.command_api import ApiAddress, CommandServer, Session
+from spacearm.controller.daemon.core import ControllerCore, Event
+from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
+from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
+from spacearm.controller.daemon.leases import ControlLease
+from spacearm.controller.daemon.modes import Mode
+from spacearm.controller.daemon.recorder_thread import RecorderThread
+from spacearm.controller.daemon.state import JointCommand, Measurement
+from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
+from spacearm.base.kinematics.model import KinematicModel
+from spacearm.controller.planning.motion_planner import MotionPlanner
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, load_bus_config
+from spacearm.drivers.network import ArmNetwork
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
 
 
 @dataclass
@@ -107,7 +107,7 @@ class Daemon:
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
                                         RecordingControl(self), self.model.nq)
         self.handlers.mode_factories = self.mode_factories   # the same dict: "approach" once a camera is attached
-        from controller.oru.install import install_oru   # here: it imports the daemon's handler types
+        from spacearm.controller.oru.install import install_oru   # here: it imports the daemon's handler types
         self.oru = install_oru(self)                      # "impedance", "oru" modes and oru.* commands
         self.server: CommandServer | None = None
         if options.api:
@@ -128,7 +128,7 @@ class Daemon:
         self.scheduling = problem or describe()
         self.hardware.start()
         if self.options.camera:
-            from controller.vision.frames import ShmFrameRing
+            from spacearm.base.vision.frames import ShmFrameRing
             self.attach_vision(ShmFrameRing.attach(self.options.camera))
         if self.options.record_dir is not None:
             self.start_recording(None)
@@ -140,10 +140,10 @@ class Daemon:
     def attach_vision(self, source) -> None:
         """Run the vision pipeline on `source` (a FrameSource) on its own thread and register
         mode_factories["approach"] (controller/daemon/approach_mode.py)."""
-        from controller.config.scene import load_scene
-        from controller.daemon.approach_mode import approach_factory
-        from controller.vision.config import load_mount
-        from controller.vision.worker import VisionWorker
+        from spacearm.base.config.scene import load_scene
+        from spacearm.controller.daemon.approach_mode import approach_factory
+        from spacearm.base.vision.config import load_mount
+        from spacearm.controller.vision.worker import VisionWorker
         self.vision = VisionWorker(source).start()
         self.mode_factories["approach"] = approach_factory(
             self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
@@ -278,5 +278,5 @@ class RecordingControl:
         try:
             return self.daemon.stop_recording()
         except ValueError as exc:
-            from controller.daemon.command_api import ApiError
+            from spacearm.controller.daemon.command_api import ApiError
             raise ApiError(str(exc)) from None

@@ -11,9 +11,9 @@ import time as time_module
 
 import numpy as np
 
-from controller.daemon.state import DeviceEvent, JointCommand, Measurement
-from drivers.bus_config import BusConfig, JointSettings
-from drivers.network import ArmCommand, ArmNetwork, ArmState
+from spacearm.controller.daemon.state import DeviceEvent, JointCommand, Measurement
+from spacearm.base.config.bus import BusConfig, JointSettings
+from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 
 # The drives' own position limits (607Dh) sit this far outside the arm file's limits, beyond
 # the controller's supervision margin, so the controller always stops first and the drive

@@ -13,9 +13,9 @@ from typing import Protocol
 
 import numpy as np
 
-from controller.daemon.state import Measurement
-from controller.daemon.supervision import Finding
-from controller.planning.joint_move import JointSetpoint
+from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.planning.joint_move import JointSetpoint
 
 
 class Plan(Protocol):

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from controller.recording.can_trace import CanTrace
-from controller.recording.channels import CHANNELS
-from controller.recording.mcap_recorder import McapRecorder
+from spacearm.controller.recording.can_trace import CanTrace
+from spacearm.controller.recording.channels import CHANNELS
+from spacearm.controller.recording.mcap_recorder import McapRecorder
 
 QUEUE_LIMIT = 10_000  # cycles buffered if the disk stalls (200 s at 50 Hz) before dropping
 

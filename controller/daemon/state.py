@@ -40,4 +40,4 @@ class JointCommand:
     q: np.ndarray                # rad, CSP target
     dq: np.ndarray = field(default_factory=lambda: np.zeros(0))  # rad/s feed-forward
     enable: bool = True          # False: drives to quick stop and brakes
-    end_effector: Any = None     # drivers.od.EeCommand to send this cycle, or None
+    end_effector: Any = None     # spacearm.base.canopen.od.EeCommand to send this cycle, or None

@@ -15,8 +15,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from controller.daemon.modes import PlannedMode
-from controller.daemon.supervision import Finding
+from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.daemon.supervision import Finding
 
 JOG_KEEPALIVE = 1.0  # s without a request from the jogging console before a protective stop
 

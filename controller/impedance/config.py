@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from controller.config.loader import load_toml_model
+from spacearm.base.config.loader import load_toml_model
 
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 Six = tuple[float, float, float, float, float, float]

@@ -17,18 +17,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.daemon.modes import ModeBase
-from controller.daemon.state import Measurement
-from controller.daemon.supervision import Finding
-from controller.impedance.admittance import Admittance
-from controller.impedance.config import ImpedanceParams
-from controller.impedance.gravity import GravityModel
-from controller.kinematics.forward import fk
-from controller.kinematics.jacobian import fk_jacobian
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.pose_error import twist_error
-from controller.kinematics.transforms import rotvec_to_matrix
-from controller.planning.joint_move import JointSetpoint
+from spacearm.controller.daemon.modes import ModeBase
+from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.impedance.admittance import Admittance
+from spacearm.controller.impedance.config import ImpedanceParams
+from spacearm.controller.impedance.gravity import GravityModel
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.jacobian import fk_jacobian
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.pose_error import twist_error
+from spacearm.base.kinematics.transforms import rotvec_to_matrix
+from spacearm.controller.planning.joint_move import JointSetpoint
 
 AXIS_MODES = ("impedance", "hold", "step")
 IK_DAMPING = 1.0e-3

@@ -5,7 +5,7 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from controller.config.loader import load_toml_model
+from spacearm.base.config.loader import load_toml_model
 
 DEFAULT_CHANGEOUT = Path(__file__).resolve().parents[2] / "configs" / "oru" / "changeout.toml"
 

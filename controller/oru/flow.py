@@ -12,17 +12,17 @@ from typing import Callable
 
 import numpy as np
 
-from controller.config.scene import SceneConfig
-from controller.daemon.modes import Mode, PlannedMode
-from controller.impedance.config import ImpedanceParams
-from controller.impedance.gravity import GravityModel
-from controller.impedance.mode import ContactTask
-from controller.kinematics.inverse import solve_ik
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.oru.config import ChangeoutConfig
-from controller.oru.linear_move import LinearToolMove
-from controller.oru.steps import ContactStep, EndEffectorStep, LatchStep, ModeStep, Step
-from drivers.od import EeCommand
+from spacearm.base.config.scene import SceneConfig
+from spacearm.controller.daemon.modes import Mode, PlannedMode
+from spacearm.controller.impedance.config import ImpedanceParams
+from spacearm.controller.impedance.gravity import GravityModel
+from spacearm.controller.impedance.mode import ContactTask
+from spacearm.base.kinematics.inverse import solve_ik
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.controller.oru.config import ChangeoutConfig
+from spacearm.controller.oru.linear_move import LinearToolMove
+from spacearm.controller.oru.steps import ContactStep, EndEffectorStep, LatchStep, ModeStep, Step
+from spacearm.base.canopen.od import EeCommand
 
 TABLE_1 = {
     1: ("gets close to the ORU", "open loop path planning"),
@@ -45,7 +45,7 @@ STEP_AXES = ("impedance", "impedance", "step", "impedance", "impedance", "impeda
 @dataclass
 class FlowContext:
     model: KinematicModel
-    planner: object                      # controller.planning.MotionPlanner
+    planner: object                      # spacearm.controller.planning.MotionPlanner
     scene: SceneConfig
     config: ChangeoutConfig
     impedance: ImpedanceParams

@@ -8,15 +8,15 @@ from typing import Any
 import numpy as np
 from pydantic import Field
 
-from controller.config.scene import DEFAULT_SCENE, load_scene
-from controller.daemon.api_handlers import Args, NoArgs
-from controller.daemon.command_api import ApiError
-from controller.daemon.core import CommandRefused
-from controller.impedance.config import DEFAULT_IMPEDANCE, load_impedance
-from controller.impedance.mode import ContactTask, ImpedanceMode
-from controller.oru.config import DEFAULT_CHANGEOUT, load_changeout
-from controller.oru.flow import FlowContext
-from controller.oru.runner import OruTaskRunner
+from spacearm.base.config.scene import DEFAULT_SCENE, load_scene
+from spacearm.controller.daemon.api_handlers import Args, NoArgs
+from spacearm.controller.daemon.command_api import ApiError
+from spacearm.controller.daemon.core import CommandRefused
+from spacearm.controller.impedance.config import DEFAULT_IMPEDANCE, load_impedance
+from spacearm.controller.impedance.mode import ContactTask, ImpedanceMode
+from spacearm.controller.oru.config import DEFAULT_CHANGEOUT, load_changeout
+from spacearm.controller.oru.flow import FlowContext
+from spacearm.controller.oru.runner import OruTaskRunner
 
 
 class OruRunArgs(Args):

@@ -13,12 +13,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.daemon.modes import ModeBase
-from controller.daemon.state import Measurement
-from controller.daemon.supervision import Finding
-from controller.oru.flow import FlowContext, stage_steps
-from controller.oru.steps import ContactStep, Step, hold
-from controller.planning.joint_move import JointSetpoint
+from spacearm.controller.daemon.modes import ModeBase
+from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.oru.flow import FlowContext, stage_steps
+from spacearm.controller.oru.steps import ContactStep, Step, hold
+from spacearm.controller.planning.joint_move import JointSetpoint
 
 
 @dataclass

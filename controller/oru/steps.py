@@ -12,13 +12,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from controller.daemon.modes import Mode
-from controller.daemon.state import Measurement
-from controller.daemon.supervision import Finding
-from controller.impedance.config import ImpedanceParams
-from controller.impedance.mode import ContactTask, ImpedanceMode
-from controller.planning.joint_move import JointSetpoint
-from drivers.od import EeCommand
+from spacearm.controller.daemon.modes import Mode
+from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.impedance.config import ImpedanceParams
+from spacearm.controller.impedance.mode import ContactTask, ImpedanceMode
+from spacearm.controller.planning.joint_move import JointSetpoint
+from spacearm.base.canopen.od import EeCommand
 
 _planner_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="oru-plan")
 

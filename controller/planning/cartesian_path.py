@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError
 
 # Peak of ds/dt and d2s/dt2 for s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 on tau in [0, 1].
 QUINTIC_PEAK_VELOCITY = 1.875

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
 
-from controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError
 
 
 @dataclass(frozen=True)

@@ -9,15 +9,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from controller.config.arm import CartesianLimits as CartesianLimitsConfig
-from controller.kinematics.forward import fk
-from controller.kinematics.jacobian import jacobian
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.transforms import rpy_to_matrix
-from controller.planning.cartesian_path import CartesianLimits, CartesianPath
-from controller.planning.errors import PlanningError
-from controller.planning.joint_move import JointLimits, JointMove
-from controller.planning.resolved_rate import SampledJointPath, resolve_cartesian_path
+from spacearm.base.config.arm import CartesianLimits as CartesianLimitsConfig
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.jacobian import jacobian
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.controller.planning.cartesian_path import CartesianLimits, CartesianPath
+from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.joint_move import JointLimits, JointMove
+from spacearm.controller.planning.resolved_rate import SampledJointPath, resolve_cartesian_path
 
 
 def joint_limits_of(model: KinematicModel) -> JointLimits:

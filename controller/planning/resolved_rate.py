@@ -13,10 +13,10 @@ from typing import Callable
 
 import numpy as np
 
-from controller.kinematics.pose_error import twist_error as pose_error
-from controller.planning.cartesian_path import CartesianPath
-from controller.planning.errors import PlanningError
-from controller.planning.joint_move import JointLimits, JointSetpoint
+from spacearm.base.kinematics.pose_error import twist_error as pose_error
+from spacearm.controller.planning.cartesian_path import CartesianPath
+from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.joint_move import JointLimits, JointSetpoint
 
 Forward = Callable[[np.ndarray], np.ndarray]     # q -> 4x4 tool pose
 Jacobian = Callable[[np.ndarray], np.ndarray]    # q -> 6 x n geometric Jacobian

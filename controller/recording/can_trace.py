@@ -7,7 +7,7 @@ daemon, 6 ms without), so on a bus another process can open (loopback hub, Socke
 tap runs as a low-priority child process. python-can's virtual bus exists
 only inside one process, so there the tap stays a thread.
 
-    python -m controller.recording.can_trace BUS OUT.log    # what the daemon starts
+    python -m spacearm.controller.recording.can_trace BUS OUT.log    # what the daemon starts
 
 The child flushes the log once per second (a kill loses at most the last second) and ends
 when told (SIGTERM) or when its parent disappears.
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import can
 
-from drivers.child_process import module_env, readline_within
-from drivers.priority import use_normal
-from drivers.transport import open_bus, parse_bus_spec
+from spacearm.base.runtime.child_process import module_env, readline_within
+from spacearm.base.runtime.priority import use_normal
+from spacearm.base.transport import open_bus, parse_bus_spec
 
 READY = "can_trace: ready"
 FLUSH_INTERVAL = 1.0   # s
@@ -43,7 +43,7 @@ class CanTrace:
             self._in_process = _open_tap(bus_spec, self.path)
             return
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "controller.recording.can_trace", bus_spec, str(self.path)],
+            [sys.executable, "-m", "spacearm.controller.recording.can_trace", bus_spec, str(self.path)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=module_env(),
             preexec_fn=_below_the_cycle)
         # Wait for the tap to be on the bus so the trace covers the recording from its start.

@@ -10,7 +10,7 @@ import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from controller.recording.mcap_reader import Recording, RecordingError, read_recording
+from spacearm.controller.recording.mcap_reader import Recording, RecordingError, read_recording
 
 WRENCH_COLUMNS = ["fx", "fy", "fz", "tx", "ty", "tz"]
 SYNC_COUNTER_MAX = 240  # CiA 301 synchronous counter overflow value used on our buses

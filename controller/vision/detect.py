@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from controller.vision.config import PipelineConfig
+from spacearm.base.vision.config import PipelineConfig
 
 TILE = 32                                # px (search scale) tiles of the noise estimate
 NOISE_FLOOR = 0.5                        # DN, 8-bit quantisation noise is 0.29 DN

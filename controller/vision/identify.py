@@ -17,7 +17,7 @@ from itertools import permutations
 
 import numpy as np
 
-from controller.vision.marker import MarkerModel
+from spacearm.base.vision.marker import MarkerModel
 
 
 

@@ -28,15 +28,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.vision.camera import CameraModel
-from controller.vision.config import (CameraConfig, MarkerConfig, PipelineConfig, load_camera, load_marker,
+from spacearm.base.vision.camera import CameraModel
+from spacearm.base.vision.config import (CameraConfig, MarkerConfig, PipelineConfig, load_camera, load_marker,
                                       load_pipeline)
-from controller.vision.detect import Candidate, CircleDetector
-from controller.vision.frames import Frame
-from controller.vision.identify import Hypothesis, hypotheses, match_prior, plate_is_dark
-from controller.vision.marker import MarkerModel
-from controller.vision.pnp import PnpResult, solve_pnp
-from controller.kinematics.transforms import matrix_to_rotvec
+from spacearm.controller.vision.detect import Candidate, CircleDetector
+from spacearm.base.vision.frames import Frame
+from spacearm.controller.vision.identify import Hypothesis, hypotheses, match_prior, plate_is_dark
+from spacearm.base.vision.marker import MarkerModel
+from spacearm.controller.vision.pnp import PnpResult, solve_pnp
+from spacearm.base.kinematics.transforms import matrix_to_rotvec
 
 FAILURES = ("no_marker", "too_far", "too_close", "out_of_view", "ambiguous")
 CIRCLE_SAMPLES = 64

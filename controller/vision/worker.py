@@ -11,9 +11,9 @@ import time
 
 import numpy as np
 
-from controller.vision.frames import FrameSource
-from controller.vision.pipeline import VisionPipeline, VisionResult
-from drivers.priority import use_normal
+from spacearm.base.vision.frames import FrameSource
+from spacearm.controller.vision.pipeline import VisionPipeline, VisionResult
+from spacearm.base.runtime.priority import use_normal
 
 PRIOR_MAX_AGE = 0.5          # s (frame time): an older good pose is not used as prior
 

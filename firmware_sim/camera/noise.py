@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.vision.config import Sensor
+from spacearm.base.vision.config import Sensor
 
 
 class SensorModel:

@@ -26,9 +26,9 @@ from typing import Sequence
 import cv2
 import numpy as np
 
-from controller.vision.camera import CameraModel
-from controller.vision.config import Optics
-from firmware_sim.camera.scene import Scene
+from spacearm.base.vision.camera import CameraModel
+from spacearm.base.vision.config import Optics
+from spacearm.firmware_sim.camera.scene import Scene
 
 SS = 4            # supersampling factor of the foreground
 SHIFT = 8         # fractional bits for cv2 drawing

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.vision.marker import MarkerModel
+from spacearm.base.vision.marker import MarkerModel
 
 
 @dataclass(frozen=True)

@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
-from controller.kinematics.transforms import inv_transform
-from firmware_sim.calibration_board import board_layer
-from firmware_sim.camera.renderer import FlatLayer
-from firmware_sim.camera.scene import OruShape, Scene
-from firmware_sim.camera.simulator import CameraSimulator
-from drivers.priority import use_normal
+from spacearm.base.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
+from spacearm.base.kinematics.transforms import inv_transform
+from spacearm.firmware_sim.calibration_board import board_layer
+from spacearm.firmware_sim.camera.renderer import FlatLayer
+from spacearm.firmware_sim.camera.scene import OruShape, Scene
+from spacearm.firmware_sim.camera.simulator import CameraSimulator
+from spacearm.base.runtime.priority import use_normal
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,7 @@ class CameraService:
         self.base_T_board = None             # its true pose
 
     def show_board(self, board) -> None:
-        """Put the calibration checkerboard (controller.calibration.board.BoardConfig) in the cell."""
+        """Put the calibration checkerboard (spacearm.controller.calibration.board.BoardConfig) in the cell."""
         self.base_T_board = board.pose.matrix() @ board.true_offset.matrix()
         self.board = board
 

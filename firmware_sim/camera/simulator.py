@@ -5,14 +5,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controller.kinematics.transforms import inv_transform
-from controller.vision.camera import CameraModel
-from controller.vision.config import CameraConfig, MarkerConfig, MountConfig, load_camera, load_marker, load_mount
-from controller.vision.frames import Frame
-from controller.vision.marker import MarkerModel
-from firmware_sim.camera.noise import SensorModel
-from firmware_sim.camera.renderer import Renderer
-from firmware_sim.camera.scene import Scene
+from spacearm.base.kinematics.transforms import inv_transform
+from spacearm.base.vision.camera import CameraModel
+from spacearm.base.vision.config import CameraConfig, MarkerConfig, MountConfig, load_camera, load_marker, load_mount
+from spacearm.base.vision.frames import Frame
+from spacearm.base.vision.marker import MarkerModel
+from spacearm.firmware_sim.camera.noise import SensorModel
+from spacearm.firmware_sim.camera.renderer import Renderer
+from spacearm.firmware_sim.camera.scene import Scene
 
 
 @dataclass

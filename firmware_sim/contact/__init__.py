@@ -1,5 +1,5 @@
 """Contact world of the ORU cell: the plant's `Environment` (see world.py)."""
-from firmware_sim.contact.config import ContactConfig
-from firmware_sim.contact.world import ContactWorld, build_contact_world
+from spacearm.firmware_sim.contact.config import ContactConfig
+from spacearm.firmware_sim.contact.world import ContactWorld, build_contact_world
 
 __all__ = ["ContactConfig", "ContactWorld", "build_contact_world"]

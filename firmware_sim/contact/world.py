@@ -20,12 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from controller.config.scene import SceneConfig, load_scene
-from controller.kinematics.jacobian import fk_jacobian
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.pose_error import twist_error
-from firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
-from firmware_sim.contact.config import ContactConfig
+from spacearm.base.config.scene import SceneConfig, load_scene
+from spacearm.base.kinematics.jacobian import fk_jacobian
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.pose_error import twist_error
+from spacearm.firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
+from spacearm.firmware_sim.contact.config import ContactConfig
 
 CAPTURE_LATERAL = 1.0e-3     # m beyond the guide clearance still counted as captured
 CAPTURE_DEPTH = 1.5e-3       # m short of the guide floor still counted as captured

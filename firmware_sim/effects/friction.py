@@ -3,7 +3,7 @@
     f(v) = sign(v) * (Fc + Fs * exp(-(v / vs)^2)) + b * v
 
 Near zero speed the joint sticks while the applied torque stays below the static level
-Fc + Fs (handled by the integrator in ``firmware_sim.plant``).
+Fc + Fs (handled by the integrator in ``spacearm.firmware_sim.plant``).
 """
 from __future__ import annotations
 

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.calibration import ErrorModel, PlaneTarget, Problem
-from controller.kinematics import load_model
+from spacearm.controller.calibration import ErrorModel, PlaneTarget, Problem
+from spacearm.base.kinematics import load_model
 
 ARM_DIR = Path(__file__).resolve().parents[2] / "configs" / "arm"
 
@@ -39,7 +39,7 @@ def paper_plane():
 
 @pytest.fixture(scope="session")
 def laser_setup():
-    from controller.calibration import study_laser
+    from spacearm.controller.calibration import study_laser
     return study_laser.setup()
 
 

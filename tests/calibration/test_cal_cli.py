@@ -5,10 +5,10 @@ import numpy as np
 import typer
 from typer.testing import CliRunner
 
-from console.commands.calibrate import register
-from controller.calibration.datafile import write_measurements
-from controller.calibration.study_ekf import ARM_FILE, setup
-from controller.calibration.study_laser import ARM_FILE as LASER_ARM, candidates
+from spacearm.console.commands.calibrate import register
+from spacearm.controller.calibration.datafile import write_measurements
+from spacearm.controller.calibration.study_ekf import ARM_FILE, setup
+from spacearm.controller.calibration.study_laser import ARM_FILE as LASER_ARM, candidates
 
 app = typer.Typer()
 register(app)

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.calibration import Problem, rotvec_batch
-from controller.calibration.residuals import laser_distance
-from controller.kinematics import fk_batch
+from spacearm.controller.calibration import Problem, rotvec_batch
+from spacearm.controller.calibration.residuals import laser_distance
+from spacearm.base.kinematics import fk_batch
 
 
 @pytest.mark.parametrize("which", ["laser_em", "ssrms_em"])
@@ -59,7 +59,7 @@ def _fd_check(pr, x, rng, tol):
 
 
 def test_plane_distance_jacobian_matches_finite_differences(laser_em, paper_plane, laser_setup):
-    from controller.calibration.study_laser import candidates
+    from spacearm.controller.calibration.study_laser import candidates
     Q = candidates(laser_setup, 6, np.random.default_rng(3))
     pr = Problem(laser_em, "plane", Q, np.zeros(len(Q)), [], plane=paper_plane)
     x = pr.nominal() + np.random.default_rng(4).normal(0, 1e-3, len(pr.names))

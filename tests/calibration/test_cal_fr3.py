@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.calibration import fr3 as F
-from controller.calibration.errormodel import ErrorModel
-from controller.calibration.validation import compare_poses
+from spacearm.controller.calibration import fr3 as F
+from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.validation import compare_poses
 
 pytestmark = pytest.mark.skipif(not F.DATA.exists(), reason="FR3 data not available")
 

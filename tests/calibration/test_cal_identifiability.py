@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controller.calibration import Problem, find_identifiable
+from spacearm.controller.calibration import Problem, find_identifiable
 
 PAPER_25 = [f"{k}_{j}" for j in range(1, 7) for k in ("theta", "alpha", "a", "d")
             if (k, j) != ("d", 2)] + ["beta_2", "beta_6"]

@@ -6,8 +6,8 @@ import os
 import numpy as np
 import pytest
 
-from drivers.laser_ranger import LaserRanger, NoHit, RangerError
-from firmware_sim.laser_ranger import LaserRangerSim, RangerConfig, checksum, frame, parse_frame
+from spacearm.drivers.laser_ranger import LaserRanger, NoHit, RangerError
+from spacearm.firmware_sim.laser_ranger import LaserRangerSim, RangerConfig, checksum, frame, parse_frame
 
 
 def test_frame_round_trip_and_checksum_rejection():
@@ -67,9 +67,9 @@ def test_bad_request_checksum_gets_error_reply():
 
 def test_end_to_end_identification_through_the_serial_device(laser_setup):
     """Readings through the pty driver feed the identification: pose error shrinks ~100x."""
-    from controller.calibration import compare_poses, lm
-    from controller.calibration.study_laser import candidates
-    from firmware_sim.laser_ranger import arm_plane_distance
+    from spacearm.controller.calibration import compare_poses, lm
+    from spacearm.controller.calibration.study_laser import candidates
+    from spacearm.firmware_sim.laser_ranger import arm_plane_distance
     st = laser_setup
     Q = candidates(st, 60, np.random.default_rng(12))
     current = {"q": Q[0]}

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.calibration import (board_in_view, configuration_blocks, laser_ok, observability,
+from spacearm.controller.calibration import (board_in_view, configuration_blocks, laser_ok, observability,
                                     random_subsets_best, select_configurations)
-from controller.calibration.study_laser import candidates
+from spacearm.controller.calibration.study_laser import candidates
 
 
 def test_indices_on_known_singular_values():
@@ -66,7 +66,7 @@ def test_board_in_view():
 
 
 def test_selection_on_pose_blocks(ssrms_em):
-    from controller.calibration import Problem
+    from spacearm.controller.calibration import Problem
     Q = ssrms_em.kin.random_configurations(40, np.random.default_rng(4))
     free = [n for n in ssrms_em.dh_names(with_beta=False) if n not in ("d_3", "d_4")]
     pr = Problem(ssrms_em, "pose", Q, np.zeros((40, 4, 4)), free)

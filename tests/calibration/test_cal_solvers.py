@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.calibration import EKFTuning, Problem, ekf, lm, lse
-from controller.calibration.study_ekf import table3_errors
-from controller.calibration.study_laser import candidates
+from spacearm.controller.calibration import EKFTuning, Problem, ekf, lm, lse
+from spacearm.controller.calibration.study_ekf import table3_errors
+from spacearm.controller.calibration.study_laser import candidates
 
 
 @pytest.fixture(scope="module")

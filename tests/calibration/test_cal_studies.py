@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.calibration import study_ekf as E
-from controller.calibration import study_laser as L
-from controller.calibration.validation import compare_poses
+from spacearm.controller.calibration import study_ekf as E
+from spacearm.controller.calibration import study_laser as L
+from spacearm.controller.calibration.validation import compare_poses
 
 
 def test_laser_noise_free_run_recovers_exactly(laser_setup):

@@ -9,21 +9,21 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from console.commands.calibrate import _print_camera_result
-from controller.calibration.board import BoardNotFound, board_pose, load_board
-from controller.calibration.camera_routine import (CameraSetup, camera_calibration_section, candidate_postures,
+from spacearm.console.commands.calibrate import _print_camera_result
+from spacearm.controller.calibration.board import BoardNotFound, board_pose, load_board
+from spacearm.controller.calibration.camera_routine import (CameraSetup, camera_calibration_section, candidate_postures,
                                                    overhead_view, run_camera_calibration, score_against_truth,
                                                    write_camera_calibrated_arm)
-from controller.calibration.laser_routine import CalibrationRunError
-from controller.config.arm import load_arm_config
-from controller.kinematics.forward import fk
-from controller.kinematics.model import KinematicData, KinematicModel
-from controller.kinematics.transforms import inv_transform, xyz_rpy_to_transform
-from controller.vision.camera import CameraModel
-from controller.vision.config import load_camera, load_mount
-from controller.vision.frames import LocalFrameSource
-from firmware_sim.calibration_board import render_board
-from firmware_sim.camera.service import CameraService
+from spacearm.controller.calibration.laser_routine import CalibrationRunError
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.kinematics.forward import fk
+from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.base.kinematics.transforms import inv_transform, xyz_rpy_to_transform
+from spacearm.base.vision.camera import CameraModel
+from spacearm.base.vision.config import load_camera, load_mount
+from spacearm.base.vision.frames import LocalFrameSource
+from spacearm.firmware_sim.calibration_board import render_board
+from spacearm.firmware_sim.camera.service import CameraService
 
 ARM = load_arm_config("configs/arm/oru_testbed_6dof.toml")
 RESOLVER = np.radians(25 / 3600)

@@ -5,9 +5,9 @@ import uuid
 
 import pytest
 
-from drivers.bus_config import load_bus_config
-from drivers.network import ArmNetwork
-from firmware_sim.runner import Simulator
+from spacearm.base.config.bus import load_bus_config
+from spacearm.drivers.network import ArmNetwork
+from spacearm.firmware_sim.runner import Simulator
 
 
 @pytest.fixture

@@ -1,8 +1,8 @@
 """Controller-side CiA 402 state machine driver, without a bus."""
 from __future__ import annotations
 
-from drivers.cia402 import FAULT_RESET_VERIFY_CYCLES, Cia402Axis
-from drivers.cia402_defs import STATE_BITS, State, decode_statusword
+from spacearm.drivers.cia402 import FAULT_RESET_VERIFY_CYCLES, Cia402Axis
+from spacearm.base.canopen.cia402_defs import STATE_BITS, State, decode_statusword
 
 
 def sw(state: State, extra: int = 0) -> int:

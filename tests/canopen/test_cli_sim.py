@@ -4,7 +4,7 @@ from __future__ import annotations
 import typer
 from typer.testing import CliRunner
 
-from console.commands.sim import register
+from spacearm.console.commands.sim import register
 
 
 def app() -> typer.Typer:

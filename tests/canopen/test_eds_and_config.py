@@ -4,12 +4,12 @@ from __future__ import annotations
 import canopen
 import pytest
 
-from controller.config.errors import ConfigError
-from controller.config.loader import load_toml_model
-from drivers import od
-from drivers.bus_config import EDS_DIR, BusConfig, load_bus_config
-from drivers.pdo_maps import PDO_MAPS
-from firmware_sim import eds_builder
+from spacearm.base.config.errors import ConfigError
+from spacearm.base.config.loader import load_toml_model
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import EDS_DIR, BusConfig, load_bus_config
+from spacearm.base.canopen.pdo_maps import PDO_MAPS
+from spacearm.firmware_sim import eds_builder
 
 DEVICES = ("joint_drive", "end_effector", "ft_sensor")
 
@@ -17,7 +17,7 @@ DEVICES = ("joint_drive", "end_effector", "ft_sensor")
 @pytest.mark.parametrize("device", DEVICES)
 def test_eds_file_is_up_to_date_with_builder(device):
     assert (EDS_DIR / f"{device}.eds").read_text() == eds_builder.render(device), \
-        "run: .venv/bin/python -m firmware_sim.eds_builder"
+        "run: .venv/bin/python -m spacearm.firmware_sim.eds_builder"
 
 
 @pytest.mark.parametrize("device", DEVICES)

@@ -6,12 +6,12 @@ import time
 
 import pytest
 
-from drivers import od
-from drivers.bus_config import BusConfig, NodeConfig
-from drivers.cia402_defs import State
-from drivers.devices import EeCommand, EeState
-from drivers.errors import BootError, SdoError, SdoTimeoutError
-from drivers.network import ArmCommand, ArmNetwork
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import BusConfig, NodeConfig
+from spacearm.base.canopen.cia402_defs import State
+from spacearm.drivers.devices import EeCommand, EeState
+from spacearm.drivers.errors import BootError, SdoError, SdoTimeoutError
+from spacearm.drivers.network import ArmCommand, ArmNetwork
 
 
 def test_boot_configures_by_sdo_and_starts(booted, sim):
@@ -229,7 +229,7 @@ def test_end_effector_clamp_lock_and_release(enabled, sim):
 
 
 def test_end_effector_without_target_faults(enabled, sim):
-    from firmware_sim.plant import EndEffectorParams
+    from spacearm.firmware_sim.plant import EndEffectorParams
     sim.plant.ee.params = EndEffectorParams(target_present=False)
     net = enabled
     net.cycle(ArmCommand(end_effector=EeCommand.CLAMP))

@@ -6,10 +6,10 @@ from pathlib import Path
 
 import pytest
 
-from controller.config.errors import ConfigError
-from drivers.network import ArmCommand, ArmNetwork
-from firmware_sim.plant import ARCSEC, Plant, PlantConfig, load_plant_config
-from firmware_sim.runner import Simulator
+from spacearm.base.config.errors import ConfigError
+from spacearm.drivers.network import ArmCommand, ArmNetwork
+from spacearm.firmware_sim.plant import ARCSEC, Plant, PlantConfig, load_plant_config
+from spacearm.firmware_sim.runner import Simulator
 
 PLANTS = Path(__file__).resolve().parents[2] / "firmware_sim" / "plants"
 

@@ -10,9 +10,9 @@ import canopen
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
-from drivers import od
-from drivers.bus_config import EDS_DIR
-from drivers.transport import open_bus
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import EDS_DIR
+from spacearm.base.transport import open_bus
 
 
 @pytest.fixture
@@ -50,7 +50,7 @@ def sync(bus):
 
 
 def test_power_on_sends_bootup_for_every_node(vbus, bus_config):
-    from firmware_sim.runner import Simulator
+    from spacearm.firmware_sim.runner import Simulator
     bus = open_bus(vbus)
     try:
         sim = Simulator(vbus, bus_config).start()

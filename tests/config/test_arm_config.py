@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from controller.config import ConfigError
-from controller.config.arm import load_arm_config
+from spacearm.base.config import ConfigError
+from spacearm.base.config.arm import load_arm_config
 
 ROOT = Path(__file__).resolve().parents[2]
 ARMS = ROOT / "configs" / "arm"
@@ -86,7 +86,7 @@ def test_unreadable_files_give_clear_errors(tmp_path):
 
 def test_cli_reports_bad_file_in_one_line_without_traceback(tmp_path):
     path = write_variant(tmp_path, "a = 0.560", "a = 560")
-    result = subprocess.run([sys.executable, "-m", "console.main", "config", "check", str(path)],
+    result = subprocess.run([sys.executable, "-m", "spacearm.console.main", "config", "check", str(path)],
                             capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr

@@ -7,7 +7,7 @@ import pytest
 import typer
 from typer.testing import CliRunner
 
-from console.main import app
+from spacearm.console.main import app
 
 ORU = "configs/arm/oru_testbed_6dof.toml"
 runner = CliRunner()

@@ -1,8 +1,8 @@
 """Clock behaviour on a fake time source: deadlines are absolute, overruns are skipped."""
 import pytest
 
-from controller.daemon.clock import LockstepClock, RealTimeClock
-from controller.daemon.cycle_stats import CycleStats, CycleThresholds
+from spacearm.controller.daemon.clock import LockstepClock, RealTimeClock
+from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 
 
 class FakeTime:

@@ -6,8 +6,8 @@ import socket
 
 import pytest
 
-from controller.daemon.command_api import ApiAddress, ApiError, CommandServer, MAX_REQUEST_BYTES
-from controller.daemon.leases import ControlLease, LeaseError
+from spacearm.controller.daemon.command_api import ApiAddress, ApiError, CommandServer, MAX_REQUEST_BYTES
+from spacearm.controller.daemon.leases import ControlLease, LeaseError
 
 
 class Echo:

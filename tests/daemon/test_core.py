@@ -6,11 +6,11 @@ import threading
 import numpy as np
 import pytest
 
-from controller.daemon.core import CommandRefused, ControllerCore
-from controller.daemon.modes import PlannedMode
-from controller.daemon.state import DeviceEvent, Measurement
-from controller.daemon.supervision import SupervisionLimits, Supervisor
-from controller.planning.joint_move import JointLimits, JointMove
+from spacearm.controller.daemon.core import CommandRefused, ControllerCore
+from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.daemon.state import DeviceEvent, Measurement
+from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
+from spacearm.controller.planning.joint_move import JointLimits, JointMove
 
 N = 6
 NAMES = [f"j{i + 1}" for i in range(N)]

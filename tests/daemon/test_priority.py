@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from drivers.priority import describe, use_fifo, use_normal
+from spacearm.base.runtime.priority import describe, use_fifo, use_normal
 
 
 def _in_thread(fn):

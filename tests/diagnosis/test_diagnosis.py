@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from console.main import app
-from controller.diagnosis.analysis import diagnose
-from controller.diagnosis.record import record_direct
-from controller.diagnosis.recording_io import RecordingFormatError, read_table, write_csv
-from controller.diagnosis.trajectory import Trajectory, save_trajectory
-from firmware_sim.plant import load_plant_config
+from spacearm.console.main import app
+from spacearm.offline.diagnosis.analysis import diagnose
+from spacearm.offline.diagnosis.record import record_direct
+from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_table, write_csv
+from spacearm.offline.diagnosis.trajectory import Trajectory, save_trajectory
+from spacearm.firmware_sim.plant import load_plant_config
 
 NOMINAL = load_plant_config("configs/plant/oru_testbed_nominal.toml")
 Q_HOME = np.array([0.0, math.pi / 2, -math.pi / 2, 0.0, -math.pi / 2, 0.0])
@@ -126,9 +126,9 @@ def moves(seconds: float = 40.0) -> Trajectory:
 
 
 def test_coulomb_beats_viscous_when_it_fits_better_whatever_the_residual_correlation():
-    from controller.diagnosis.analysis import _best_for_channel
-    from controller.diagnosis.candidates import Signals, by_name
-    from controller.diagnosis.fitting import fit_candidate
+    from spacearm.offline.diagnosis.analysis import _best_for_channel
+    from spacearm.offline.diagnosis.candidates import Signals, by_name
+    from spacearm.offline.diagnosis.fitting import fit_candidate
     t = np.arange(0.0, 60.0, 0.02)
     v = 0.05 * np.sin(2 * math.pi * t / 10.0)
     y = 10.0 * np.sign(v) + np.random.default_rng(1).normal(0.0, 5.0, len(t))

@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from controller.diagnosis.record import record_can, record_direct
-from controller.diagnosis.recording_io import read_table
-from controller.diagnosis.trajectory import Trajectory
-from firmware_sim.plant import ARCSEC, load_plant_config
+from spacearm.offline.diagnosis.record import record_can, record_direct
+from spacearm.offline.diagnosis.recording_io import read_table
+from spacearm.offline.diagnosis.trajectory import Trajectory
+from spacearm.firmware_sim.plant import ARCSEC, load_plant_config
 
 Q_HOME = np.array([0.0, math.pi / 2, -math.pi / 2, 0.0, -math.pi / 2, 0.0])
 

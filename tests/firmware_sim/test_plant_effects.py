@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from controller.config.errors import ConfigError
-from firmware_sim.effects import DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error
-from firmware_sim.plant import ARCSEC, GRAVITY, JointModel, JointParams, Plant, PlantConfig, load_plant_config
+from spacearm.base.config.errors import ConfigError
+from spacearm.firmware_sim.effects import DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error
+from spacearm.firmware_sim.plant import ARCSEC, GRAVITY, JointModel, JointParams, Plant, PlantConfig, load_plant_config
 
 EFFECT_FIELDS = ("viscous_friction", "coulomb_friction", "stribeck_friction", "backlash", "joint_stiffness",
                  "te_amplitude", "encoder_bias", "feedback_latency_cycles", "torque_limit", "gravity_torque",

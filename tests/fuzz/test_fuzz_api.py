@@ -24,8 +24,8 @@ MOVING = {"enable", "jog", "move_joints", "move_pose", "reset", "record.start"}
 
 @pytest.fixture(scope="module")
 def daemon(tmp_path_factory):
-    from controller.daemon.daemon import Daemon, DaemonOptions
-    from firmware_sim.runner import start_simulator
+    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+    from spacearm.firmware_sim.runner import start_simulator
     bus = f"virtual:fuzz-api-{uuid.uuid4().hex[:8]}"
     sim = start_simulator(bus, plant="configs/plant/oru_testbed_nominal.toml")
     port = free_port()

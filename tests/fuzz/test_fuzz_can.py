@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 from hypothesis import given, strategies as st
 
-from drivers import od
+from spacearm.base.canopen import od
 from tests.fuzz.conftest import CaseCounter
 
 NODE_IDS = {"joint": 1, "end_effector": 16, "ft_sensor": 17}
@@ -42,7 +42,7 @@ def not_motion(cid: int, data: bytes) -> bool:
 
 @pytest.fixture(scope="module")
 def sim():
-    from firmware_sim.runner import start_simulator
+    from spacearm.firmware_sim.runner import start_simulator
     s = start_simulator(f"virtual:fuzz-{uuid.uuid4().hex[:8]}",
                         plant="configs/plant/oru_testbed_nominal.toml", control_node_id=None)
     time.sleep(0.2)
@@ -97,7 +97,7 @@ def test_sim_node_recovers_from_a_segmented_download_that_never_finishes(sim, op
 
 @pytest.fixture
 def open_bus_pair(sim):
-    from drivers.transport import open_bus
+    from spacearm.base.transport import open_bus
     bus = open_bus(sim.bus_spec) if hasattr(sim, "bus_spec") else None
     if bus is None:
         pytest.skip("simulator does not expose its bus spec")
@@ -118,7 +118,7 @@ def _recv_from(bus, cob: int, timeout: float = 1.0):
 @pytest.fixture(scope="module")
 def arm():
     """An ArmNetwork on a bus with no nodes: every frame it sees comes from the fuzzer."""
-    from drivers.network import ArmNetwork
+    from spacearm.drivers.network import ArmNetwork
     net = ArmNetwork(f"virtual:fuzz-ctl-{uuid.uuid4().hex[:8]}").connect()
     yield net
     net.close()
@@ -127,7 +127,7 @@ def arm():
 @given(st.lists(frames, min_size=1, max_size=30))
 def test_random_frames_into_the_controller_drivers(arm, batch):
     CaseCounter.hit("can_frames_into_controller")
-    from drivers.network import _Listener
+    from spacearm.drivers.network import _Listener
     listener = next(x for x in arm.network.listeners if isinstance(x, _Listener))
     before = arm.stats.callback_errors
     for cid, data, kind in batch:
@@ -143,7 +143,7 @@ class FakeNode(threading.Thread):
 
     def __init__(self, spec: str, reply):
         super().__init__(daemon=True)
-        from drivers.transport import open_bus
+        from spacearm.base.transport import open_bus
         self.bus = open_bus(spec)
         self.reply = reply
         self.stop = threading.Event()
@@ -165,7 +165,7 @@ class FakeNode(threading.Thread):
 @pytest.fixture(scope="module")
 def sdo_target():
     """A controller network and a fake node whose SDO answers the test chooses."""
-    from drivers.network import ArmNetwork
+    from spacearm.drivers.network import ArmNetwork
     spec = f"virtual:fuzz-sdo-{uuid.uuid4().hex[:8]}"
     holder = {"reply": lambda req: None}
     node = FakeNode(spec, lambda req: holder["reply"](req))
@@ -180,7 +180,7 @@ def sdo_target():
 
 @given(answer=st.binary(min_size=0, max_size=8))
 def test_controller_sdo_read_with_garbage_answers_fails_cleanly(sdo_target, answer):
-    from drivers.errors import DriverError
+    from spacearm.drivers.errors import DriverError
     CaseCounter.hit("sdo_garbage_answers_into_controller")
     net, holder = sdo_target
     holder["reply"] = lambda req: answer
@@ -193,7 +193,7 @@ def test_controller_sdo_read_with_garbage_answers_fails_cleanly(sdo_target, answ
 
 
 def test_controller_segmented_upload_that_never_finishes_times_out_cleanly(sdo_target):
-    from drivers.errors import DriverError
+    from spacearm.drivers.errors import DriverError
     net, holder = sdo_target
     # initiate a segmented upload of 100 bytes, then never send a segment
     holder["reply"] = lambda req: (bytes([0x41]) + req[1:4] + struct.pack("<I", 100)) if req[0] & 0xE0 == 0x40 else None

@@ -42,8 +42,8 @@ def mutate(text: bytes, data) -> bytes:
 
 @given(data=st.data())
 def test_mutated_arm_file_loads_or_names_the_problem(data):
-    from controller.config.arm import load_arm_config
-    from controller.config.errors import ConfigError
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.base.config.errors import ConfigError
     CaseCounter.hit("files_arm_config")
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "arm.toml"
@@ -57,7 +57,7 @@ def test_mutated_arm_file_loads_or_names_the_problem(data):
 
 @given(data=st.data())
 def test_mutated_eds_file_loads_or_names_the_problem(data):
-    from drivers.eds import EdsError, load_od
+    from spacearm.base.canopen.eds import EdsError, load_od
     CaseCounter.hit("files_eds")
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "joint_drive.eds"
@@ -71,7 +71,7 @@ def test_mutated_eds_file_loads_or_names_the_problem(data):
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> bytes:
     """A real recording: a few cycles written by the recorder, closed complete."""
-    from controller.recording.mcap_recorder import McapRecorder
+    from spacearm.controller.recording.mcap_recorder import McapRecorder
     path = tmp_path_factory.mktemp("rec") / "run.mcap"
     rec = McapRecorder(path)
     rec.add_channel("/cycle", {"title": "cycle", "type": "object"})
@@ -83,7 +83,7 @@ def recording(tmp_path_factory) -> bytes:
 
 @given(data=st.data())
 def test_damaged_recording_reads_partially_or_names_the_problem(recording, data):
-    from controller.recording.mcap_reader import RecordingError, read_recording
+    from spacearm.controller.recording.mcap_reader import RecordingError, read_recording
     CaseCounter.hit("files_recording")
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "run.mcap"

@@ -7,11 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from controller.config.errors import ConfigError
-from controller.impedance import Admittance, GravityModel, ImpedanceParams, load_impedance
-from controller.impedance.config import DEFAULT_IMPEDANCE
-from controller.kinematics.transforms import rpy_to_matrix
-from firmware_sim.contact.trials import ContactTrials, run_stiffness_direct
+from spacearm.base.config.errors import ConfigError
+from spacearm.controller.impedance import Admittance, GravityModel, ImpedanceParams, load_impedance
+from spacearm.controller.impedance.config import DEFAULT_IMPEDANCE
+from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.offline.contact.trials import ContactTrials, run_stiffness_direct
 
 
 def test_admittance_with_m_zero_is_the_exact_first_order_step_response():

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.kinematics import KinematicData, load_model
+from spacearm.base.kinematics import KinematicData, load_model
 from kin_reference import ARM_DIR, ARMS
 
 

@@ -1,6 +1,6 @@
 """Reference FK written straight from the papers' formulas, one explicit matrix per step.
 
-Deliberately naive and independent of controller.kinematics (no shared chain reduction), so
+Deliberately naive and independent of spacearm.base.kinematics (no shared chain reduction), so
 that the tests compare two derivations rather than one code path with itself.
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.kinematics import (KinematicData, dh_transform, fk, fk_batch, frames,
+from spacearm.base.kinematics import (KinematicData, dh_transform, fk, fk_batch, frames,
                                    load_model)
 from kin_reference import ARM_DIR, Rx, Rz, Tx, Tz, ekf_paper_T, laser_paper_A, reference_fk
 

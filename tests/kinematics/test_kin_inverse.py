@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from controller.kinematics import (KinematicData, analytic_ik, analytic_solver, fk, fk_batch,
+from spacearm.base.kinematics import (KinematicData, analytic_ik, analytic_solver, fk, fk_batch,
                                    ik_fixed_joint, pose_errors_batch, solve_dls, solve_ik,
                                    wrap_angle)
 

@@ -5,7 +5,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.kinematics import KinematicData, fk, fk_jacobian, jacobian, load_model
+from spacearm.base.kinematics import KinematicData, fk, fk_jacobian, jacobian, load_model
 from kin_reference import ARM_DIR, numeric_jacobian
 
 

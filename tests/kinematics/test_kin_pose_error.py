@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from controller.kinematics import (matrix_to_rotvec, matrix_to_rpy, pose_errors_batch,
+from spacearm.base.kinematics import (matrix_to_rotvec, matrix_to_rpy, pose_errors_batch,
                                    position_error, rotation_error, rotvec_to_matrix,
                                    rpy_to_matrix, to_mm, twist_error)
 

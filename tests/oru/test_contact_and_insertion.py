@@ -1,5 +1,5 @@
 """The contact world and the contact subtasks on the plant without the bus (same controller
-code as the task flow: controller.oru.flow's ContactTask in an ImpedanceMode)."""
+code as the task flow: spacearm.controller.oru.flow's ContactTask in an ImpedanceMode)."""
 from __future__ import annotations
 
 import math
@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from controller.config.scene import load_scene
-from firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
-from firmware_sim.contact.trials import ContactTrials
+from spacearm.base.config.scene import load_scene
+from spacearm.firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
+from spacearm.offline.contact.trials import ContactTrials
 
 LAW = ContactLaw(2.5e3, 0.0, 0.0, 1e-3)
 SLOT = Cavity(0.0605, 0.0405, 0.010, 0.04)

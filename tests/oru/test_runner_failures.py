@@ -9,19 +9,19 @@ import time
 import numpy as np
 import pytest
 
-from controller.config.arm import load_arm_config
-from controller.config.scene import load_scene
-from controller.daemon.core import ControllerCore
-from controller.daemon.modes import HoldMode
-from controller.daemon.state import DeviceEvent, Measurement
-from controller.daemon.supervision import SupervisionLimits, Supervisor
-from controller.impedance.config import load_impedance
-from controller.kinematics import KinematicData, KinematicModel, fk
-from controller.oru.config import load_changeout
-from controller.oru.flow import FlowContext
-from controller.oru.runner import OruTaskRunner
-from controller.oru.steps import ContactStep, EndEffectorStep, LatchStep, ModeStep
-from controller.planning.motion_planner import MotionPlanner
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.config.scene import load_scene
+from spacearm.controller.daemon.core import ControllerCore
+from spacearm.controller.daemon.modes import HoldMode
+from spacearm.controller.daemon.state import DeviceEvent, Measurement
+from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
+from spacearm.controller.impedance.config import load_impedance
+from spacearm.base.kinematics import KinematicData, KinematicModel, fk
+from spacearm.controller.oru.config import load_changeout
+from spacearm.controller.oru.flow import FlowContext
+from spacearm.controller.oru.runner import OruTaskRunner
+from spacearm.controller.oru.steps import ContactStep, EndEffectorStep, LatchStep, ModeStep
+from spacearm.controller.planning.motion_planner import MotionPlanner
 
 ARM = load_arm_config("configs/arm/oru_testbed_6dof.toml")
 MODEL = KinematicModel.from_config(ARM)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from controller.planning.cartesian_path import CartesianLimits, CartesianPath, quintic
+from spacearm.controller.planning.cartesian_path import CartesianLimits, CartesianPath, quintic
 
 LIMITS = CartesianLimits(0.05, 0.1, 0.1, 0.2)
 

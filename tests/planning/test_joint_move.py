@@ -3,8 +3,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from controller.planning.errors import PlanningError
-from controller.planning.joint_move import JointLimits, JointMove
+from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.joint_move import JointLimits, JointMove
 
 LIMITS = JointLimits(
     q_min=np.full(6, -3.0), q_max=np.full(6, 3.0),

@@ -4,11 +4,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.kinematics.model import load_model
-from controller.kinematics.pose_error import position_error, rotation_error
-from controller.planning.errors import PlanningError
-from controller.kinematics.transforms import rpy_to_matrix
-from controller.planning.motion_planner import MotionPlanner
+from spacearm.base.kinematics.model import load_model
+from spacearm.base.kinematics.pose_error import position_error, rotation_error
+from spacearm.controller.planning.errors import PlanningError
+from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.controller.planning.motion_planner import MotionPlanner
 
 ROOT = Path(__file__).resolve().parents[2]
 

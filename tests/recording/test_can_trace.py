@@ -6,9 +6,9 @@ import time
 import can
 import pytest
 
-from controller.recording.can_trace import CanTrace
-from drivers.transport import BusSpecError, open_bus
-from drivers.transport.hub import LoopbackHub
+from spacearm.controller.recording.can_trace import CanTrace
+from spacearm.base.transport import BusSpecError, open_bus
+from spacearm.base.transport.hub import LoopbackHub
 
 
 def _frames(n: int) -> list[can.Message]:

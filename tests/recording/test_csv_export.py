@@ -2,10 +2,10 @@ import csv
 
 import pytest
 
-from controller.recording.channels import CHANNELS
-from controller.recording.csv_export import export_csv
-from controller.recording.mcap_reader import RecordingError
-from controller.recording.mcap_recorder import McapRecorder
+from spacearm.controller.recording.channels import CHANNELS
+from spacearm.controller.recording.csv_export import export_csv
+from spacearm.controller.recording.mcap_reader import RecordingError
+from spacearm.controller.recording.mcap_recorder import McapRecorder
 
 
 def cycle(k, n=6):

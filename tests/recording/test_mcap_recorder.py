@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from controller.recording.mcap_reader import RecordingError, read_recording
-from controller.recording.mcap_recorder import McapRecorder
+from spacearm.controller.recording.mcap_reader import RecordingError, read_recording
+from spacearm.controller.recording.mcap_recorder import McapRecorder
 
 SCHEMA = {"title": "sample", "type": "object", "properties": {"k": {"type": "integer"}}}
 ROOT = Path(__file__).resolve().parents[2]
@@ -35,7 +35,7 @@ def test_recording_killed_mid_run_is_readable_up_to_the_last_flushed_second(tmp_
     progress = tmp_path / "progress"
     writer = textwrap.dedent(f"""
         import time
-        from controller.recording.mcap_recorder import McapRecorder
+        from spacearm.controller.recording.mcap_recorder import McapRecorder
         rec = McapRecorder({str(path)!r}, flush_interval=1.0)
         rec.add_channel("/cycle", {SCHEMA!r})
         k = 0

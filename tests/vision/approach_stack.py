@@ -7,16 +7,16 @@ import time
 
 import numpy as np
 
-from controller.config.scene import load_scene
-from controller.daemon.approach_mode import marker_T_goal
-from controller.daemon.daemon import Daemon, DaemonOptions
-from controller.kinematics.inverse import solve_ik
-from controller.kinematics.model import KinematicData
-from controller.kinematics.transforms import matrix_to_rpy
-from controller.vision.frames import LocalFrameSource
-from drivers.bus_config import DEFAULT_BUS_CONFIG
-from firmware_sim.camera.service import marker_sites
-from firmware_sim.runner import start_simulator
+from spacearm.base.config.scene import load_scene
+from spacearm.controller.daemon.approach_mode import marker_T_goal
+from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+from spacearm.base.kinematics.inverse import solve_ik
+from spacearm.base.kinematics.model import KinematicData
+from spacearm.base.kinematics.transforms import matrix_to_rpy
+from spacearm.base.vision.frames import LocalFrameSource
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.firmware_sim.camera.service import marker_sites
+from spacearm.firmware_sim.runner import start_simulator
 
 PLANT = "configs/plant/oru_testbed_errors.toml"
 

@@ -1,7 +1,7 @@
 import pytest
 
-from controller.vision.pipeline import VisionPipeline
-from firmware_sim.camera.simulator import CameraSimulator
+from spacearm.controller.vision.pipeline import VisionPipeline
+from spacearm.firmware_sim.camera.simulator import CameraSimulator
 
 
 @pytest.fixture(scope="module")

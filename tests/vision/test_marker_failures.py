@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from controller.vision.pipeline import FAILURES
+from spacearm.controller.vision.pipeline import FAILURES
 from tests.vision.views import pose_error, view
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controller.vision.pnp import solve_pnp
+from spacearm.controller.vision.pnp import solve_pnp
 from tests.vision.views import pose_error, view
 
 

@@ -1,0 +1,195 @@
+"""Schema of a bus file (configs/bus/*.toml): which nodes are on the CAN bus and how
+the controller configures them at bring-up.
+
+All quantities are SI (s, rad, rad/s, N, N m) except where a key names its unit.
+Wire scaling of the joint drives uses the CiA 402 objects 608Fh (position encoder
+resolution) and 6091h (gear ratio): increments per joint radian =
+encoder_increments / motor_revolutions * gear_motor_revolutions / gear_shaft_revolutions / (2 pi).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from spacearm.base.config.loader import load_toml_model
+
+EDS_DIR = Path(__file__).resolve().parents[1] / "configs" / "eds"
+DeviceType = Literal["joint_drive", "end_effector", "ft_sensor"]
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class BusSettings(Strict):
+    sync_period: float = Field(default=0.02, ge=0.001, le=1.0, description="s, SYNC producer period")
+    boot_timeout: float = Field(default=3.0, gt=0.0, le=60.0, description="s to wait for all boot-ups")
+    sdo_timeout: float = Field(default=0.5, ge=0.01, le=10.0, description="s per SDO response")
+    heartbeat_loss_factor: float = Field(
+        default=2.5, ge=1.2, le=3.0,
+        description="a node is lost when silent for this many of its heartbeat periods (<= 3)")
+    lockstep_timeout: float = Field(default=0.5, gt=0.0, le=10.0,
+                                    description="s to wait for all TPDOs of one SYNC in lockstep mode")
+    master_node_id: int = Field(default=127, ge=1, le=127,
+                                description="node ID of the controller's own heartbeat (0x700 + id)")
+    master_heartbeat_period: float = Field(default=0.1, ge=0.0, le=65.0,
+                                           description="s; controller heartbeat producer, 0 = off")
+    master_heartbeat_timeout: float = Field(
+        default=0.3, ge=0.0, le=65.0,
+        description="s; every node consumes the controller heartbeat (1016h) and faults/stops "
+                    "when it is silent this long; 0 = off")
+
+
+class JointSettings(Strict):
+    encoder_increments: int = Field(default=1 << 20, ge=1, le=2**31, description="608Fh.1 per motor_revolutions")
+    motor_revolutions: int = Field(default=1, ge=1, le=2**16, description="608Fh.2")
+    gear_motor_revolutions: int = Field(default=100, ge=1, le=2**20, description="6091h.1")
+    gear_shaft_revolutions: int = Field(default=1, ge=1, le=2**20, description="6091h.2")
+    rated_torque: float = Field(default=1.5, gt=0.0, le=1000.0, description="N m, motor side (6076h)")
+    max_torque: float = Field(default=1.0, gt=0.0, le=3.0, description="fraction of rated torque (6072h)")
+    following_error_window: float = Field(default=0.01, gt=0.0, le=1.0, description="rad (6065h)")
+    following_error_timeout: float = Field(default=0.1, ge=0.0, le=65.0, description="s (6066h)")
+    lower: float = Field(default=-2 * math.pi, ge=-6 * math.pi, le=6 * math.pi, description="rad (607Dh.1)")
+    upper: float = Field(default=2 * math.pi, ge=-6 * math.pi, le=6 * math.pi, description="rad (607Dh.2)")
+    max_velocity: float = Field(default=1.0, gt=0.0, le=10.0, description="rad/s (607Fh)")
+    profile_velocity: float = Field(default=0.1, gt=0.0, le=10.0, description="rad/s (6081h)")
+    profile_acceleration: float = Field(default=0.2, gt=0.0, le=100.0, description="rad/s^2 (6083h/6084h)")
+    quick_stop_deceleration: float = Field(default=1.0, gt=0.0, le=100.0, description="rad/s^2 (6085h)")
+    quick_stop_option: int = Field(default=2, ge=0, le=8, description="605Ah: 2 stop then disable, 6 stay in quick stop")
+
+    @model_validator(mode="after")
+    def _ordered(self) -> "JointSettings":
+        if not self.lower < self.upper:
+            raise ValueError(f"lower ({self.lower}) must be less than upper ({self.upper})")
+        if not self.profile_velocity <= self.max_velocity:
+            raise ValueError("profile_velocity must not exceed max_velocity")
+        return self
+
+    @property
+    def increments_per_rad(self) -> float:
+        return (self.encoder_increments / self.motor_revolutions * self.gear_motor_revolutions
+                / self.gear_shaft_revolutions / (2.0 * math.pi))
+
+    @property
+    def gear_ratio(self) -> float:
+        return self.gear_motor_revolutions / self.gear_shaft_revolutions
+
+    @property
+    def rated_joint_torque(self) -> float:
+        """N m at the joint output for 1000 per mille (motor rated torque times gear ratio)."""
+        return self.rated_torque * self.gear_ratio
+
+
+class EndEffectorSettings(Strict):
+    lock_torque: float = Field(default=8.0, ge=0.1, le=30.0, description="N m screw torque that means locked (2110h)")
+    lock_turns: float = Field(default=6.0, ge=0.1, le=100.0, description="screw turns to full lock (2111h)")
+
+
+class FtSettings(Strict):
+    force_counts_per_n: int = Field(default=100, ge=1, le=10000, description="2201h")
+    torque_counts_per_nm: int = Field(default=1000, ge=1, le=100000, description="2202h")
+    force_limit: int = Field(default=300, ge=1, le=65535, description="N, overload (2205h.1)")
+    torque_limit: int = Field(default=30, ge=1, le=65535, description="N m, overload (2205h.2)")
+
+
+class NodeConfig(Strict):
+    name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    node_id: int = Field(ge=1, le=127)
+    device: DeviceType
+    heartbeat_period: float = Field(default=0.1, ge=0.01, le=65.0, description="s (1017h)")
+    joint: JointSettings | None = None
+    end_effector: EndEffectorSettings | None = None
+    ft: FtSettings | None = None
+
+    @model_validator(mode="after")
+    def _settings_match_device(self) -> "NodeConfig":
+        for key, device in (("joint", "joint_drive"), ("end_effector", "end_effector"), ("ft", "ft_sensor")):
+            if getattr(self, key) is not None and self.device != device:
+                raise ValueError(f"[{key}] settings given for a {self.device} node")
+        # fill in defaults so users of the config never see None for their own device
+        if self.device == "joint_drive" and self.joint is None:
+            object.__setattr__(self, "joint", JointSettings())
+        if self.device == "end_effector" and self.end_effector is None:
+            object.__setattr__(self, "end_effector", EndEffectorSettings())
+        if self.device == "ft_sensor" and self.ft is None:
+            object.__setattr__(self, "ft", FtSettings())
+        return self
+
+    @property
+    def eds_path(self) -> Path:
+        return EDS_DIR / f"{self.device}.eds"
+
+    @property
+    def label(self) -> str:
+        return f"node {self.node_id} '{self.name}' ({self.device})"
+
+
+class BusConfig(Strict):
+    bus: BusSettings = BusSettings()
+    nodes: list[NodeConfig] = Field(min_length=1, max_length=127)
+
+    @model_validator(mode="after")
+    def _unique(self) -> "BusConfig":
+        seen_ids: dict[int, str] = {}
+        seen_names: set[str] = set()
+        for node in self.nodes:
+            if node.node_id == self.bus.master_node_id:
+                raise ValueError(f"node '{node.name}' uses node_id {node.node_id}, the controller's "
+                                 f"bus.master_node_id")
+            if node.node_id in seen_ids:
+                raise ValueError(f"node_id {node.node_id} used by both '{seen_ids[node.node_id]}' and '{node.name}'")
+            if node.name in seen_names:
+                raise ValueError(f"node name '{node.name}' used twice")
+            seen_ids[node.node_id] = node.name
+            seen_names.add(node.name)
+        return self
+
+    def of_device(self, device: str) -> list[NodeConfig]:
+        return [n for n in self.nodes if n.device == device]
+
+    @property
+    def joints(self) -> list[NodeConfig]:
+        return self.of_device("joint_drive")
+
+    def node(self, name_or_id: str | int) -> NodeConfig:
+        for n in self.nodes:
+            if n.name == name_or_id or n.node_id == name_or_id:
+                return n
+        raise KeyError(f"no node {name_or_id!r} in bus config")
+
+    def without(self, *names: str) -> "BusConfig":
+        """A copy with the named nodes removed (tests: a bus with a node missing)."""
+        return BusConfig(bus=self.bus, nodes=[n for n in self.nodes if n.name not in names])
+
+
+DEFAULT_BUS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "bus" / "arm.toml"
+
+
+def load_bus_config(path: str | Path = DEFAULT_BUS_CONFIG) -> BusConfig:
+    return load_toml_model(path, BusConfig)
+
+
+def dump_toml(config: BusConfig) -> str:
+    """TOML text of a bus config (e.g. a test's variant written for a `spacearm sim` process)."""
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return json.dumps(v)          # a JSON string is a valid TOML basic string
+        return repr(v)
+
+    lines = ["[bus]"] + [f"{k} = {value(v)}" for k, v in config.bus.model_dump().items()]
+    for node in config.nodes:
+        lines += ["", "[[nodes]]"]
+        data = node.model_dump()
+        tables = {k: data.pop(k) for k in ("joint", "end_effector", "ft")}
+        lines += [f"{k} = {value(v)}" for k, v in data.items()]
+        for key, table in tables.items():
+            if table is not None:
+                lines.append(f"[nodes.{key}]")
+                lines += [f"{k} = {value(v)}" for k, v in table.items()]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,1 @@
+"""Process helpers: real-time scheduling requests and starting the repository's own modules as children."""

@@ -1,0 +1,1 @@
+"""The vision pipeline: circle detection, marker labelling, PnP, the vision worker."""

@@ -1,0 +1,1 @@
+"""Contact trials and the direct (bus-free) controller-plant loop."""

@@ -1,0 +1,123 @@
+"""The direct simulation path: the firmware_sim plant driven cycle by cycle without a bus.
+
+Same plant (``spacearm.firmware_sim.plant``), same drive servo law (``spacearm.firmware_sim.joint_drive.servo_torque``)
+and the same CSP interpolation, scaling and reporting as the CAN path, minus the CANopen
+frames: a 5-minute recording replays in seconds instead of minutes. Command timing matches
+the daemon: the target written in cycle k-1 is latched at SYNC k, the plant advances one
+period, and what the drives report after it is the measurement of row k.
+``tests/diagnosis/test_direct_vs_can.py`` checks both paths give the same recording.
+
+Torque limit, position limits and the velocity clamp are the bus configuration's; drive
+faults (following error) are not modelled here: a replay that would fault says so through
+``SimTraces.following_error_max``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSettings, load_bus_config
+from spacearm.firmware_sim.joint_drive import servo_torque
+from spacearm.firmware_sim.plant import JointModel, Plant, PlantConfig
+
+FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
+FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
+
+
+@dataclass
+class SimTraces:
+    """What the controller would have recorded, one row per cycle (SI)."""
+    t: np.ndarray
+    q_cmd: np.ndarray       # (N, n)
+    q: np.ndarray
+    dq: np.ndarray
+    tau: np.ndarray         # joint side, N m
+    wrench: np.ndarray      # (N, 6)
+    following_error_max: float = 0.0
+
+
+def joint_settings(bus_config: BusConfig | str | None = None) -> list[JointSettings]:
+    config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config or DEFAULT_BUS_CONFIG)
+    return [node.joint or JointSettings() for node in config.joints]
+
+
+class _CspDrive:
+    """One drive in CSP: linear interpolation of the latched target across the SYNC period."""
+
+    def __init__(self, joint: JointModel, settings: JointSettings, limits: tuple[float, float], dt: float):
+        self.joint = joint
+        self.k = settings.increments_per_rad
+        self.rated_motor = settings.rated_torque
+        self.rated_joint = settings.rated_joint_torque
+        self.vmax = settings.max_velocity
+        self.lo, self.hi = limits
+        self.dt = dt
+        self.q_start = self.q_end = self.q_ref = joint.q_measured
+        self.v_ff = 0.0
+        joint.brake_engaged = False
+        joint.max_motor_torque = settings.max_torque * settings.rated_torque
+        joint.controller = self._servo
+
+    def latch(self, target: float, velocity_offset: float) -> None:
+        k, dt = self.k, self.dt
+        target = round(target * k) / k                 # 607Ah increments
+        clamped = min(self.hi, max(self.lo, target))
+        self.q_start = self.q_ref
+        step = clamped - self.q_start
+        if abs(step) > self.vmax * dt:
+            step = math.copysign(self.vmax * dt, step)
+        self.q_end = self.q_start + step
+        self.v_ff = step / dt + round(velocity_offset * k) / k
+
+    def _servo(self, s: float, q_meas: float, qd: float) -> float:
+        self.q_ref = self.q_start + s * (self.q_end - self.q_start)
+        return servo_torque(self.joint, self.q_ref, self.v_ff, q_meas, qd)
+
+    def report(self) -> tuple[float, float, float]:
+        j, k = self.joint, self.k
+        per_mille = max(-32768, min(32767, round(j.torque_reported / self.rated_motor * 1000.0)))   # 6077h
+        return round(j.q_reported * k) / k, round(j.qd_reported * k) / k, per_mille / 1000.0 * self.rated_joint
+
+
+def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray | None = None,
+             dq_cmd: np.ndarray | None = None, settings: list[JointSettings] | None = None,
+             limits: list[tuple[float, float]] | None = None, joints: list[int] | None = None,
+             t0: float = 0.0) -> SimTraces:
+    """Replay commanded positions (N, n) through the plant; row k reports the plant after the
+    command of row k-1. `joints` simulates only those columns (joints are independent unless
+    an environment couples them), which is what the diagnosis does per candidate effect."""
+    q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
+    rows, n = q_cmd.shape
+    index = list(range(n)) if joints is None else list(joints)
+    settings = settings or joint_settings()
+    params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
+    start = q_cmd[0] if q0 is None else np.asarray(q0, float)
+    params = [p.model_copy(update={"initial_position": float(start[i])}) for i, p in zip(index, params)]
+    plant = Plant.create(len(index), config.model_copy(update={"joints": params}))
+    plant.time = t0
+    drives = [_CspDrive(joint, settings[i], limits[i] if limits else (-math.inf, math.inf), dt)
+              for joint, i in zip(plant.joints, index)]
+    q = np.empty((rows, len(index)))
+    dq = np.empty_like(q)
+    tau = np.empty_like(q)
+    wrench = np.empty((rows, 6))
+    fe = 0.0
+    cols = q_cmd[:, index]
+    vel = np.zeros_like(cols) if dq_cmd is None else np.asarray(dq_cmd, float)[:, index]
+    previous = cols[0]
+    previous_v = np.zeros(len(index))
+    for r in range(rows):
+        for c, drive in enumerate(drives):
+            drive.latch(previous[c], previous_v[c])
+        plant.step(dt)
+        for c, drive in enumerate(drives):
+            q[r, c], dq[r, c], tau[r, c] = drive.report()
+            fe = max(fe, abs(drive.q_ref - drive.joint.q_measured))
+        w = plant.ft_reading()
+        wrench[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
+        wrench[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
+        previous, previous_v = cols[r], vel[r]
+    t = t0 + dt * np.arange(1, rows + 1)
+    return SimTraces(t, cols.copy(), q, dq, tau, wrench, fe)

@@ -1,0 +1,147 @@
+"""Fit candidate effects to one channel's residual; choose by held-out error and BIC.
+
+Residual samples are correlated (servo dynamics, resolver chatter), so the significance test
+counts blocks, not rows: the block length is where the fitted model's residual stops being
+correlated, and the chi-square statistic of the error reduction is divided by it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import stats
+
+from spacearm.offline.diagnosis.candidates import Candidate, Signals
+
+POSITIVE = ("coulomb_friction", "viscous_friction", "stribeck_friction")
+SIGNIFICANCE = 1e-6          # per test; about 80 tests per recording
+MIN_HELDOUT_REDUCTION = 0.10
+
+
+@dataclass
+class ChannelFit:
+    effects: tuple[str, ...]
+    channel: str
+    index: int                   # joint (0-based) or F/T axis
+    coef: np.ndarray
+    stderr: np.ndarray
+    columns: tuple[str, ...]
+    shape: tuple[float, ...]     # grid values chosen (one per effect, nan = none)
+    sse_train: float
+    sse_null_train: float
+    rms_heldout_before: float
+    rms_heldout_after: float
+    p_value: float
+    block: int
+    prediction: np.ndarray = field(repr=False, default=None)   # over all rows
+    n_train: int = 0
+    n_params: int = 0
+
+    def bic_at(self, block: int) -> float:
+        """BIC with a given block length. Candidates on one channel must be compared at one
+        common block length: with each fit's own, a worse fit (longer correlated residual,
+        fewer effective samples) gets the lower BIC whenever the mean square error exceeds 1."""
+        if not np.isfinite(self.sse_train) or self.n_train == 0:
+            return np.inf
+        n_eff = max(self.n_train / block, self.n_params + 2.0)
+        return float(n_eff * np.log(max(self.sse_train, 1e-30) / self.n_train) + self.n_params * np.log(n_eff))
+
+    @property
+    def heldout_reduction(self) -> float:
+        if self.rms_heldout_before <= 0:
+            return 0.0
+        return 1.0 - self.rms_heldout_after / self.rms_heldout_before
+
+    @property
+    def significant(self) -> bool:
+        return self.p_value < SIGNIFICANCE and self.heldout_reduction >= MIN_HELDOUT_REDUCTION
+
+    @property
+    def by_envelope(self) -> bool:
+        """Fitted on the residual's RMS envelope (gear effects), not sample by sample."""
+        return self.effects[0] in ("backlash", "elasticity")
+
+
+def correlation_length(x: np.ndarray, cap: int = 100) -> int:
+    """Lag where the autocorrelation first falls below 0.2 (at least 1)."""
+    x = x - x.mean()
+    var = float(x @ x)
+    if var <= 0:
+        return 1
+    for lag in range(1, min(cap, len(x) // 4)):
+        if float(x[:-lag] @ x[lag:]) / var < 0.2:
+            return lag
+    return cap
+
+
+def _lstsq(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    return coef, float(r @ r)
+
+
+def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tuple[str, ...],
+                 shape: tuple[float, ...], X: np.ndarray, y: np.ndarray, train: np.ndarray,
+                 fixed_gain: bool = False, held: np.ndarray | None = None) -> ChannelFit:
+    """Fit on the `train` rows; judge on `held` (default: all other rows)."""
+    held = ~train if held is None else held
+    if fixed_gain:
+        coef = np.ones(X.shape[1])
+        sse = float(np.sum((y[train] - X[train] @ coef) ** 2))
+        gain, _ = _lstsq(X[train], y[train])
+        if not 0.5 < gain[0] < 1.5:          # the shape must explain the residual at its own size
+            sse = np.inf
+    else:
+        coef, sse = _lstsq(X[train], y[train])
+        scale = np.sqrt(np.mean(X[train] ** 2, axis=0))
+        if np.any(scale < 1e-6 * max(float(scale.max()), 1e-300)) or np.any(scale == 0.0):
+            sse = np.inf                     # the recording never excites this shape
+        elif any(c < 0.0 for c, name in zip(coef, columns) if name in POSITIVE):
+            sse = np.inf                     # friction that pushes the joint along is not friction
+    pred = X @ coef
+    n = int(train.sum())
+    sse0 = float(y[train] @ y[train])
+    resid = y[train] - pred[train]
+    block = correlation_length(resid)
+    sigma2 = max(sse / n, 1e-30)
+    k = X.shape[1] + sum(1 for s in shape if not np.isnan(s))
+    chi = max(sse0 - sse, 0.0) / sigma2 / block if np.isfinite(sse) else 0.0
+    p = float(stats.chi2.sf(chi, k))
+    try:
+        cov = sigma2 * block * np.linalg.inv(X[train].T @ X[train])
+        stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+    except np.linalg.LinAlgError:
+        stderr = np.full(X.shape[1], np.nan)
+    before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
+    after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
+    return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
+                      block, pred, n, k)
+
+
+def common_block(fits: list[ChannelFit]) -> int:
+    """The block length the best-fitting candidate's residual shows: the scale at which
+    all candidates of one channel are compared."""
+    finite = [f for f in fits if np.isfinite(f.sse_train)]
+    return min(finite, key=lambda f: f.sse_train).block if finite else 1
+
+
+def fit_candidate(candidate: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,
+                  held: np.ndarray | None = None) -> ChannelFit:
+    grid = candidate.grid
+    if grid == ("quantiles",):
+        grid = tuple(float(np.quantile(np.abs(s.tau), q)) for q in (0.5, 0.7, 0.8, 0.9, 0.95, 0.98))
+    best = None
+    for value in grid or (np.nan,):
+        X = candidate.features(s, value)
+        fit = fit_features((candidate.effect,), candidate.channel, index, candidate.columns, (value,), X, y, train,
+                           candidate.fixed_gain, held)
+        if best is None or fit.sse_train < best.sse_train:
+            best = fit
+    return best
+
+
+def fit_pair(a: Candidate, b: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,
+             shape_a: float, shape_b: float, held: np.ndarray | None = None) -> ChannelFit:
+    X = np.column_stack([a.features(s, shape_a), b.features(s, shape_b)])
+    return fit_features((a.effect, b.effect), a.channel, index, a.columns + b.columns, (shape_a, shape_b), X, y,
+                        train, held=held)

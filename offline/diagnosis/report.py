@@ -1,0 +1,84 @@
+"""Diagnosis output: Markdown report with PNG plots, JSON summary, updated plant TOML."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import tomli_w
+
+from spacearm.offline.diagnosis.analysis import Diagnosis
+from spacearm.firmware_sim.plant import PlantConfig
+
+
+def summary(d: Diagnosis) -> dict:
+    return {
+        "verdict": d.verdict,
+        "significant": bool(d.findings or d.unexplained),
+        "unexplained_channels": [c.name for c in d.unexplained],
+        "heldout_from_s": d.heldout_start,
+        "findings": [{
+            "rank": i + 1, "effects": list(f.fit.effects), "channel": f.fit.channel,
+            "joint": f.fit.index + 1 if f.fit.channel != "wrench" else None,
+            "axis": f.fit.index if f.fit.channel == "wrench" else None,
+            "parameters": f.params, "stderr": f.stderr, "text": f.text, "score": f.score,
+            "p_value": f.fit.p_value, "heldout_rms_reduction_residual_model": f.fit.heldout_reduction,
+            "change_point_s": f.onset} for i, f in enumerate(d.findings)],
+        "channels": [{"name": c.name, "noise": c.noise, "heldout_rms_before": c.rms_before,
+                      "heldout_rms_after": c.rms_after, "significant": c.significant, "metric": c.metric,
+                      "mismatch_before": c.excess_before, "mismatch_after": c.excess_after} for c in d.channels],
+        "timings_s": d.timings,
+    }
+
+
+def write_plant(path: Path, config: PlantConfig, note: str) -> None:
+    data = config.model_dump(mode="json", exclude_none=True, exclude_defaults=True)
+    text = "".join(f"# {line}\n" for line in note.splitlines()) + tomli_w.dumps(data)
+    Path(path).write_text(text)
+
+
+def write_report(d: Diagnosis, out: Path, source: str, nominal: PlantConfig) -> dict:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out.mkdir(parents=True, exist_ok=True)
+    data = summary(d)
+    (out / "summary.json").write_text(json.dumps(data, indent=2))
+    write_plant(out / "plant_fitted.toml", d.updated,
+                f"Nominal plant with the effects fitted by `spacearm diagnose {source}`:\n{d.verdict}")
+    lines = [f"# Sim-vs-real diagnosis of `{source}`", "", f"**{d.verdict}**", "",
+             f"Held-out part: t >= {d.heldout_start:.1f} s (fits use the rows before it).", ""]
+    if d.findings:
+        lines += ["| rank | finding | p-value | score (explained / noise variance) | change point s |",
+                  "| --- | --- | --- | --- | --- |"]
+        for i, f in enumerate(d.findings):
+            onset = f"{f.onset:.1f}" if f.onset is not None else "-"
+            lines.append(f"| {i + 1} | {f.text} | {f.fit.p_value:.1e} | {f.score:.1f} | {onset} |")
+        lines += ["", "Updated plant file: `plant_fitted.toml`.", ""]
+    lines += ["Mismatch statistic: residual vs noise as a multiple of the significance limit (> 1: significant).",
+              "", "| channel | noise | held-out RMS before | after | reduction | mismatch before | after |",
+              "| --- | --- | --- | --- | --- | --- | --- |"]
+    for c in d.channels:
+        red = 1.0 - c.rms_after / c.rms_before if c.rms_before > 0 else 0.0
+        mark = " **" if c.significant else ""
+        lines.append(f"| {c.name}{mark} | {c.noise:.3g} | {c.rms_before:.3g} | {c.rms_after:.3g} | {100 * red:.0f} % "
+                     f"| {c.excess_before:.2f} | {c.excess_after:.2f} |")
+    for i, f in enumerate(d.findings[:4]):
+        name = f"tau_{f.fit.index + 1}" if f.fit.channel == "tau" else (
+            f"q_{f.fit.index + 1}" if f.fit.channel == "q" else ["fx", "fy", "fz", "tx", "ty", "tz"][f.fit.index])
+        fig, (a, b) = plt.subplots(1, 2, figsize=(11, 3.5))
+        a.plot(d.t, d.residual_before[name], lw=0.5, label="recording - nominal sim")
+        a.plot(d.t, d.residual_after[name], lw=0.5, label="recording - fitted sim")
+        a.axvline(d.heldout_start, color="k", ls="--", lw=0.8)
+        a.set_xlabel("t s"), a.set_ylabel(f"{name} residual"), a.legend(fontsize=7)
+        cond = f.fit.prediction
+        b.plot(cond, d.residual_before[name], ".", ms=1)
+        b.set_xlabel(f"predicted by {'+'.join(f.fit.effects)}"), b.set_ylabel("residual")
+        fig.tight_layout()
+        png = f"finding_{i + 1}_{name}.png"
+        fig.savefig(out / png, dpi=90)
+        plt.close(fig)
+        lines += ["", f"![{f.text}]({png})"]
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+    return data

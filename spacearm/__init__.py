@@ -1,0 +1,1 @@
+"""spacearm: a hardware-in-the-loop controller stack for a space manipulator over CANopen."""
