@@ -16,8 +16,9 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from spacearm.base.config.loader import load_toml_model
+from spacearm.base.paths import CONFIGS
 
-EDS_DIR = Path(__file__).resolve().parents[1] / "configs" / "eds"
+EDS_DIR = CONFIGS / "eds"
 DeviceType = Literal["joint_drive", "end_effector", "ft_sensor"]
 
 
@@ -166,7 +167,7 @@ class BusConfig(Strict):
         return BusConfig(bus=self.bus, nodes=[n for n in self.nodes if n.name not in names])
 
 
-DEFAULT_BUS_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "bus" / "arm.toml"
+DEFAULT_BUS_CONFIG = CONFIGS / "bus" / "arm.toml"
 
 
 def load_bus_config(path: str | Path = DEFAULT_BUS_CONFIG) -> BusConfig:

@@ -4,14 +4,13 @@ from __future__ import annotations
 import os
 import subprocess
 import threading
-from pathlib import Path
+from spacearm.base.paths import REPO_ROOT
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def module_env() -> dict[str, str]:
     """This process's environment with the repository first on PYTHONPATH, so that
-    `python -m drivers...` / `python -m controller...` work from any working directory."""
+    `python -m spacearm...` children import this clone's code from any working directory."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO_ROOT) + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     return env
