@@ -36,7 +36,7 @@ from spacearm.controller.calibration.camera_routine import (run_camera_calibrati
                                                    setup_from_files)
 from spacearm.controller.calibration.validation import compare_poses  # noqa: E402
 from spacearm.base.kinematics.forward import fk_batch  # noqa: E402
-from spacearm.base.kinematics.transforms import inv_transform  # noqa: E402
+from spacearm.base.spatial import inv_transform  # noqa: E402
 from spacearm.base.transport.hub import HubProcess  # noqa: E402
 from spacearm.firmware_sim.plant import load_plant_config  # noqa: E402
 from hil_tests.harness import free_port  # noqa: E402

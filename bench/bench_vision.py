@@ -22,7 +22,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from spacearm.base.kinematics.transforms import xyz_rpy_to_transform  # noqa: E402
+from spacearm.base.spatial import xyz_rpy_to_transform  # noqa: E402
 from spacearm.controller.vision.pipeline import VisionPipeline  # noqa: E402
 from spacearm.controller.vision.pnp import solve_pnp  # noqa: E402
 from spacearm.firmware_sim.camera.simulator import CameraSimulator  # noqa: E402

@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from spacearm.base.kinematics.model import KinematicModel, load_model
-from spacearm.base.kinematics.transforms import xyz_rpy_to_transform
+from spacearm.base.spatial import xyz_rpy_to_transform
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ARM = "configs/arm/oru_testbed_6dof.toml"

@@ -17,7 +17,7 @@ from spacearm.base.config.scene import load_scene
 from spacearm.controller.daemon.approach_mode import marker_T_goal
 from spacearm.base.kinematics.inverse import solve_ik
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.base.kinematics.transforms import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
+from spacearm.base.spatial import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
 from spacearm.base.vision.config import load_marker, load_mount
 from spacearm.base.vision.frames import ShmFrameRing
 from hil_tests.test_daemon_console import Console, free_port

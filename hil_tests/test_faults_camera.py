@@ -41,7 +41,7 @@ def cell():
     from spacearm.base.config.arm import load_arm_config
     from spacearm.controller.daemon.approach_mode import ApproachMode
     from spacearm.controller.daemon.core import ControllerCore
-    from spacearm.controller.daemon.state import Measurement
+    from spacearm.controller.cycle import Measurement
     from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
     from spacearm.base.kinematics.model import KinematicModel
 

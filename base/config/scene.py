@@ -13,7 +13,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from spacearm.base.config.loader import load_toml_model
-from spacearm.base.kinematics.transforms import xyz_rpy_to_transform
+from spacearm.base.spatial import xyz_rpy_to_transform
 
 DEFAULT_SCENE = Path(__file__).resolve().parents[2] / "configs" / "scene" / "oru_testbed.toml"
 

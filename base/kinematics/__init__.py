@@ -15,7 +15,7 @@ from spacearm.base.kinematics.jacobian import fk_jacobian, jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel, dh_transform, load_model
 from spacearm.base.kinematics.pose_error import (pose_errors_batch, position_error, rotation_error,
                                               to_mm, twist_error, wrap_angle)
-from spacearm.base.kinematics.transforms import (matrix_to_rotvec, matrix_to_rpy, rotvec_to_matrix,
+from spacearm.base.spatial import (matrix_to_rotvec, matrix_to_rpy, rotvec_to_matrix,
                                               rpy_to_matrix)
 
 __all__ = [

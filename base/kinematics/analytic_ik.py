@@ -27,7 +27,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from spacearm.base.kinematics.model import KinematicModel
-from spacearm.base.kinematics.transforms import inv_transform, rotz
+from spacearm.base.spatial import inv_transform, rotz
 
 Array = NDArray[np.float64]
 Z = np.array([0.0, 0.0, 1.0])

@@ -11,7 +11,7 @@ from spacearm.base.kinematics.analytic_ik import analytic_solver, expand_wraps
 from spacearm.base.kinematics.forward import compute_chain
 from spacearm.base.kinematics.jacobian import jacobian_from_chain
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.base.kinematics.transforms import matrix_to_rotvec
+from spacearm.base.spatial import matrix_to_rotvec
 
 Array = NDArray[np.float64]
 

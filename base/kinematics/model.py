@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from spacearm.base.config.arm import ArmConfig, FixedFrame, load_arm_config
-from spacearm.base.kinematics.transforms import rotx, roty, rotz, trans, xyz_rpy_to_transform
+from spacearm.base.spatial import rotx, roty, rotz, trans, xyz_rpy_to_transform
 
 Array = NDArray[np.float64]
 

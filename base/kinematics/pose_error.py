@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from spacearm.base.kinematics.transforms import (matrix_to_rotvec, matrix_to_rpy,  # noqa: F401
+from spacearm.base.spatial import (matrix_to_rotvec, matrix_to_rpy,  # noqa: F401
                                               rotvec_to_matrix, rpy_to_matrix)
 
 Array = NDArray[np.float64]

@@ -46,7 +46,7 @@ from spacearm.base.config.arm import Calibration, load_arm_config
 from spacearm.base.kinematics.forward import fk_batch
 from spacearm.base.kinematics.inverse import solve_ik
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.base.kinematics.transforms import inv_transform
+from spacearm.base.spatial import inv_transform
 
 Array = NDArray[np.float64]
 

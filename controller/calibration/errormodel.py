@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from spacearm.base.kinematics import KinematicModel
-from spacearm.base.kinematics.transforms import rotx, roty, rotz, trans
+from spacearm.base.spatial import rotx, roty, rotz, trans
 
 Array = NDArray[np.float64]
 

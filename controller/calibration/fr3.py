@@ -23,7 +23,7 @@ from spacearm.controller.calibration.residuals import Problem
 from spacearm.controller.calibration.solvers import CalibrationResult, lm
 from spacearm.controller.calibration.validation import compare_poses
 from spacearm.base.kinematics import KinematicModel
-from spacearm.base.kinematics.transforms import rotz, trans
+from spacearm.base.spatial import rotz, trans
 
 Array = NDArray[np.float64]
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "fr3_eye_in_hand" / "samples.csv"

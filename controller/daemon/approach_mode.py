@@ -40,13 +40,13 @@ import numpy as np
 from spacearm.base.config.arm import CartesianLimits
 from spacearm.base.config.scene import SceneConfig
 from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.controller.daemon.supervision import Finding
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
-from spacearm.base.kinematics.transforms import inv_transform, trans
+from spacearm.base.spatial import inv_transform, trans
 from spacearm.controller.planning.joint_move import JointSetpoint
 from spacearm.controller.planning.resolved_rate import damped_pinv
 

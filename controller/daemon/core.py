@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from spacearm.controller.daemon.modes import HoldMode, Mode
-from spacearm.controller.daemon.state import JointCommand, Measurement
+from spacearm.controller.cycle import JointCommand, Measurement
 from spacearm.controller.daemon.supervision import Finding, Supervisor
 from spacearm.controller.planning.errors import PlanningError
 

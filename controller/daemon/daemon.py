@@ -26,7 +26,7 @@ from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limi
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.daemon.modes import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
-from spacearm.controller.daemon.state import JointCommand, Measurement
+from spacearm.controller.cycle import JointCommand, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner

@@ -11,7 +11,7 @@ import time as time_module
 
 import numpy as np
 
-from spacearm.controller.daemon.state import DeviceEvent, JointCommand, Measurement
+from spacearm.controller.cycle import DeviceEvent, JointCommand, Measurement
 from spacearm.base.config.bus import BusConfig, JointSettings
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 

@@ -13,7 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.controller.daemon.supervision import Finding
 from spacearm.controller.planning.joint_move import JointSetpoint
 

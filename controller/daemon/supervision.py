@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 
 
 @dataclass(frozen=True)

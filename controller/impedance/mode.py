@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.controller.daemon.supervision import Finding
 from spacearm.controller.impedance.admittance import Admittance
 from spacearm.controller.impedance.config import ImpedanceParams
@@ -27,7 +27,7 @@ from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
-from spacearm.base.kinematics.transforms import rotvec_to_matrix
+from spacearm.base.spatial import rotvec_to_matrix
 from spacearm.controller.planning.joint_move import JointSetpoint
 
 AXIS_MODES = ("impedance", "hold", "step")

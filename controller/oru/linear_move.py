@@ -9,12 +9,12 @@ from __future__ import annotations
 import numpy as np
 
 from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
-from spacearm.base.kinematics.transforms import matrix_to_rotvec, rotvec_to_matrix
+from spacearm.base.spatial import matrix_to_rotvec, rotvec_to_matrix
 from spacearm.controller.planning.cartesian_path import quintic
 from spacearm.controller.planning.joint_move import JointSetpoint
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.controller.daemon.supervision import Finding
 from spacearm.controller.oru.flow import FlowContext, stage_steps
 from spacearm.controller.oru.steps import ContactStep, Step, hold

@@ -13,7 +13,7 @@ from typing import Any, Callable
 import numpy as np
 
 from spacearm.controller.daemon.modes import Mode
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.controller.daemon.supervision import Finding
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.mode import ContactTask, ImpedanceMode

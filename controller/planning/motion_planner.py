@@ -13,7 +13,7 @@ from spacearm.base.config.arm import CartesianLimits as CartesianLimitsConfig
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.jacobian import jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.base.spatial import rpy_to_matrix
 from spacearm.controller.planning.cartesian_path import CartesianLimits, CartesianPath
 from spacearm.controller.planning.errors import PlanningError
 from spacearm.controller.planning.joint_move import JointLimits, JointMove

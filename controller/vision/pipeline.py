@@ -36,7 +36,7 @@ from spacearm.base.vision.frames import Frame
 from spacearm.controller.vision.identify import Hypothesis, hypotheses, match_prior, plate_is_dark
 from spacearm.base.vision.marker import MarkerModel
 from spacearm.controller.vision.pnp import PnpResult, solve_pnp
-from spacearm.base.kinematics.transforms import matrix_to_rotvec
+from spacearm.base.spatial import matrix_to_rotvec
 
 FAILURES = ("no_marker", "too_far", "too_close", "out_of_view", "ambiguous")
 CIRCLE_SAMPLES = 64

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from spacearm.base.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
-from spacearm.base.kinematics.transforms import inv_transform
+from spacearm.base.spatial import inv_transform
 from spacearm.firmware_sim.calibration_board import board_layer
 from spacearm.firmware_sim.camera.renderer import FlatLayer
 from spacearm.firmware_sim.camera.scene import OruShape, Scene

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacearm.base.kinematics.transforms import inv_transform
+from spacearm.base.spatial import inv_transform
 from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import CameraConfig, MarkerConfig, MountConfig, load_camera, load_marker, load_mount
 from spacearm.base.vision.frames import Frame

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacearm.controller.daemon.state import Measurement
+from spacearm.controller.cycle import Measurement
 from spacearm.firmware_sim.joint_drive import servo_torque
 from spacearm.firmware_sim.plant import Plant
 

@@ -15,7 +15,7 @@ from spacearm.base.config.arm import load_arm_config
 from spacearm.controller.impedance.config import load_impedance
 from spacearm.controller.impedance.mode import ImpedanceMode
 from spacearm.base.kinematics import KinematicData, KinematicModel, solve_ik
-from spacearm.base.kinematics.transforms import rotvec_to_matrix
+from spacearm.base.spatial import rotvec_to_matrix
 from spacearm.controller.oru.config import load_changeout
 from spacearm.controller.oru.flow import FlowContext, _contact_step
 from spacearm.firmware_sim.contact.config import ContactConfig

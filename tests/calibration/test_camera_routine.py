@@ -18,7 +18,7 @@ from spacearm.controller.calibration.laser_routine import CalibrationRunError
 from spacearm.base.config.arm import load_arm_config
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.base.kinematics.transforms import inv_transform, xyz_rpy_to_transform
+from spacearm.base.spatial import inv_transform, xyz_rpy_to_transform
 from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import load_camera, load_mount
 from spacearm.base.vision.frames import LocalFrameSource

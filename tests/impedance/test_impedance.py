@@ -10,7 +10,7 @@ import pytest
 from spacearm.base.config.errors import ConfigError
 from spacearm.controller.impedance import Admittance, GravityModel, ImpedanceParams, load_impedance
 from spacearm.controller.impedance.config import DEFAULT_IMPEDANCE
-from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.base.spatial import rpy_to_matrix
 from spacearm.offline.contact.trials import ContactTrials, run_stiffness_direct
 
 

@@ -13,7 +13,7 @@ from spacearm.base.config.arm import load_arm_config
 from spacearm.base.config.scene import load_scene
 from spacearm.controller.daemon.core import ControllerCore
 from spacearm.controller.daemon.modes import HoldMode
-from spacearm.controller.daemon.state import DeviceEvent, Measurement
+from spacearm.controller.cycle import DeviceEvent, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.controller.impedance.config import load_impedance
 from spacearm.base.kinematics import KinematicData, KinematicModel, fk

@@ -7,7 +7,7 @@ import pytest
 from spacearm.base.kinematics.model import load_model
 from spacearm.base.kinematics.pose_error import position_error, rotation_error
 from spacearm.controller.planning.errors import PlanningError
-from spacearm.base.kinematics.transforms import rpy_to_matrix
+from spacearm.base.spatial import rpy_to_matrix
 from spacearm.controller.planning.motion_planner import MotionPlanner
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,7 +12,7 @@ from spacearm.controller.daemon.approach_mode import marker_T_goal
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
 from spacearm.base.kinematics.inverse import solve_ik
 from spacearm.base.kinematics.model import KinematicData
-from spacearm.base.kinematics.transforms import matrix_to_rpy
+from spacearm.base.spatial import matrix_to_rpy
 from spacearm.base.vision.frames import LocalFrameSource
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
 from spacearm.firmware_sim.camera.service import marker_sites

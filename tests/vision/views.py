@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacearm.base.kinematics.transforms import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
+from spacearm.base.spatial import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
 
 # the marker's z axis points at the camera: camera z = -marker z
 _FACING = xyz_rpy_to_transform((0.0, 0.0, 0.0), (np.pi, 0.0, 0.0))[:3, :3]
