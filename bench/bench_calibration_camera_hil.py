@@ -31,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from spacearm.console.arm_session import DaemonArm  # noqa: E402
 from spacearm.console.client import ApiClient  # noqa: E402
 from spacearm.console.commands.calibrate import attach_ring, settled_frame_grabber  # noqa: E402
-from spacearm.controller.calibration.board import load_board  # noqa: E402
+from spacearm.base.config.board import load_board  # noqa: E402
 from spacearm.controller.calibration.camera_routine import (run_camera_calibration, score_against_truth,  # noqa: E402
                                                    setup_from_files)
 from spacearm.controller.calibration.validation import compare_poses  # noqa: E402

@@ -1,4 +1,4 @@
-"""pyserial driver of the end-effector laser ranger (protocol in firmware_sim/laser_ranger.py).
+"""pyserial driver of the end-effector laser ranger (protocol in base/laser_ranger_protocol.py).
 
 `measure()` returns metres; a "beam misses" reply raises `NoHit` (not retried: it is a valid
 answer); timeouts and garbled replies (bad checksum, wrong format, wrong reply type) are retried
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import serial
 
-from spacearm.firmware_sim.laser_ranger import frame, parse_frame
+from spacearm.base.laser_ranger_protocol import frame, parse_frame
 
 
 class RangerError(Exception):

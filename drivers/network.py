@@ -39,7 +39,7 @@ from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_con
 from spacearm.base.canopen.cia402_defs import State
 from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, EndEffectorState, FtDriver,
                              FtState, JointDriver, JointState)
-from spacearm.base.canopen.eds import load_od
+from spacearm.base.canopen.eds import EdsError, load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
 from spacearm.base.transport import open_bus
 
@@ -143,7 +143,10 @@ class ArmNetwork:
         self.ft: FtDriver | None = None
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
         for cfg in self.config.nodes:
-            object_dictionary = load_od(cfg.eds_path, cfg.node_id)
+            try:
+                object_dictionary = load_od(cfg.eds_path, cfg.node_id)
+            except EdsError as exc:
+                raise BootError(f"{cfg.name}: {exc}") from None
             driver = DRIVERS[cfg.device](cfg, self.config.bus, object_dictionary)
             self.drivers[cfg.name] = driver
             self.health[cfg.name] = NodeHealth(cfg.name, cfg.node_id)

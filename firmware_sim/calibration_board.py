@@ -13,7 +13,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from spacearm.controller.calibration.board import BoardConfig
+from spacearm.base.config.board import BoardConfig
 
 SHIFT = 4                 # fractional bits of the polygon vertices
 EDGE_STEPS = 6            # segments per square edge

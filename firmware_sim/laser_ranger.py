@@ -1,15 +1,6 @@
 """Simulated end-effector laser ranger on a pseudo-terminal (os.openpty).
 
-Protocol (ASCII lines, NMEA-style checksum), 115200 8N1 nominal:
-
-    frame    = "$" body "*" CS "\\r\\n"
-    CS       = two upper-case hex digits, XOR of every byte of body
-    requests = MEAS | INFO | PING
-    replies  = D,<distance mm, 3 decimals>      valid reading
-               E,NOHIT                          beam misses the target or out of range
-               I,<model>,<min mm>,<max mm>,<sigma mm>
-               P,OK
-               E,BADCS | E,UNKNOWN | E,FORMAT   request rejected
+Protocol: base/laser_ranger_protocol.py (ASCII lines, NMEA-style checksum), 115200 8N1 nominal.
 
 The true distance comes from a callable (None = the beam misses, e.g. not on the plane).
 Readings get N(0, sigma) noise (0.2 mm by default, as in the laser-ranger paper). Fault injection
@@ -26,33 +17,9 @@ from typing import Callable, Optional
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
+from spacearm.base.laser_ranger_protocol import frame, parse_frame
+
 MODEL = "SIM-LR1"
-
-
-def checksum(body: bytes) -> int:
-    cs = 0
-    for b in body:
-        cs ^= b
-    return cs
-
-
-def frame(body: str) -> bytes:
-    raw = body.encode("ascii")
-    return b"$" + raw + b"*" + f"{checksum(raw):02X}".encode() + b"\r\n"
-
-
-def parse_frame(line: bytes) -> Optional[str]:
-    """Body of a well-formed frame with a correct checksum, else None."""
-    line = line.strip()
-    if len(line) < 4 or not line.startswith(b"$") or line[-3:-2] != b"*":
-        return None
-    body, cs = line[1:-3], line[-2:]
-    try:
-        if int(cs, 16) != checksum(body):
-            return None
-        return body.decode("ascii")
-    except (ValueError, UnicodeDecodeError):
-        return None
 
 
 @dataclass

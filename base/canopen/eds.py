@@ -6,10 +6,7 @@ from pathlib import Path
 
 import canopen
 
-from spacearm.drivers.errors import DriverError
-
-
-class EdsError(DriverError):
+class EdsError(Exception):
     """An EDS file that cannot be read or parsed; the message names the file."""
 
 

@@ -278,7 +278,7 @@ def register(app: typer.Typer) -> None:
                 raise CommandFailed(str(exc)) from None
         scores = None
         if truth is not None:
-            from spacearm.controller.calibration.board import load_board
+            from spacearm.base.config.board import load_board
             from spacearm.firmware_sim.plant import load_plant_config
             board = load_board(board_file)
             scores = score_against_truth(st, result, load_plant_config(truth).geometry.true_model(),

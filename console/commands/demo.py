@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
                                           api=None, record_dir=record_dir))
             started = time.monotonic()
             daemon.start()
-            console.print(f"CAN network up: {len(daemon.network.drivers)} nodes booted, configured by SDO "
+            console.print(f"CAN network up: {daemon.hardware.node_count} nodes booted, configured by SDO "
                           f"and operational in {time.monotonic() - started:.2f} s")
             cycle_thread = threading.Thread(target=daemon.run, name="control-cycle", daemon=True)
             cycle_thread.start()

@@ -38,7 +38,7 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
 
     board_config = None
     if board is not None:
-        from spacearm.controller.calibration.board import load_board
+        from spacearm.base.config.board import load_board
         try:
             if not camera:
                 raise ValueError("--board needs --camera (the board is only seen through the camera)")

@@ -33,7 +33,8 @@ from typing import Callable, Optional
 import numpy as np
 from numpy.typing import NDArray
 
-from spacearm.controller.calibration.board import DEFAULT_BOARD, BoardConfig, BoardNotFound, board_pose, load_board
+from spacearm.base.config.board import DEFAULT_BOARD, BoardConfig, load_board
+from spacearm.controller.calibration.board import BoardNotFound, board_pose
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.fr3 import camera_covariances
 from spacearm.controller.calibration.identifiability import find_identifiable, identifiability_jacobian

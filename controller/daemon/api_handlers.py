@@ -19,7 +19,7 @@ from spacearm.base.config.loader import format_location
 from spacearm.controller.daemon.command_api import ApiError, Session
 from spacearm.controller.daemon.core import CommandRefused, ControllerCore
 from spacearm.controller.daemon.leases import ControlLease, LeaseError
-from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.modes import PlannedMode
 from spacearm.controller.daemon.watchdog import KeepAliveMode
 from spacearm.controller.planning.errors import PlanningError
 

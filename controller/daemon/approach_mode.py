@@ -39,9 +39,8 @@ import numpy as np
 
 from spacearm.base.config.arm import CartesianLimits
 from spacearm.base.config.scene import SceneConfig
-from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.cycle import Measurement
-from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.modes import ModeBase
+from spacearm.controller.cycle import Finding, FindingCode, Measurement
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
@@ -106,8 +105,8 @@ class ApproachMode(ModeBase):
         self._data = KinematicData(self.model)
         self._v_joint = np.asarray(self.model.v_max, float)
 
-    # ------------------------------------------------------------------ Mode protocol
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    # ------------------------------------------------------------------ Mode (update() in ModeBase)
+    def _next_setpoint(self, t: float, m: Measurement) -> JointSetpoint:
         if self._q is None:
             self._q = m.q.copy()
             self._started_at = t
@@ -139,25 +138,22 @@ class ApproachMode(ModeBase):
         self._q = self._q + dq * self.period
         return JointSetpoint(self._q.copy(), dq, np.zeros_like(dq))
 
-    def finished(self, t: float) -> bool:
+    def _finished(self, t: float) -> bool:
         return self._done
 
-    def progress(self, t: float) -> float:
+    def _progress(self, t: float) -> float:
         if self._err0 is None or self.measured_error is None or self._err0 <= 0:
             return 0.0
         return float(np.clip(1.0 - self.measured_error[0] / self._err0, 0.0, 1.0))
-
-    def failure(self) -> Finding | None:
-        return self._failure
 
     # ------------------------------------------------------------------ vision
     def _take_vision(self, t: float) -> None:
         latest = self.vision.latest()
         if latest is None or latest is self._seen:
             if self._last_frame_time is None and t - self._started_at > self.tuning.no_frame_timeout:
-                self._fail("vision_lost", f"no camera frame within {self.tuning.no_frame_timeout:.0f} s")
+                self._fail(FindingCode.VISION_LOST, f"no camera frame within {self.tuning.no_frame_timeout:.0f} s")
             elif self._last_frame_time is not None and t - self._last_frame_time > self.tuning.no_frame_timeout:
-                self._fail("vision_lost", f"no camera frame for {t - self._last_frame_time:.1f} s")
+                self._fail(FindingCode.VISION_LOST, f"no camera frame for {t - self._last_frame_time:.1f} s")
             return
         self._seen = latest
         result, sync = latest
@@ -169,7 +165,7 @@ class ApproachMode(ModeBase):
             self._bad_frames += 1
             self._last_failure = f"{result.reason}: {result.message}"
             if self._bad_frames >= self.tuning.lost_frames:
-                self._fail("vision_lost", f"marker lost for {self._bad_frames} frames ({self._last_failure})")
+                self._fail(FindingCode.VISION_LOST, f"marker lost for {self._bad_frames} frames ({self._last_failure})")
             return
         self._bad_frames = 0
         q_exp, still = entry
@@ -181,12 +177,12 @@ class ApproachMode(ModeBase):
         if self._err0 is None:
             self._err0 = pos
             if pos > self.tuning.max_start_distance:
-                self._fail("too_far", f"target {self.target} is {pos:.3f} m from the tool "
+                self._fail(FindingCode.TOO_FAR, f"target {self.target} is {pos:.3f} m from the tool "
                            f"(> {self.tuning.max_start_distance} m): move closer open-loop first")
                 return
         self._err_min = min(self._err_min, pos)
         if pos > self._err_min + self.tuning.grow_margin:
-            self._fail("error_grows", f"remaining error grew to {pos * 1e3:.1f} mm "
+            self._fail(FindingCode.ERROR_GROWS, f"remaining error grew to {pos * 1e3:.1f} mm "
                        f"(smallest {self._err_min * 1e3:.1f} mm)")
             return
         self.goal = goal

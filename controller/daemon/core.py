@@ -16,9 +16,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from spacearm.controller.daemon.modes import HoldMode, Mode
-from spacearm.controller.cycle import JointCommand, Measurement
-from spacearm.controller.daemon.supervision import Finding, Supervisor
+from spacearm.controller.cycle import (NODE_FINDINGS, Command, Finding, FindingCode, MachineState, Measurement, Mode,
+                                       ModeOutput)
+from spacearm.controller.daemon.supervision import Supervisor
+from spacearm.controller.modes import HoldMode
 from spacearm.controller.planning.errors import PlanningError
 
 ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
@@ -53,8 +54,9 @@ class ControllerCore:
         self.motions_started = 0
         self.motions_finished = 0
         self.joint_names = joint_names
-        self.state = "disabled"
+        self.state = MachineState.DISABLED
         self.mode: Mode | None = None
+        self.mode_output: ModeOutput | None = None   # the current mode's answer of the last cycle
         self.stop_reason: Finding | None = None
         self.events: list[Event] = []           # new events since the last drain
         self.last_target: np.ndarray | None = None
@@ -62,6 +64,14 @@ class ControllerCore:
         self._enable_started = 0.0
         self._pending: "queue.Queue[_Pending]" = queue.Queue()
         self._lock = threading.Lock()
+
+    @property
+    def state(self) -> MachineState:
+        return self._state
+
+    @state.setter
+    def state(self, value: MachineState | str) -> None:
+        self._state = MachineState(value)    # a misspelt state fails where it is set
 
     # ---- called from the API threads -------------------------------------------------
     def submit(self, apply: Callable[[float, Measurement], Any], timeout: float = 2.0) -> Any:
@@ -71,58 +81,64 @@ class ControllerCore:
         return pending.future.result(timeout=timeout)
 
     # ---- called by the cycle ----------------------------------------------------------
-    def update(self, m: Measurement) -> JointCommand:
+    def update(self, m: Measurement) -> Command:
         self.last_measurement = m
         self._apply_pending(m)
-        moving = self.state == "enabled" and self.mode is not None and self.mode.moving
-        if self.state in ("enabled", "enabling"):
+        moving = self.state is MachineState.ENABLED and self.mode is not None and self.mode.moving
+        if self.state in (MachineState.ENABLED, MachineState.ENABLING):
             findings = self.supervisor.check(m, self.last_target, moving)
         else:
             # Disabled or stopped: still watch the nodes, but not motion-related limits.
-            findings = [f for f in self.supervisor.check(m, None, False)
-                        if f.code in ("heartbeat_lost", "emcy", "bootup", "pdo_missing", "ft_frozen")]
-        if findings and self.state != "stopped":
+            findings = [f for f in self.supervisor.check(m, None, False) if f.code in NODE_FINDINGS]
+        if findings and self.state is not MachineState.STOPPED:
             self.protective_stop(m.time, findings[0])
             for extra in findings[1:]:
                 self._event(m.time, "finding", extra.message)
-        if self.state == "enabling":
+        if self.state is MachineState.ENABLING:
             if np.all(m.joints_enabled):
-                self.state = "enabled"
-                self.mode = HoldMode(m.q.copy())
+                self.state = MachineState.ENABLED
+                self._set_mode(HoldMode(m.q.copy()))
                 self._event(m.time, "state", "all joints enabled")
             elif m.time - self._enable_started > ENABLE_TIMEOUT:
                 slow = [n for n, ok in zip(self.joint_names, m.joints_enabled) if not ok]
-                self.protective_stop(m.time, Finding("enable_timeout",
-                                     f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}"))
+                self.protective_stop(m.time, Finding(FindingCode.ENABLE_TIMEOUT,
+                                     f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}",
+                                     joint=slow[0] if slow else None))
         command = self._command(m)
         self.motion_time += self.period
         return command
 
-    def _command(self, m: Measurement) -> JointCommand:
-        if self.state == "enabled" and self.mode is not None:
+    def _command(self, m: Measurement) -> Command:
+        if self.state is MachineState.ENABLED and self.mode is not None:
             mode = self.mode
-            setpoint = mode.setpoint(self.motion_time, m)
-            failure = mode.failure()
-            if failure is not None:
+            out = mode.update(self.motion_time, m)
+            self.mode_output = out
+            if out.failure is not None:
                 # The mode cannot go on safely (lost marker, capture not confirmed, ...).
-                self.protective_stop(m.time, failure)
+                self.protective_stop(m.time, out.failure)
                 self.last_target = None
-                return JointCommand(m.q.copy(), np.zeros_like(m.q), enable=False)
-            devices = mode.device_commands()
-            if mode.moving and mode.finished(self.motion_time):
+                return Command(m.q.copy(), np.zeros_like(m.q), enable=False)
+            setpoint = out.setpoint
+            if mode.moving and out.finished:
                 self._event(m.time, "motion", f"{mode.name} finished")
                 self.motions_finished = self.motions_started
-                self.mode = HoldMode(setpoint.q.copy())
+                self._set_mode(HoldMode(setpoint.q.copy()))
             self.last_target = setpoint.q.copy()
-            return JointCommand(setpoint.q.copy(), setpoint.dq.copy(), enable=True,
-                                end_effector=devices.get("end_effector"))
+            return Command(setpoint.q.copy(), setpoint.dq.copy(), enable=True, end_effector=out.end_effector)
         # Not enabled: targets follow the measurement so enabling never causes a jump.
         self.last_target = None
-        return JointCommand(m.q.copy(), np.zeros_like(m.q), enable=self.state == "enabling")
+        return Command(m.q.copy(), np.zeros_like(m.q), enable=self.state is MachineState.ENABLING)
+
+    def _set_mode(self, mode: Mode | None) -> None:
+        self.mode = mode
+        self.mode_output = None
+
+    def mode_progress(self) -> float:
+        return self.mode_output.progress if self.mode_output is not None else 0.0
 
     def protective_stop(self, t: float, finding: Finding) -> None:
-        self.state = "stopped"
-        self.mode = None
+        self.state = MachineState.STOPPED
+        self._set_mode(None)
         self.stop_reason = finding
         self._event(t, "protective_stop", finding.message)
 
@@ -150,9 +166,9 @@ class ControllerCore:
 
     # ---- commands (run inside the cycle via submit) ------------------------------------
     def cmd_enable(self, t: float, m: Measurement) -> str:
-        if self.state == "stopped":
+        if self.state is MachineState.STOPPED:
             raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first")
-        if self.state in ("enabling", "enabled"):
+        if self.state in (MachineState.ENABLING, MachineState.ENABLED):
             return self.state
         faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
         if faulted:
@@ -160,40 +176,40 @@ class ControllerCore:
             # enabling into a "drive in fault" protective stop.
             raise CommandRefused(f"drive fault on {', '.join(faulted)}: reset first "
                                  "(right after a reset: try again in a moment)")
-        self.state = "enabling"
+        self.state = MachineState.ENABLING
         self._enable_started = t
         self._event(t, "state", "enabling joints")
-        return "enabling"
+        return self.state
 
     def cmd_disable(self, t: float, m: Measurement) -> str:
-        if self.state != "stopped":
-            self.state = "disabled"
-            self.mode = None
+        if self.state is not MachineState.STOPPED:
+            self.state = MachineState.DISABLED
+            self._set_mode(None)
             self._event(t, "state", "disabled, brakes on")
         return self.state
 
     def cmd_stop(self, t: float, m: Measurement) -> str:
-        self.protective_stop(t, Finding("operator_stop", "stop commanded by the operator"))
+        self.protective_stop(t, Finding(FindingCode.OPERATOR_STOP, "stop commanded by the operator"))
         return self.state
 
     def cmd_reset(self, t: float, m: Measurement) -> str:
-        if self.state != "stopped":
+        if self.state is not MachineState.STOPPED:
             faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
-            if faulted and self.state == "disabled":
+            if faulted and self.state is MachineState.DISABLED:
                 # e.g. after a daemon restart: the drives faulted when the controller vanished
                 self._event(t, "reset", f"fault reset of {', '.join(faulted)}")
             return self.state
-        self.state = "disabled"
+        self.state = MachineState.DISABLED
         self._event(t, "reset", f"reset after: {self.stop_reason}")
         self.stop_reason = None
         return self.state
 
     def motion_start(self, t: float, m: Measurement) -> np.ndarray:
         """Where the next motion must start: the current target. Refuses if not ready."""
-        if self.state != "enabled":
-            raise CommandRefused(f"arm is {self.state}; enable it first" if self.state != "stopped"
+        if self.state is not MachineState.ENABLED:
+            raise CommandRefused(f"arm is {self.state}; enable it first" if self.state is not MachineState.STOPPED
                                  else f"protective stop active ({self.stop_reason}); reset first")
-        if self.mode is not None and self.mode.moving and not self.mode.finished(self.motion_time):
+        if self.mode is not None and self.mode.moving and not (self.mode_output is not None and self.mode_output.finished):
             raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait")
         return (self.last_target if self.last_target is not None else m.q).copy()
 
@@ -204,7 +220,7 @@ class ControllerCore:
         if planned_from is not None and not np.allclose(start, planned_from, atol=1e-9, rtol=0):
             raise CommandRefused("the arm moved while the motion was being planned; send it again")
         mode.start = self.motion_time
-        self.mode = mode
+        self._set_mode(mode)
         self.motions_started += 1
         self._event(t, "motion", f"{mode.name} started: {mode.description}")
         plan = getattr(mode, "plan", None)

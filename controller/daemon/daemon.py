@@ -24,14 +24,13 @@ from spacearm.controller.daemon.core import ControllerCore, Event
 from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
 from spacearm.controller.daemon.leases import ControlLease
-from spacearm.controller.daemon.modes import Mode
+from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
-from spacearm.controller.cycle import JointCommand, Measurement
+from spacearm.controller.cycle import Command, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, load_bus_config
-from spacearm.drivers.network import ArmNetwork
 from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
 
 
@@ -61,7 +60,7 @@ class Snapshot:
     """What the API shows; replaced whole every cycle, never mutated."""
     tick: Tick
     measurement: Measurement
-    command: JointCommand
+    command: Command
     state: str
     mode: str | None
     progress: float
@@ -82,16 +81,15 @@ class Daemon:
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
         bus_config = with_drive_limits(load_bus_config(options.bus_config), self.model.q_min, self.model.q_max)
-        self.network = ArmNetwork(options.bus, bus_config)
-        if len(self.network.joints) != self.model.nq:
-            raise ValueError(f"bus config {options.bus_config} has {len(self.network.joints)} joint drives, "
-                             f"arm {options.arm} has {self.model.nq} joints")
         lockstep = options.clock == "lockstep"
         # Real time: wait for this SYNC's TPDOs at most 40 % of the period (8 ms at 20 ms),
         # leaving the rest to compute and write; a silent node costs a bounded share of the
         # cycle and shows up as missing data.
-        self.hardware = CanopenHardware(self.network, lockstep=lockstep,
+        self.hardware = CanopenHardware(options.bus, bus_config, lockstep=lockstep,
                                         realtime_budget=0.4 * options.period)
+        if self.hardware.dof != self.model.nq:
+            raise ValueError(f"bus config {options.bus_config} has {self.hardware.dof} joint drives, "
+                             f"arm {options.arm} has {self.model.nq} joints")
         self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
         # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
         # A factory builds a Mode from validated arguments; composite modes (the ORU task
@@ -107,7 +105,7 @@ class Daemon:
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
                                         RecordingControl(self), self.model.nq)
         self.handlers.mode_factories = self.mode_factories   # the same dict: "approach" once a camera is attached
-        from spacearm.controller.oru.install import install_oru   # here: it imports the daemon's handler types
+        from spacearm.controller.daemon.oru_commands import install_oru   # here: it imports the daemon's handler types
         self.oru = install_oru(self)                      # "impedance", "oru" modes and oru.* commands
         self.server: CommandServer | None = None
         if options.api:
@@ -176,16 +174,16 @@ class Daemon:
         tick = self.clock.next_tick()
         measurement = self.hardware.read(tick.time)
         command = self.core.update(measurement)
-        self.hardware.write(command, protective_stop=self.core.state == "stopped")
+        self.hardware.write(command, protective_stop=self.core.state is MachineState.STOPPED)
         events = self.core.drain_events()
         if any(e.kind == "reset" for e in events):
-            self.network.fault_reset()
+            self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
         mode = self.core.mode
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
-                            mode.progress(self.core.motion_time) if mode is not None else 0.0,
+                            self.core.mode_progress(),
                             self.core.stop_reason.message if self.core.stop_reason else None,
                             self.core.motions_finished)
         self.snapshot = snapshot
@@ -260,7 +258,7 @@ class Daemon:
             "control": {"held": self.lease.held, "holder": self.lease.holder},
             "recording": vars(recorder.info()) if (recorder := self.recorder) else None,
             "events": list(self.event_log),
-            "network": vars(self.network.stats),
+            "network": self.hardware.statistics(),
         }
 
     def _session_closed(self, session: Session) -> None:

@@ -11,8 +11,9 @@ import time as time_module
 
 import numpy as np
 
-from spacearm.controller.cycle import DeviceEvent, JointCommand, Measurement
+from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.bus import BusConfig, JointSettings
+from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 
 # The drives' own position limits (607Dh) sit this far outside the arm file's limits, beyond
@@ -21,8 +22,8 @@ from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 DRIVE_LIMIT_MARGIN = 0.05  # rad
 
 # Network event kinds the supervisor treats as faults (others are informational).
-FAULT_EVENTS = {"heartbeat_lost": "heartbeat_lost", "bootup": "bootup", "emcy": "emcy",
-                "fault_reset_failed": "fault"}
+FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingCode.BOOTUP, "emcy": FindingCode.EMCY,
+                "fault_reset_failed": FindingCode.FAULT}
 
 
 def with_drive_limits(bus: BusConfig, q_min, q_max) -> BusConfig:
@@ -40,8 +41,10 @@ def with_drive_limits(bus: BusConfig, q_min, q_max) -> BusConfig:
 
 
 class CanopenHardware:
-    def __init__(self, network: ArmNetwork, lockstep: bool, realtime_budget: float = 0.005):
-        self.network = network
+    """The one owner of the CAN network in the daemon (boot, SYNC, PDOs, fault reset, statistics)."""
+
+    def __init__(self, bus: str, bus_config: BusConfig, lockstep: bool, realtime_budget: float = 0.005):
+        self.network = ArmNetwork(bus, bus_config)
         self.lockstep = lockstep
         self.realtime_budget = realtime_budget
         self._enabled = False
@@ -56,8 +59,18 @@ class CanopenHardware:
     def joint_names(self) -> list[str]:
         return [j.name for j in self.network.joints]
 
+    @property
+    def node_count(self) -> int:
+        return len(self.network.drivers)
+
     def start(self, boot_timeout: float | None = None) -> None:
         self.network.boot(boot_timeout)
+
+    def fault_reset(self) -> None:
+        self.network.fault_reset()
+
+    def statistics(self) -> dict:
+        return dict(vars(self.network.stats))
 
     def read(self, time: float) -> Measurement:
         sync = self.network.send_sync()
@@ -92,10 +105,11 @@ class CanopenHardware:
             joints_enabled=np.array([j.enabled for j in joints]),
             joints_faulted=np.array([j.fault for j in joints]),
             wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
-            end_effector=state.end_effector.state.name.lower() if state.end_effector else "none",
+            end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
+                          else EndEffectorState.NONE),
             events=events, missing=missing)
 
-    def write(self, command: JointCommand, protective_stop: bool) -> None:
+    def write(self, command: Command, protective_stop: bool) -> None:
         if command.enable and not self._enabled:
             for joint in self.network.joints:
                 joint.axis.enable()
@@ -107,7 +121,8 @@ class CanopenHardware:
         self._enabled = command.enable
         self.network.write(ArmCommand(joint_positions=list(command.q),
                                       joint_velocities=list(command.dq) if len(command.dq) else None,
-                                      end_effector=command.end_effector))
+                                      end_effector=(EeCommand[command.end_effector.name] if command.end_effector
+                                                    else None)))
 
     def stop(self) -> None:
         self.network.shutdown()

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacearm.controller.cycle import Measurement
+from spacearm.controller.cycle import Finding, FindingCode, Measurement
 
 
 @dataclass(frozen=True)
@@ -37,13 +37,8 @@ class SupervisionLimits:
     ft_live_changes: int = 3
 
 
-@dataclass(frozen=True)
-class Finding:
-    code: str      # short machine-readable reason, e.g. "position_limit"
-    message: str   # what a person needs to know, with joint names and values
-
-    def __str__(self) -> str:
-        return self.message
+EVENT_LABELS = {FindingCode.HEARTBEAT_LOST: "heartbeat lost", FindingCode.EMCY: "emergency message",
+                FindingCode.FAULT: "drive fault", FindingCode.BOOTUP: "unexpected boot-up (node restarted)"}
 
 
 class Supervisor:
@@ -60,41 +55,40 @@ class Supervisor:
         lim = self.limits
         findings: list[Finding] = []
         for event in m.events:
-            if event.kind in ("heartbeat_lost", "emcy", "fault", "bootup"):
-                label = {"heartbeat_lost": "heartbeat lost", "emcy": "emergency message",
-                         "fault": "drive fault", "bootup": "unexpected boot-up (node restarted)"}
+            label = EVENT_LABELS.get(event.kind)
+            if label is not None:
                 detail = f": {event.detail}" if event.detail else ""
-                findings.append(Finding(event.kind, f"{event.node}: {label[event.kind]}{detail}"))
+                findings.append(Finding(event.kind, f"{event.node}: {label}{detail}", node=event.node))
         for node in list(self._missing_count):
             if node not in m.missing:
                 del self._missing_count[node]
         for node in m.missing:
             self._missing_count[node] = self._missing_count.get(node, 0) + 1
             if self._missing_count[node] >= lim.missing_pdo_cycles:
-                findings.append(Finding("pdo_missing", f"{node}: no process data for "
-                                        f"{self._missing_count[node]} cycles"))
+                findings.append(Finding(FindingCode.PDO_MISSING, f"{node}: no process data for "
+                                        f"{self._missing_count[node]} cycles", node=node))
         for i in np.flatnonzero(m.joints_faulted):
-            findings.append(Finding("fault", f"{self.names[i]}: drive in fault"))
+            findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
         low = m.q < lim.q_min - lim.position_margin
         high = m.q > lim.q_max + lim.position_margin
         for i in np.flatnonzero(low | high):
             bound = lim.q_min[i] if low[i] else lim.q_max[i]
-            findings.append(Finding("position_limit", f"{self.names[i]}: position {m.q[i]:.4f} rad "
-                                    f"beyond limit {bound:.4f} rad"))
+            findings.append(Finding(FindingCode.POSITION_LIMIT, f"{self.names[i]}: position {m.q[i]:.4f} rad "
+                                    f"beyond limit {bound:.4f} rad", joint=self.names[i]))
         for i in np.flatnonzero(np.abs(m.dq) > lim.v_max * (1.0 + lim.velocity_tolerance)):
-            findings.append(Finding("velocity_limit", f"{self.names[i]}: velocity {m.dq[i]:.4f} rad/s "
-                                    f"above limit {lim.v_max[i]:.4f} rad/s"))
+            findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} rad/s "
+                                    f"above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
         if moving and last_target is not None:
             error = np.abs(last_target - m.q)
             for i in np.flatnonzero(error > lim.following_error):
-                findings.append(Finding("following_error", f"{self.names[i]}: following error "
-                                        f"{error[i]:.4f} rad above {lim.following_error:.4f} rad"))
+                findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
+                                        f"{error[i]:.4f} rad above {lim.following_error:.4f} rad", joint=self.names[i]))
         force = float(np.linalg.norm(m.wrench[:3]))
         torque = float(np.linalg.norm(m.wrench[3:]))
         if m.wrench_overload:
-            findings.append(Finding("ft_overload", "force/torque sensor: overload flag set"))
+            findings.append(Finding(FindingCode.FT_OVERLOAD, "force/torque sensor: overload flag set"))
         elif force > lim.wrench_force_limit or torque > lim.wrench_torque_limit:
-            findings.append(Finding("ft_limit", f"force/torque {force:.1f} N / {torque:.2f} N m above "
+            findings.append(Finding(FindingCode.FT_LIMIT, f"force/torque {force:.1f} N / {torque:.2f} N m above "
                                     f"limits {lim.wrench_force_limit:.0f} N / {lim.wrench_torque_limit:.0f} N m"))
         findings.extend(self._check_ft_signal(m))
         return findings
@@ -114,7 +108,7 @@ class Supervisor:
         step = m.wrench - last
         df, dt = float(np.linalg.norm(step[:3])), float(np.linalg.norm(step[3:]))
         if df > lim.ft_jump_force or dt > lim.ft_jump_torque:
-            findings.append(Finding("ft_jump", f"force/torque sensor: reading jumped by {df:.1f} N / "
+            findings.append(Finding(FindingCode.FT_JUMP, f"force/torque sensor: reading jumped by {df:.1f} N / "
                                     f"{dt:.2f} N m in one cycle (limits {lim.ft_jump_force:.0f} N / "
                                     f"{lim.ft_jump_torque:.0f} N m)"))
         if np.array_equal(step, np.zeros(6)):
@@ -126,6 +120,6 @@ class Supervisor:
             self._wrench_changes += 1
             self._ft_live = self._ft_live or self._wrench_changes >= lim.ft_live_changes
         if lim.ft_frozen_cycles > 0 and self._ft_live and self._wrench_same >= lim.ft_frozen_cycles:
-            findings.append(Finding("ft_frozen", f"force/torque sensor: reading frozen (identical for "
+            findings.append(Finding(FindingCode.FT_FROZEN, f"force/torque sensor: reading frozen (identical for "
                                     f"{self._wrench_same} cycles)"))
         return findings

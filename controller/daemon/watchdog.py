@@ -15,8 +15,9 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from spacearm.controller.daemon.modes import PlannedMode
-from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.cycle import Finding, FindingCode, Measurement
+from spacearm.controller.modes import PlannedMode
+from spacearm.controller.planning.joint_move import JointSetpoint
 
 JOG_KEEPALIVE = 1.0  # s without a request from the jogging console before a protective stop
 
@@ -28,15 +29,19 @@ class KeepAliveMode(PlannedMode):
     timeout: float = JOG_KEEPALIVE
     now: Callable[[], float] = time.monotonic
 
-    def failure(self) -> Finding | None:
+    def _next_setpoint(self, t: float, m: Measurement | None = None) -> JointSetpoint:
+        self._failure = self._silence()
+        return super()._next_setpoint(t, m)
+
+    def _silence(self) -> Finding | None:
         s = self.session
         if s is None:
             return None
         if s.closed.is_set():
-            return Finding("command_watchdog", f"{self.name}: the console that started it disconnected "
+            return Finding(FindingCode.COMMAND_WATCHDOG, f"{self.name}: the console that started it disconnected "
                            f"({s.peer}, session {s.id})")
         silent = self.now() - s.last_seen
         if silent > self.timeout:
-            return Finding("command_watchdog", f"{self.name}: no keep-alive from its console for "
+            return Finding(FindingCode.COMMAND_WATCHDOG, f"{self.name}: no keep-alive from its console for "
                            f"{silent:.1f} s (limit {self.timeout:.1f} s)")
         return None

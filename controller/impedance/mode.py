@@ -17,9 +17,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.cycle import Measurement
-from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.modes import ModeBase
+from spacearm.controller.cycle import Finding, FindingCode, Measurement
 from spacearm.controller.impedance.admittance import Admittance
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.gravity import GravityModel
@@ -101,8 +100,8 @@ class ImpedanceMode(ModeBase):
         self.peaks = ContactPeaks()
         self._failure: Finding | None = None
 
-    # ---- Mode protocol -----------------------------------------------------------------
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    # ---- Mode (update() in ModeBase) -----------------------------------------------------------------
+    def _next_setpoint(self, t: float, m: Measurement) -> JointSetpoint:
         zeros = np.zeros_like(self.q_cmd)
         if self._failure is not None:
             return JointSetpoint(self.q_cmd.copy(), zeros, zeros)
@@ -131,19 +130,16 @@ class ImpedanceMode(ModeBase):
         self.q_cmd = q_new
         return JointSetpoint(q_new.copy(), dq, zeros)
 
-    def finished(self, t: float) -> bool:
+    def _finished(self, t: float) -> bool:
         settle = 0 if self.task.stop == "force" else self.task.settle_cycles
         return self.stopped and self.settled >= settle and self._failure is None
 
-    def progress(self, t: float) -> float:
+    def _progress(self, t: float) -> float:
         if self.task.stop == "time":
             return min(1.0, self.elapsed / self.task.duration) if self.task.duration > 0 else 1.0
         if self.stopped:
             return 1.0
         return min(0.99, self.travelled / self.task.travel) if self.task.travel > 0 else 0.0
-
-    def failure(self) -> Finding | None:
-        return self._failure
 
     # ---- the loop's parts --------------------------------------------------------------
     def _task_wrench(self, T: np.ndarray, w_sensor: np.ndarray) -> np.ndarray:
@@ -164,7 +160,7 @@ class ImpedanceMode(ModeBase):
         if self.task.step != 0.0:
             pk.insert_force = max(pk.insert_force, float(-np.sign(self.task.step) * w[2]))
         if force > self.params.force_limit or torque > self.params.torque_limit:
-            self._failure = Finding("contact_force_limit",
+            self._failure = Finding(FindingCode.CONTACT_FORCE_LIMIT,
                                     f"{self.name}: contact wrench {force:.1f} N / {torque:.2f} N m beyond the "
                                     f"limits {self.params.force_limit:.0f} N / {self.params.torque_limit:.1f} N m")
             return True
@@ -197,7 +193,7 @@ class ImpedanceMode(ModeBase):
                 self.travelled = task.travel
                 self.stopped = True
             else:
-                self._failure = Finding("contact_missing", f"{self.name}: no contact force above "
+                self._failure = Finding(FindingCode.CONTACT_MISSING, f"{self.name}: no contact force above "
                                         f"{self.params.insert_force} N within {1e3 * task.travel:.0f} mm")
             return
         self.travelled += abs(task.step)
@@ -216,7 +212,7 @@ class ImpedanceMode(ModeBase):
     def _check_seat(self) -> None:
         task = self.task
         if task.seat_travel is not None and self.travelled < task.seat_travel - task.seat_tolerance:
-            self._failure = Finding("jammed", f"{self.name}: stopped by {self.params.insert_force} N after "
+            self._failure = Finding(FindingCode.JAMMED, f"{self.name}: stopped by {self.params.insert_force} N after "
                                     f"{1e3 * self.travelled:.1f} mm, short of the {1e3 * task.seat_travel:.1f} mm "
                                     f"to the seat (jammed or blocked)")
 

@@ -13,7 +13,8 @@ from typing import Callable
 import numpy as np
 
 from spacearm.base.config.scene import SceneConfig
-from spacearm.controller.daemon.modes import Mode, PlannedMode
+from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, Mode
+from spacearm.controller.modes import PlannedMode
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.gravity import GravityModel
 from spacearm.controller.impedance.mode import ContactTask
@@ -22,7 +23,6 @@ from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.controller.oru.config import ChangeoutConfig
 from spacearm.controller.oru.linear_move import LinearToolMove
 from spacearm.controller.oru.steps import ContactStep, EndEffectorStep, LatchStep, ModeStep, Step
-from spacearm.base.canopen.od import EeCommand
 
 TABLE_1 = {
     1: ("gets close to the ORU", "open loop path planning"),
@@ -123,7 +123,7 @@ def _approach_step(ctx: FlowContext, stage: int, number: int, store: str, placin
     return step
 
 
-def _contact_step(ctx: FlowContext, stage: int, number: int, store: str, kind: str) -> ContactStep:
+def contact_step(ctx: FlowContext, stage: int, number: int, store: str, kind: str) -> ContactStep:
     title, algorithm = TABLE_1[number]
     g = ctx.scene.geometry
     gap = ctx.config.motion.contact_gap
@@ -159,19 +159,19 @@ def stage_steps(ctx: FlowContext, stage: int, store: str) -> list[Step]:
             ModeStep(*t(1), background=True, wrap=_planned("free motion"),
                      make=lambda q0: _joint_move_to(ctx, ctx.above(store, ctx.contact_height(False) + view))(q0)),
             _approach_step(ctx, stage, 2, store, placing=False),
-            _contact_step(ctx, stage, 3, store, "capture"),
-            EndEffectorStep(*t(4), command=EeCommand.CLAMP, expect="locked", timeout=ee.clamp_timeout),
-            LatchStep(*t(5), command=EeCommand.LATCH_UNLOCK, wait=ee.latch_wait),
-            _contact_step(ctx, stage, 6, store, "extract"),
+            contact_step(ctx, stage, 3, store, "capture"),
+            EndEffectorStep(*t(4), command=EndEffectorCommand.CLAMP, expect=EndEffectorState.LOCKED, timeout=ee.clamp_timeout),
+            LatchStep(*t(5), command=EndEffectorCommand.LATCH_UNLOCK, wait=ee.latch_wait),
+            contact_step(ctx, stage, 6, store, "extract"),
         ]
     return [
         ModeStep(*t(7), background=True, wrap=_planned("free motion"),
                  make=lambda q0: _joint_move_to(ctx, ctx.above(store, ctx.contact_height(True) + view))(q0)),
         _approach_step(ctx, stage, 8, store, placing=True),
-        _contact_step(ctx, stage, 9, store, "insert"),
-        LatchStep(*t(10), command=EeCommand.LATCH_LOCK, wait=ee.latch_wait),
-        EndEffectorStep(*t(11), command=EeCommand.RELEASE, expect="open", timeout=ee.release_timeout),
-        _contact_step(ctx, stage, 12, store, "withdraw"),
+        contact_step(ctx, stage, 9, store, "insert"),
+        LatchStep(*t(10), command=EndEffectorCommand.LATCH_LOCK, wait=ee.latch_wait),
+        EndEffectorStep(*t(11), command=EndEffectorCommand.RELEASE, expect=EndEffectorState.OPEN, timeout=ee.release_timeout),
+        contact_step(ctx, stage, 12, store, "withdraw"),
         ModeStep(*t(13), background=True, wrap=_planned("free motion"),
                  make=lambda q0: _joint_move_to(ctx, None, ctx.q_initial)(q0)),
     ]

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacearm.controller.daemon.modes import ModeBase
+from spacearm.controller.modes import ModeBase
 from spacearm.controller.cycle import Measurement
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.jacobian import fk_jacobian
@@ -38,7 +38,7 @@ class LinearToolMove(ModeBase):
                             1.875 * float(np.linalg.norm(self.rotvec)) / angular_velocity, 4 * period)
         self.elapsed = 0.0
 
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    def _next_setpoint(self, t: float, m: Measurement) -> JointSetpoint:
         self.elapsed = min(self.duration, self.elapsed + self.period)
         s = quintic(self.elapsed / self.duration)[0]
         Xd = np.eye(4)
@@ -52,8 +52,8 @@ class LinearToolMove(ModeBase):
         self.q_cmd = q
         return JointSetpoint(q.copy(), dq, np.zeros_like(q))
 
-    def finished(self, t: float) -> bool:
+    def _finished(self, t: float) -> bool:
         return self.elapsed >= self.duration
 
-    def progress(self, t: float) -> float:
+    def _progress(self, t: float) -> float:
         return self.elapsed / self.duration

@@ -4,7 +4,7 @@ State: running -> (paused <-> running) -> done | aborted | failed. The runner ke
 clock, which stops while paused, so a paused free motion or contact resumes where it was; a
 paused runner holds the last joint target. Any step failure (force limit, capture not
 confirmed, end-effector fault or timeout, jammed insertion, planning refused, lost marker in
-the approach) is reported through `failure()`, and the daemon core makes a protective stop
+the approach) is reported in the runner's output, and the daemon core makes a protective stop
 (quick stop, brakes) and keeps the reason. Abort ends the flow holding the current target.
 """
 from __future__ import annotations
@@ -13,12 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from spacearm.controller.daemon.modes import ModeBase
-from spacearm.controller.cycle import Measurement
-from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.modes import ModeBase
+from spacearm.controller.cycle import Finding, Measurement, ModeOutput, hold
 from spacearm.controller.oru.flow import FlowContext, stage_steps
-from spacearm.controller.oru.steps import ContactStep, Step, hold
-from spacearm.controller.planning.joint_move import JointSetpoint
+from spacearm.controller.oru.steps import ContactStep, Step
 
 
 @dataclass
@@ -56,7 +54,7 @@ class OruTaskRunner(ModeBase):
         self.records: list[StepRecord] = []
         self._failure: Finding | None = None
         self._begun = False
-        self._last_t: float | None = None
+        self._step_progress = 0.0
 
     # ---- operator commands (run inside the cycle) ------------------------------------
     def pause(self) -> str:
@@ -74,14 +72,20 @@ class OruTaskRunner(ModeBase):
             self.state = "aborted"
         return self.state
 
-    # ---- Mode protocol -----------------------------------------------------------------
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    # ---- Mode ------------------------------------------------------------------------
+    def update(self, t: float, m: Measurement) -> ModeOutput:
+        """One cycle of the flow on the runner's own clock (which stops while paused)."""
+        out = self._advance(m)
+        return ModeOutput(out.setpoint, out.end_effector, self._failure, self.state in ("done", "aborted"),
+                          self.progress())
+
+    def _advance(self, m: Measurement) -> ModeOutput:
         period = self.ctx.impedance.period
         if self.state != "running" or self._failure is not None:
-            return hold(self.q_last)
+            return ModeOutput(hold(self.q_last))
         if self.index >= len(self.steps):
             self.state = "done"
-            return hold(self.q_last)
+            return ModeOutput(hold(self.q_last))
         step = self.steps[self.index]
         if not self._begun:
             step.begin(self.q_last, self.clock)
@@ -89,18 +93,18 @@ class OruTaskRunner(ModeBase):
                                            notes=list(step.notes)))
             self.ctx.notes += [f"stage {step.stage + 1} subtask {step.number}: {n}" for n in step.notes]
             self._begun = True
-        sp = step.setpoint(self.clock, m)
-        self.q_last = sp.q.copy()
-        failure = step.failure()
-        if failure is not None:
-            self._failure = failure
+        out = step.update(self.clock, m)
+        self._step_progress = out.progress
+        self.q_last = out.setpoint.q.copy()
+        if out.failure is not None:
+            self._failure = out.failure
             self.state = "failed"
             self._record(step)
-            return sp
-        if step.finished(self.clock):
+            return out
+        if out.finished:
             self._complete(step)
         self.clock += period
-        return sp
+        return out
 
     def _complete(self, step: Step) -> None:
         self._record(step)
@@ -124,24 +128,11 @@ class OruTaskRunner(ModeBase):
             rec.peak_force, rec.peak_torque = pk.force, pk.torque
             rec.peak_lateral_force, rec.peak_insert_force = pk.lateral_force, pk.insert_force
 
-    def device_commands(self) -> dict:
-        if self.state != "running" or self.index >= len(self.steps) or not self._begun:
-            return {}
-        return self.steps[self.index].device_commands()
-
-    def finished(self, t: float) -> bool:
-        return self.state in ("done", "aborted")
-
-    def progress(self, t: float) -> float:
-        if not self.steps:
+    def progress(self) -> float:
+        if not self.steps or self.state == "done":
             return 1.0
-        if self.state == "done":
-            return 1.0
-        current = self.steps[self.index].progress(self.clock) if self._begun and self.index < len(self.steps) else 0.0
+        current = self._step_progress if self._begun and self.index < len(self.steps) else 0.0
         return float(np.clip((self.index + current) / len(self.steps), 0.0, 1.0))
-
-    def failure(self) -> Finding | None:
-        return self._failure
 
     # ---- status ------------------------------------------------------------------------
     def current(self) -> Step | None:
@@ -150,7 +141,7 @@ class OruTaskRunner(ModeBase):
     def status(self) -> dict:
         step = self.current()
         return {
-            "state": self.state, "progress": self.progress(0.0), "time": self.clock,
+            "state": self.state, "progress": self.progress(), "time": self.clock,
             "subtask_index": self.index, "subtasks": len(self.steps),
             "stage": None if step is None else step.stage + 1,
             "stage_name": None if step is None else self.stage_names[step.stage],

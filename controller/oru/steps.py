@@ -12,20 +12,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from spacearm.controller.daemon.modes import Mode
-from spacearm.controller.cycle import Measurement
-from spacearm.controller.daemon.supervision import Finding
+from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, Finding, FindingCode, Measurement, Mode, ModeOutput, hold
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.mode import ContactTask, ImpedanceMode
-from spacearm.controller.planning.joint_move import JointSetpoint
-from spacearm.base.canopen.od import EeCommand
 
 _planner_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="oru-plan")
-
-
-def hold(q: np.ndarray) -> JointSetpoint:
-    zeros = np.zeros_like(q)
-    return JointSetpoint(q.copy(), zeros, zeros)
 
 
 @dataclass
@@ -43,31 +34,20 @@ class Step:
         self.q_hold = np.asarray(q, float).copy()
         self.started_at = t
 
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
-        return hold(self.q_hold)
+    def update(self, t: float, m: Measurement) -> ModeOutput:
+        """Advance the step by one cycle (the runner's clock t) and answer as a mode does."""
+        return ModeOutput(hold(self.q_hold), failure=self._failure, finished=self._failure is None, progress=1.0)
 
-    def finished(self, t: float) -> bool:
-        return True
-
-    def progress(self, t: float) -> float:
-        return 1.0 if self.finished(t) else 0.0
-
-    def failure(self) -> Finding | None:
-        return self._failure
-
-    def device_commands(self) -> dict:
-        return {}
-
-    def fail(self, code: str, message: str) -> None:
+    def fail(self, code: FindingCode, message: str) -> None:
         self._failure = Finding(code, f"stage {self.stage + 1} subtask {self.number} ({self.title}): {message}")
 
-    def _follow(self, mode, t: float, m: Measurement) -> JointSetpoint:
-        """The mode's setpoint; its first failure becomes this step's."""
-        sp = mode.setpoint(t, m)
-        failure = mode.failure()
-        if failure is not None and self._failure is None:
-            self.fail(failure.code, failure.message)
-        return sp
+    def _follow(self, mode: Mode, t: float, m: Measurement) -> ModeOutput:
+        """The mode's output, with its first failure adopted as this step's."""
+        out = mode.update(t, m)
+        if out.failure is not None and self._failure is None:
+            self.fail(out.failure.code, out.failure.message)
+        return ModeOutput(out.setpoint, out.end_effector, self._failure, out.finished and self._failure is None,
+                          out.progress)
 
 
 @dataclass
@@ -91,57 +71,41 @@ class ModeStep(Step):
         mode.start = t
         self.mode = mode
 
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    def update(self, t: float, m: Measurement) -> ModeOutput:
         if self.mode is None:
             future = self._future
             if future is None or not future.done():
-                return hold(self.q_hold)
+                return ModeOutput(hold(self.q_hold))
             try:
                 self._start(future.result(), t)
             except Exception as exc:   # planning refused: unreachable, limits, ...
-                self.fail("planning_failed", str(exc))
-                return hold(self.q_hold)
+                self.fail(FindingCode.PLANNING_FAILED, str(exc))
+                return ModeOutput(hold(self.q_hold), failure=self._failure)
         return self._follow(self.mode, t, m)
-
-    def finished(self, t: float) -> bool:
-        return self.mode is not None and self._failure is None and self.mode.finished(t)
-
-    def progress(self, t: float) -> float:
-        return 0.0 if self.mode is None else float(self.mode.progress(t))
-
-    def device_commands(self) -> dict:
-        return self.mode.device_commands() if self.mode is not None else {}
 
 
 @dataclass
 class EndEffectorStep(Step):
     """Command the end effector and wait for its state (clamp+lock -> locked, release -> open)."""
-    command: EeCommand = EeCommand.NONE
-    expect: str = "locked"
+    command: EndEffectorCommand = EndEffectorCommand.CLAMP
+    expect: EndEffectorState = EndEffectorState.LOCKED
     timeout: float = 10.0
     _sent: bool = False
     _done: bool = False
 
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    def update(self, t: float, m: Measurement) -> ModeOutput:
         if self._sent and not self._done and self._failure is None:
-            if m.end_effector == "fault":
-                self.fail("end_effector_fault", f"end effector reports a fault while waiting for {self.expect!r} "
-                          "(capture not confirmed, jam or screw torque)")
+            if m.end_effector == EndEffectorState.FAULT:
+                self.fail(FindingCode.END_EFFECTOR_FAULT, f"end effector reports a fault while waiting for "
+                          f"{self.expect.value!r} (capture not confirmed, jam or screw torque)")
             elif m.end_effector == self.expect:
                 self._done = True
             elif t - self.started_at > self.timeout:
-                self.fail("end_effector_timeout", f"end effector still {m.end_effector!r} after "
-                          f"{self.timeout:.0f} s (expected {self.expect!r})")
-        return hold(self.q_hold)
-
-    def device_commands(self) -> dict:
-        if self._sent:
-            return {}
-        self._sent = True
-        return {"end_effector": self.command}
-
-    def finished(self, t: float) -> bool:
-        return self._done
+                self.fail(FindingCode.END_EFFECTOR_TIMEOUT, f"end effector still {str(m.end_effector)!r} after "
+                          f"{self.timeout:.0f} s (expected {self.expect.value!r})")
+        done = self._done
+        command, self._sent = (None if self._sent else self.command), True
+        return ModeOutput(hold(self.q_hold), command, self._failure, done, 1.0 if done else 0.0)
 
 
 @dataclass
@@ -149,21 +113,15 @@ class LatchStep(Step):
     """Drive the store's connection mechanism through the end effector's screw drive, then wait
     its travel time (the mechanism has no feedback on this bus: an unreleased latch shows up as
     the extraction's force limit)."""
-    command: EeCommand = EeCommand.NONE
+    command: EndEffectorCommand = EndEffectorCommand.LATCH_LOCK
     wait: float = 1.5
     _sent: bool = False
 
-    def device_commands(self) -> dict:
-        if self._sent:
-            return {}
-        self._sent = True
-        return {"end_effector": self.command}
-
-    def finished(self, t: float) -> bool:
-        return self._sent and t - self.started_at >= self.wait
-
-    def progress(self, t: float) -> float:
-        return min(1.0, (t - self.started_at) / self.wait)
+    def update(self, t: float, m: Measurement) -> ModeOutput:
+        done = self._sent and t - self.started_at >= self.wait
+        command, self._sent = (None if self._sent else self.command), True
+        return ModeOutput(hold(self.q_hold), command, self._failure, done,
+                          min(1.0, (t - self.started_at) / self.wait))
 
 
 @dataclass
@@ -178,11 +136,5 @@ class ContactStep(Step):
         super().begin(q, t)
         self.mode = ImpedanceMode(self.model, self.params, self.task_of(), self.q_hold, self.title)
 
-    def setpoint(self, t: float, m: Measurement) -> JointSetpoint:
+    def update(self, t: float, m: Measurement) -> ModeOutput:
         return self._follow(self.mode, t, m)
-
-    def finished(self, t: float) -> bool:
-        return self._failure is None and self.mode.finished(t)
-
-    def progress(self, t: float) -> float:
-        return self.mode.progress(t)

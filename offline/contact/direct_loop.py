@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacearm.controller.cycle import Measurement
+from spacearm.controller.cycle import Measurement, Mode, ModeOutput
 from spacearm.firmware_sim.joint_drive import servo_torque
 from spacearm.firmware_sim.plant import Plant
 
@@ -63,10 +63,10 @@ class DirectLoop:
         self.q_start, self.q_end = self.q_end, np.asarray(q, float).copy()
         self.v_ff = np.zeros_like(self.q_end) if dq is None else np.asarray(dq, float)
 
-    def cycle(self, mode) -> Measurement:
-        m = self.measure()
-        sp = mode.setpoint(self.time, m)
-        self.command(sp.q, sp.dq)
+    def cycle(self, mode: Mode) -> ModeOutput:
+        """One read-update-write cycle of `mode` against the plant; the mode's output."""
+        out = mode.update(self.time, self.measure())
+        self.command(out.setpoint.q, out.setpoint.dq)
         self.plant.step(self.period)
         self.time += self.period
-        return m
+        return out

@@ -17,7 +17,7 @@ from spacearm.controller.impedance.mode import ImpedanceMode
 from spacearm.base.kinematics import KinematicData, KinematicModel, solve_ik
 from spacearm.base.spatial import rotvec_to_matrix
 from spacearm.controller.oru.config import load_changeout
-from spacearm.controller.oru.flow import FlowContext, _contact_step
+from spacearm.controller.oru.flow import FlowContext, contact_step
 from spacearm.firmware_sim.contact.config import ContactConfig
 from spacearm.offline.contact.direct_loop import DirectLoop
 from spacearm.firmware_sim.plant import Plant, load_plant_config
@@ -85,22 +85,19 @@ class ContactTrials:
         for _ in range(SETTLE_CYCLES):         # let the servos take up the load before the tare
             loop.command(ik.q)
             plant.step(loop.period)
-        step = _contact_step(ctx, 0, 9 if placing else 3, store, kind)
+        step = contact_step(ctx, 0, 9 if placing else 3, store, kind)
         step.begin(ik.q, 0.0)
         mode: ImpedanceMode = step.mode
         wall = time.perf_counter()
         cycles = 0
-        while cycles < max_cycles and step.failure() is None and not step.finished(loop.time):
-            m = loop.measure()
-            sp = step.setpoint(loop.time, m)
-            loop.command(sp.q, sp.dq)
-            plant.step(loop.period)
-            loop.time += loop.period
+        out = None
+        while cycles < max_cycles and (out is None or (out.failure is None and not out.finished)):
+            out = loop.cycle(step)
             cycles += 1
         wall = time.perf_counter() - wall
         lateral_err, angle_err, seated = self._seat_error(world, placing, oru, store)
-        failure = step.failure()
-        return TrialResult(failure is None and step.finished(loop.time) and seated,
+        failure = out.failure if out is not None else None
+        return TrialResult(failure is None and out is not None and out.finished and seated,
                            None if failure is None else failure.message, loop.time, wall,
                            mode.peaks.lateral_force, mode.peaks.torque, mode.peaks.insert_force,
                            lateral_err, angle_err)
@@ -166,8 +163,9 @@ def run_stiffness_direct(trials: ContactTrials, peak: float = 5.0, duration: flo
     mode = ImpedanceMode(trials.model, trials.impedance, task, q)
     start = plant.tool_pose()[:3, 3].copy()
     t0 = task.tare_cycles * loop.period
-    while not mode.finished(loop.time):
+    finished = False
+    while not finished:
         plant.environment.applied_wrench[0] = force_ramp(loop.time - t0, peak)
-        loop.cycle(mode)
+        finished = loop.cycle(mode).finished
     return StiffnessResult(plant.tool_pose()[:3, 3] - start, float(plant.environment.applied_wrench[0]),
                            float(plant.environment.applied_wrench[0]) / 1000.0)

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
-from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.modes import PlannedMode
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.recording_io import RecordingTable, write_csv
 from spacearm.offline.diagnosis.trajectory import Trajectory

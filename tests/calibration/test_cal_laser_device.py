@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from spacearm.drivers.laser_ranger import LaserRanger, NoHit, RangerError
-from spacearm.firmware_sim.laser_ranger import LaserRangerSim, RangerConfig, checksum, frame, parse_frame
+from spacearm.base.laser_ranger_protocol import checksum, frame, parse_frame
+from spacearm.firmware_sim.laser_ranger import LaserRangerSim, RangerConfig
 
 
 def test_frame_round_trip_and_checksum_rejection():

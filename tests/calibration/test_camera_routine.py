@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from spacearm.console.commands.calibrate import _print_camera_result
-from spacearm.controller.calibration.board import BoardNotFound, board_pose, load_board
+from spacearm.base.config.board import load_board
+from spacearm.controller.calibration.board import BoardNotFound, board_pose
 from spacearm.controller.calibration.camera_routine import (CameraSetup, camera_calibration_section, candidate_postures,
                                                    overhead_view, run_camera_calibration, score_against_truth,
                                                    write_camera_calibrated_arm)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from spacearm.controller.daemon.core import CommandRefused, ControllerCore
-from spacearm.controller.daemon.modes import PlannedMode
+from spacearm.controller.modes import PlannedMode
 from spacearm.controller.cycle import DeviceEvent, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.controller.planning.joint_move import JointLimits, JointMove

@@ -12,7 +12,7 @@ import pytest
 from spacearm.base.config.arm import load_arm_config
 from spacearm.base.config.scene import load_scene
 from spacearm.controller.daemon.core import ControllerCore
-from spacearm.controller.daemon.modes import HoldMode
+from spacearm.controller.modes import HoldMode
 from spacearm.controller.cycle import DeviceEvent, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.controller.impedance.config import load_impedance
