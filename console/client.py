@@ -8,6 +8,7 @@ from itertools import count
 from typing import Any
 
 from spacearm.console.errors import CommandFailed
+from spacearm.controller.daemon.api_errors import ErrorCode
 
 DEFAULT_API = os.environ.get("SPACEARM_API", "tcp:127.0.0.1:7440")
 
@@ -30,7 +31,7 @@ class ApiClient:
                 raise CommandFailed(f"bad API address {address!r}: use tcp:HOST:PORT or unix:/path")
         except (OSError, ValueError) as exc:
             raise CommandFailed(f"cannot reach the daemon at {address}: {exc} "
-                                "(is `spacearm daemon` running?)") from None
+                                "(is `spacearm daemon` running?)", ErrorCode.NO_CONNECTION) from None
         self._stream = self._sock.makefile("rwb")
 
     def call(self, cmd: str, **args: Any) -> Any:
@@ -42,12 +43,18 @@ class ApiClient:
             self._stream.flush()
             line = self._stream.readline()
         except OSError as exc:
-            raise CommandFailed(f"lost the connection to the daemon: {exc}") from None
+            raise CommandFailed(f"lost the connection to the daemon: {exc}", ErrorCode.NO_CONNECTION) from None
         if not line:
-            raise CommandFailed("the daemon closed the connection")
-        answer = json.loads(line)
+            raise CommandFailed("the daemon closed the connection", ErrorCode.NO_CONNECTION)
+        try:
+            answer = json.loads(line)
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            answer = None
+        if not isinstance(answer, dict) or "ok" not in answer:
+            raise CommandFailed(f"{self.address} answered something that is not a spacearm daemon: "
+                                f"{line[:60]!r}", ErrorCode.BAD_ANSWER)
         if not answer.get("ok"):
-            raise CommandFailed(answer.get("error", "refused"))
+            raise CommandFailed(str(answer.get("error", "refused")), answer.get("code"))
         return answer.get("result")
 
     def close(self) -> None:

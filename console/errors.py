@@ -14,7 +14,12 @@ EXIT_FAILED = 1
 
 
 class CommandFailed(Exception):
-    """A command could not do what was asked; the message is shown to the operator."""
+    """A command could not do what was asked; the message is shown to the operator, the code
+    (the daemon's ErrorCode value, or None for the console's own checks) is what code branches on."""
+
+    def __init__(self, message: str, code: str | None = None):
+        super().__init__(message)
+        self.code = code
 
 
 def friendly_errors(func: F) -> F:
@@ -26,6 +31,6 @@ def friendly_errors(func: F) -> F:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
         except CommandFailed as exc:
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"error[{exc.code}]: {exc}" if exc.code else f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_FAILED) from None
     return wrapper  # type: ignore[return-value]

@@ -90,16 +90,17 @@ def test_console_commands_end_to_end(stack):
     # A second console may watch but not move the arm; its refused commands cause no motion.
     held, held_targets = joints(status := bob.status()), targets(status)
     refused = bob.run("jog", "1", "10deg", check=False)
-    assert refused.returncode == 1 and "control is held by" in refused.stderr
+    assert refused.returncode == 1 and refused.stderr.startswith("error[lease_held]:")
     assert bob.run("control", "take", check=False).returncode == 1
     # Bad commands from the controlling console: clear one-line errors, no motion.
-    for args, message in ((["jog", "9", "1deg"], "not a joint"),
-                          (["jog", "1", "2rad"], "less than or equal"),
-                          (["move", "joints", "0", "0"], "expected 6 joint values"),
-                          (["move", "pose", "5", "0", "0", "0", "0", "0"], "beyond the arm's reach"),
-                          (["jog", "1", "ten"], "is not an angle")):
+    for args, code, message in ((["jog", "9", "1deg"], "bad_argument", "not a joint"),
+                                (["jog", "1", "2rad"], "bad_argument", "less than or equal"),
+                                (["move", "joints", "0", "0"], "bad_argument", "expected 6 joint values"),
+                                (["move", "pose", "5", "0", "0", "0", "0", "0"], "planning_refused", "beyond the arm's reach"),
+                                (["jog", "1", "ten"], None, "is not an angle")):   # refused by the console itself
         bad = alice.run(*args, check=False)
         assert bad.returncode != 0 and message in bad.stderr, (args, bad.stderr)
+        assert code is None or bad.stderr.startswith(f"error[{code}]:"), (args, bad.stderr)
         assert "Traceback" not in bad.stderr
     status = alice.status()
     assert targets(status) == held_targets            # nothing new was commanded
@@ -108,8 +109,8 @@ def test_console_commands_end_to_end(stack):
     # Anyone may stop; motion then needs an explicit reset (and enable).
     assert "stopped" in bob.run("stop").stdout
     status = alice.status()
-    assert status["state"] == "stopped" and "stop commanded by the operator" in status["stop_reason"]
-    assert "reset first" in alice.run("jog", "1", "1deg", check=False).stderr
+    assert status["state"] == "stopped" and status["stop"]["code"] == "operator_stop"
+    assert alice.run("jog", "1", "1deg", check=False).stderr.startswith("error[protective_stop]:")
     alice.run("reset")
     assert alice.status()["state"] == "disabled"
 
@@ -142,8 +143,8 @@ net.close()
             break
         time.sleep(0.05)
     assert status["state"] == "stopped"
-    assert "joint_4" in status["stop_reason"]
-    assert "reset first" in alice.run("enable", check=False).stderr
+    assert "joint_4" in (status["stop"]["node"], status["stop"]["joint"]), status["stop"]
+    assert alice.run("enable", check=False).stderr.startswith("error[protective_stop]:")
 
 
 def test_recording_is_readable_after_kill_9(stack):

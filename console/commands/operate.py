@@ -20,6 +20,7 @@ import typer
 from spacearm.console import lease_store
 from spacearm.console.client import DEFAULT_API, ApiClient
 from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.console.status_view import render_status
 from spacearm.console.units import UnitError, parse_angle, parse_length
 
@@ -43,7 +44,7 @@ def _controlled_call(client: ApiClient, cmd: str, **args: Any) -> Any:
     try:
         return client.call(cmd, lease=key, **args)
     except CommandFailed as exc:
-        if "no console holds control" not in str(exc):
+        if exc.code != ErrorCode.NO_LEASE:
             raise
         # Our stored key is stale (daemon restarted): take control again, once.
         return client.call(cmd, lease=_take(client), **args)

@@ -14,7 +14,6 @@ from __future__ import annotations
 import asyncio
 import json
 import logging
-import re
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from spacearm.console import lease_store
 from spacearm.console.client import ApiClient
 from spacearm.console.commands.operate import _controlled_call, _take
 from spacearm.console.errors import CommandFailed
+from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.console.web.camera_feed import CameraFeed
 from spacearm.console.web.presim import Presimulator
 from spacearm.console.web.state_feed import StateFeed, StateUpdate
@@ -36,7 +36,6 @@ STATIC_DIR = Path(__file__).resolve().parent / "static"
 THREE_DIR = Path("/usr/share/javascript/three")          # Debian libjs-three (scripts/bootstrap.sh)
 LOOPBACK_HOSTS = {"127.0.0.1", "localhost", "[::1]"}
 MAX_MESSAGE = 64 * 1024
-LOST_CONNECTION = re.compile(r"lost the connection|closed the connection|cannot reach")
 
 # The console's commands (console/commands/operate.py); True: needs the control lease.
 COMMANDS: dict[str, bool] = {"ping": False, "status": False, "stop": False, "enable": True,
@@ -224,7 +223,7 @@ class WebConsole:
             try:
                 return self._forward_locked(page, cmd, args)
             except CommandFailed as exc:
-                if LOST_CONNECTION.search(str(exc)) and page.client is not None:
+                if exc.code == ErrorCode.NO_CONNECTION and page.client is not None:
                     page.client.close()      # the daemon went away: reconnect on the next command
                     page.client = None
                 raise

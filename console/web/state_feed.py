@@ -19,6 +19,7 @@ import numpy as np
 
 from spacearm.console.client import ApiClient
 from spacearm.console.errors import CommandFailed
+from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.base.kinematics.forward import frames
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 
@@ -145,7 +146,7 @@ class StateFeed:
         try:
             answer = client.call("oru.status")
         except CommandFailed as exc:
-            if "unknown command" in str(exc):
+            if exc.code == ErrorCode.UNKNOWN_COMMAND:
                 self._task_supported = False     # a daemon without the ORU task flow
             return
         if isinstance(answer, dict) and answer.get("state") != "idle":

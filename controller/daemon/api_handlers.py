@@ -16,6 +16,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from spacearm.base.config.loader import format_location
+from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.controller.daemon.command_api import ApiError, Session
 from spacearm.controller.daemon.core import CommandRefused, ControllerCore
 from spacearm.controller.daemon.leases import ControlLease, LeaseError
@@ -70,7 +71,7 @@ def _parse(model: type[Args], args: dict[str, Any]) -> Args:
         return model.model_validate(args)
     except ValidationError as exc:
         item = exc.errors()[0]
-        raise ApiError(f"{format_location(item['loc'])}: {item['msg']}") from None
+        raise ApiError(f"{format_location(item['loc'])}: {item['msg']}", ErrorCode.BAD_ARGUMENT) from None
 
 
 class CommandHandlers:
@@ -108,7 +109,7 @@ class CommandHandlers:
     def handle(self, session: Session, cmd: str, args: dict[str, Any]) -> Any:
         entry = self.table.get(cmd)
         if entry is None:
-            raise ApiError(f"unknown command {cmd!r}; known: {', '.join(sorted(self.table))}")
+            raise ApiError(f"unknown command {cmd!r}; known: {', '.join(sorted(self.table))}", ErrorCode.UNKNOWN_COMMAND)
         if session is not None:
             session.last_seen = time.monotonic()   # keep-alive for the command watchdog
         model, needs_lease, action = entry
@@ -119,13 +120,13 @@ class CommandHandlers:
                 self.lease.require(parsed.lease)
             return action(parsed)
         except (LeaseError, CommandRefused) as exc:
-            raise ApiError(str(exc)) from None
+            raise ApiError(str(exc), exc.code) from None
 
     def _in_cycle(self, apply: Callable) -> Any:
         try:
             return self.core.submit(apply, timeout=self.cycle_timeout)
         except FutureTimeout:
-            raise ApiError("the control cycle did not take the command in time") from None
+            raise ApiError("the control cycle did not take the command in time", ErrorCode.CYCLE_TIMEOUT) from None
 
     def _take(self, a: TakeArgs) -> dict:
         return {"lease": self.lease.take(a.holder)}
@@ -137,7 +138,7 @@ class CommandHandlers:
         try:
             plan = plan_from(start)
         except PlanningError as exc:
-            raise ApiError(str(exc)) from None
+            raise ApiError(str(exc), ErrorCode.PLANNING_REFUSED) from None
         session = getattr(self._local, "session", None)
         if keepalive and session is not None:
             mode = KeepAliveMode(name, plan, 0.0, description, session=session)
@@ -149,34 +150,35 @@ class CommandHandlers:
         """Closed-loop approach (controller/daemon/approach_mode.py); needs a camera."""
         factory = (getattr(self, "mode_factories", None) or {}).get("approach")
         if factory is None:
-            raise ApiError("no camera attached to the daemon (start it with --camera): approach unavailable")
+            raise ApiError("no camera attached to the daemon (start it with --camera): approach unavailable",
+                           ErrorCode.UNAVAILABLE)
         if not math.isfinite(a.dz):
-            raise ApiError("dz: must be finite")
+            raise ApiError("dz: must be finite", ErrorCode.BAD_ARGUMENT)
         try:
             mode = factory(a.target, a.dz, a.holding)
         except (KeyError, ValueError) as exc:
-            raise ApiError(str(exc).strip("'\"")) from None
+            raise ApiError(str(exc).strip("'\""), ErrorCode.BAD_ARGUMENT) from None
         return self._in_cycle(lambda t, m: self.core.start_planned(t, m, mode, None))
 
     def _jog(self, a: JogArgs) -> Any:
         if a.joint > self.dof:
-            raise ApiError(f"joint: {a.joint} is not a joint of this {self.dof}-joint arm")
+            raise ApiError(f"joint: {a.joint} is not a joint of this {self.dof}-joint arm", ErrorCode.BAD_ARGUMENT)
         return self._start_motion("jog", f"joint {a.joint} by {a.delta:+.4f} rad",
                                   lambda q0: self.planner.jog(q0, a.joint - 1, a.delta, a.speed),
                                   keepalive=True)
 
     def _move_joints(self, a: MoveJointsArgs) -> Any:
         if len(a.q) != self.dof:
-            raise ApiError(f"q: expected {self.dof} joint values, got {len(a.q)}")
+            raise ApiError(f"q: expected {self.dof} joint values, got {len(a.q)}", ErrorCode.BAD_ARGUMENT)
         goal = np.array(a.q)
         if not np.all(np.isfinite(goal)):
-            raise ApiError("q: values must be finite")
+            raise ApiError("q: values must be finite", ErrorCode.BAD_ARGUMENT)
         return self._start_motion("move_joints", "to " + ", ".join(f"{v:.4f}" for v in goal) + " rad",
                                   lambda q0: self.planner.joint_move(q0, goal, a.speed))
 
     def _move_pose(self, a: MovePoseArgs) -> Any:
         if not all(math.isfinite(v) for v in (*a.xyz, *a.rpy)):
-            raise ApiError("xyz/rpy: values must be finite")
+            raise ApiError("xyz/rpy: values must be finite", ErrorCode.BAD_ARGUMENT)
         return self._start_motion(
             "move_pose", f"{a.frame} frame xyz {a.xyz} m rpy {a.rpy} rad",
             lambda q0: self.planner.pose_move(q0, np.array(a.xyz), np.array(a.rpy), a.frame, a.speed))

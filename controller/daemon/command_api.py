@@ -26,12 +26,15 @@ from itertools import count
 from pathlib import Path
 from typing import Any, Callable
 
+from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
+
 MAX_REQUEST_BYTES = 64 * 1024
 DEFAULT_PORT = 7440
 
 
-class ApiError(Exception):
-    """A request is refused; the message goes back to the client."""
+class ApiError(CodedError):
+    """A request is refused; the message and its code go back to the client."""
+    default_code = ErrorCode.BAD_REQUEST
 
 
 @dataclass
@@ -67,7 +70,7 @@ class ApiAddress:
                 return cls("tcp", host=host or "127.0.0.1", port=int(port))
             except ValueError:
                 pass
-        raise ApiError(f"bad API address {text!r}: use tcp:HOST:PORT or unix:/path")
+        raise ApiError(f"bad API address {text!r}: use tcp:HOST:PORT or unix:/path", ErrorCode.BAD_ARGUMENT)
 
     @property
     def is_loopback(self) -> bool:
@@ -87,9 +90,9 @@ class CommandServer:
                  expose: bool = False, token: str | None = None):
         if not address.is_loopback and not expose:
             raise ApiError(f"refusing to listen on {address}: not loopback; pass --expose "
-                           "(and a token) to accept commands from other machines")
+                           "(and a token) to accept commands from other machines", ErrorCode.BAD_ARGUMENT)
         if expose and not token:
-            raise ApiError("an exposed command API needs a token")
+            raise ApiError("an exposed command API needs a token", ErrorCode.BAD_ARGUMENT)
         self.address = address
         self.token = token
         self._handler = handler
@@ -173,7 +176,7 @@ class CommandServer:
             if self.token is not None and not session.authenticated:
                 given = request.get("token")
                 if not isinstance(given, str) or not hmac.compare_digest(given, self.token):
-                    raise ApiError("missing or wrong token")
+                    raise ApiError("missing or wrong token", ErrorCode.UNAUTHORIZED)
                 session.authenticated = True
             command = request.get("cmd")
             if not isinstance(command, str) or not command:
@@ -184,16 +187,18 @@ class CommandServer:
             result = self._handler(session, command, args)
         except ApiError as exc:
             self.rejected += 1
-            self._reply(wfile, request_id, error=str(exc))
+            self._reply(wfile, request_id, error=str(exc), code=exc.code)
             return
         self._reply(wfile, request_id, result=result)
 
     @staticmethod
-    def _reply(wfile, request_id, result: Any = None, error: str | None = None) -> None:
+    def _reply(wfile, request_id, result: Any = None, error: str | None = None,
+               code: ErrorCode | None = None) -> None:
         answer: dict[str, Any] = {"id": request_id, "ok": error is None}
         if error is None:
             answer["result"] = result
         else:
             answer["error"] = error
+            answer["code"] = (code or ErrorCode.INTERNAL).value
         wfile.write(json.dumps(answer, separators=(",", ":")).encode() + b"\n")
         wfile.flush()

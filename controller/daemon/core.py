@@ -18,6 +18,7 @@ import numpy as np
 
 from spacearm.controller.cycle import (NODE_FINDINGS, Command, Finding, FindingCode, MachineState, Measurement, Mode,
                                        ModeOutput)
+from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
 from spacearm.controller.daemon.supervision import Supervisor
 from spacearm.controller.modes import HoldMode
 from spacearm.controller.planning.errors import PlanningError
@@ -25,8 +26,9 @@ from spacearm.controller.planning.errors import PlanningError
 ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
 
 
-class CommandRefused(Exception):
+class CommandRefused(CodedError):
     """The command is valid in form but not now (wrong state, unreachable target, ...)."""
+    default_code = ErrorCode.NOT_ENABLED
 
 
 @dataclass
@@ -34,6 +36,13 @@ class Event:
     time: float
     kind: str
     message: str
+    finding: Finding | None = None    # the finding behind a protective stop or an extra finding
+
+    def as_dict(self) -> dict:
+        entry = {"t": self.time, "kind": self.kind, "message": self.message}
+        if self.finding is not None:
+            entry |= {k: v for k, v in self.finding.as_dict().items() if v is not None and k != "message"}
+        return entry
 
 
 @dataclass
@@ -93,7 +102,7 @@ class ControllerCore:
         if findings and self.state is not MachineState.STOPPED:
             self.protective_stop(m.time, findings[0])
             for extra in findings[1:]:
-                self._event(m.time, "finding", extra.message)
+                self._event(m.time, "finding", extra.message, extra)
         if self.state is MachineState.ENABLING:
             if np.all(m.joints_enabled):
                 self.state = MachineState.ENABLED
@@ -140,14 +149,14 @@ class ControllerCore:
         self.state = MachineState.STOPPED
         self._set_mode(None)
         self.stop_reason = finding
-        self._event(t, "protective_stop", finding.message)
+        self._event(t, "protective_stop", finding.message, finding)
 
     def drain_events(self) -> list[Event]:
         events, self.events = self.events, []
         return events
 
-    def _event(self, t: float, kind: str, message: str) -> None:
-        self.events.append(Event(t, kind, message))
+    def _event(self, t: float, kind: str, message: str, finding: Finding | None = None) -> None:
+        self.events.append(Event(t, kind, message, finding))
 
     def _apply_pending(self, m: Measurement) -> None:
         while True:
@@ -159,15 +168,17 @@ class ControllerCore:
                 continue
             try:
                 pending.future.set_result(pending.apply(m.time, m))
-            except (CommandRefused, PlanningError) as exc:
-                pending.future.set_exception(CommandRefused(str(exc)))
+            except CommandRefused as exc:
+                pending.future.set_exception(exc)
+            except PlanningError as exc:
+                pending.future.set_exception(CommandRefused(str(exc), ErrorCode.PLANNING_REFUSED))
             except Exception as exc:  # a bug in a command must not kill the cycle
-                pending.future.set_exception(CommandRefused(f"internal error: {exc!r}"))
+                pending.future.set_exception(CommandRefused(f"internal error: {exc!r}", ErrorCode.INTERNAL))
 
     # ---- commands (run inside the cycle via submit) ------------------------------------
     def cmd_enable(self, t: float, m: Measurement) -> str:
         if self.state is MachineState.STOPPED:
-            raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first")
+            raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first", ErrorCode.PROTECTIVE_STOP)
         if self.state in (MachineState.ENABLING, MachineState.ENABLED):
             return self.state
         faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
@@ -175,7 +186,7 @@ class ControllerCore:
             # Right after a reset the drives' fault reset takes a few cycles: refuse instead of
             # enabling into a "drive in fault" protective stop.
             raise CommandRefused(f"drive fault on {', '.join(faulted)}: reset first "
-                                 "(right after a reset: try again in a moment)")
+                                 "(right after a reset: try again in a moment)", ErrorCode.DRIVE_FAULT)
         self.state = MachineState.ENABLING
         self._enable_started = t
         self._event(t, "state", "enabling joints")
@@ -206,11 +217,12 @@ class ControllerCore:
 
     def motion_start(self, t: float, m: Measurement) -> np.ndarray:
         """Where the next motion must start: the current target. Refuses if not ready."""
+        if self.state is MachineState.STOPPED:
+            raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first", ErrorCode.PROTECTIVE_STOP)
         if self.state is not MachineState.ENABLED:
-            raise CommandRefused(f"arm is {self.state}; enable it first" if self.state is not MachineState.STOPPED
-                                 else f"protective stop active ({self.stop_reason}); reset first")
+            raise CommandRefused(f"arm is {self.state}; enable it first", ErrorCode.NOT_ENABLED)
         if self.mode is not None and self.mode.moving and not (self.mode_output is not None and self.mode_output.finished):
-            raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait")
+            raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait", ErrorCode.BUSY)
         return (self.last_target if self.last_target is not None else m.q).copy()
 
     def start_planned(self, t: float, m: Measurement, mode: Mode, planned_from: np.ndarray | None) -> dict:
@@ -218,7 +230,7 @@ class ControllerCore:
         valid), or a reactive mode that plans as it goes (`planned_from` None)."""
         start = self.motion_start(t, m)
         if planned_from is not None and not np.allclose(start, planned_from, atol=1e-9, rtol=0):
-            raise CommandRefused("the arm moved while the motion was being planned; send it again")
+            raise CommandRefused("the arm moved while the motion was being planned; send it again", ErrorCode.MOVED)
         mode.start = self.motion_time
         self._set_mode(mode)
         self.motions_started += 1

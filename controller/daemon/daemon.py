@@ -19,14 +19,15 @@ import numpy as np
 from spacearm.base.config.arm import ArmConfig, load_arm_config
 from spacearm.controller.daemon.api_handlers import CommandHandlers
 from spacearm.controller.daemon.clock import LockstepClock, RealTimeClock, Tick
-from spacearm.controller.daemon.command_api import ApiAddress, CommandServer, Session
+from spacearm.controller.daemon.api_errors import ErrorCode
+from spacearm.controller.daemon.command_api import ApiAddress, ApiError, CommandServer, Session
 from spacearm.controller.daemon.core import ControllerCore, Event
 from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
-from spacearm.controller.cycle import Command, MachineState, Measurement
+from spacearm.controller.cycle import Command, Finding, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner
@@ -64,8 +65,12 @@ class Snapshot:
     state: str
     mode: str | None
     progress: float
-    stop_reason: str | None
+    stop: Finding | None          # why the arm is in a protective stop
     motions_finished: int
+
+    @property
+    def stop_reason(self) -> str | None:
+        return self.stop.message if self.stop is not None else None
 
 
 class Daemon:
@@ -184,16 +189,14 @@ class Daemon:
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
                             self.core.mode_progress(),
-                            self.core.stop_reason.message if self.core.stop_reason else None,
-                            self.core.motions_finished)
+                            self.core.stop_reason, self.core.motions_finished)
         self.snapshot = snapshot
         self._record(snapshot, execution, events)
         return snapshot
 
     def _record(self, s: Snapshot, execution: float, events: list[Event]) -> None:
         for event in events:
-            entry = {"t": event.time, "kind": event.kind, "message": event.message}
-            self.event_log = (self.event_log + [entry])[-20:]
+            self.event_log = (self.event_log + [event.as_dict()])[-20:]
         recorder = self.recorder  # one file per cycle even if record start/stop swaps it now
         if recorder is None:
             return
@@ -205,8 +208,7 @@ class Daemon:
             "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
             "io_wait": self.hardware.last_io_wait})
         for event in events:
-            recorder.put("/events", event.time, {"t": event.time, "kind": event.kind,
-                                                      "message": event.message})
+            recorder.put("/events", event.time, event.as_dict())
         if s.tick.time - self._last_stats_time >= 1.0:
             self._last_stats_time = s.tick.time
             recorder.put("/stats", s.tick.time, self.stats.summary().as_dict())
@@ -243,6 +245,7 @@ class Daemon:
         m = s.measurement
         return {
             "state": s.state, "mode": s.mode, "progress": s.progress, "stop_reason": s.stop_reason,
+            "stop": s.stop.as_dict() if s.stop is not None else None,   # code, message, node, joint
             "motions_finished": s.motions_finished,
             "time": s.tick.time, "cycle": s.tick.cycle, "sync_counter": m.sync_counter,
             "woke_at": s.tick.woke_at,   # monotonic s (machine-wide): state latency, web console timing
@@ -276,5 +279,4 @@ class RecordingControl:
         try:
             return self.daemon.stop_recording()
         except ValueError as exc:
-            from spacearm.controller.daemon.command_api import ApiError
-            raise ApiError(str(exc)) from None
+            raise ApiError(str(exc), ErrorCode.RECORDING) from None

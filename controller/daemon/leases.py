@@ -13,9 +13,11 @@ import secrets
 import threading
 import time
 
+from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
 
-class LeaseError(Exception):
-    pass
+
+class LeaseError(CodedError):
+    default_code = ErrorCode.LEASE_HELD
 
 
 class ControlLease:
@@ -45,7 +47,7 @@ class ControlLease:
 
     def _check(self, key: str | None) -> None:
         if self._key is None:
-            raise LeaseError("no console holds control: take it first (`spacearm control take`)")
+            raise LeaseError("no console holds control: take it first (`spacearm control take`)", ErrorCode.NO_LEASE)
         if not isinstance(key, str) or not hmac.compare_digest(key, self._key):
             raise LeaseError(f"control is held by {self.holder!r}; this console may only watch")
 

@@ -10,6 +10,7 @@ from pydantic import Field
 
 from spacearm.base.config.scene import DEFAULT_SCENE, load_scene
 from spacearm.controller.daemon.api_handlers import Args, NoArgs
+from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.core import CommandRefused
 from spacearm.controller.impedance.config import DEFAULT_IMPEDANCE, load_impedance
@@ -61,17 +62,17 @@ def install_oru(daemon) -> OruSetup:
     def runner_now() -> OruTaskRunner:
         mode = core.mode
         if not isinstance(mode, OruTaskRunner):
-            raise CommandRefused("no ORU changeout is running")
+            raise CommandRefused("no ORU changeout is running", ErrorCode.NOT_RUNNING)
         return mode
 
     def run(a: OruRunArgs) -> Any:
         if setup.problem is not None:
-            raise ApiError(f"ORU changeout unavailable: {setup.problem}")
+            raise ApiError(f"ORU changeout unavailable: {setup.problem}", ErrorCode.UNAVAILABLE)
         stages = None
         if a.stages is not None:
             n = len(setup.changeout.stages)
             if any(not 1 <= s <= n for s in a.stages):
-                raise ApiError(f"stages: each must be 1..{n}, got {a.stages}")
+                raise ApiError(f"stages: each must be 1..{n}, got {a.stages}", ErrorCode.BAD_ARGUMENT)
             stages = [s - 1 for s in a.stages]
 
         def start(t: float, m) -> Any:

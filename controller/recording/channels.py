@@ -37,7 +37,9 @@ CYCLE_SCHEMA: dict[str, Any] = {
 EVENT_SCHEMA: dict[str, Any] = {
     "title": "spacearm.Event",
     "type": "object",
-    "properties": {"t": {"type": "number"}, "kind": {"type": "string"}, "message": {"type": "string"}},
+    "properties": {"t": {"type": "number"}, "kind": {"type": "string"}, "message": {"type": "string"},
+                   "code": {"type": "string", "description": "FindingCode of a protective stop or finding"},
+                   "node": {"type": "string"}, "joint": {"type": "string"}},
     "required": ["t", "kind", "message"],
 }
 

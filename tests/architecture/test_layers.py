@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import textwrap
@@ -65,9 +66,14 @@ def test_the_command_prints_the_graph_and_exits_zero():
 @pytest.mark.slow
 def test_the_built_distribution_holds_one_top_level_package(tmp_path):
     """`pip install .` puts spacearm/<room>/... in site-packages and no `drivers`, `controller`, ..."""
-    target = tmp_path / "site"
+    source, target = tmp_path / "src", tmp_path / "site"
+    source.mkdir()
+    for name in ("pyproject.toml", "setup.py", "README.md"):   # a copy: setuptools builds in the tree
+        shutil.copy(REPO_ROOT / name, source / name)
+    for room in ("spacearm", "base", "drivers", "firmware_sim", "controller", "offline", "console"):
+        shutil.copytree(REPO_ROOT / room, source / room, ignore=shutil.ignore_patterns("__pycache__"))
     build = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--target", str(target),
-                            str(REPO_ROOT)], capture_output=True, text=True, timeout=600)
+                            str(source)], capture_output=True, text=True, timeout=600)
     assert build.returncode == 0, build.stderr[-2000:]
     top = sorted(p.name for p in target.iterdir() if p.is_dir() and p.name != "bin" and not p.name.endswith((".dist-info", "__pycache__")))
     assert top == ["spacearm"], top
