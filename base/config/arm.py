@@ -11,6 +11,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from spacearm.base.config.limits import ApproachConfig, SupervisionConfig
 from spacearm.base.config.loader import load_toml_model
 
 TWO_PI = 2.0 * math.pi
@@ -156,6 +157,8 @@ class ArmConfig(Strict):
     postures: dict[str, list[float]] = Field(default_factory=dict,
                                              description="named joint postures, rad")
     calibration: Calibration | None = None
+    supervision: SupervisionConfig = SupervisionConfig()
+    approach: ApproachConfig = ApproachConfig()
 
     @model_validator(mode="after")
     def _unique_names(self) -> "ArmConfig":

@@ -48,19 +48,7 @@ from spacearm.base.kinematics.pose_error import twist_error
 from spacearm.base.spatial import inv_transform, trans
 from spacearm.controller.planning.joint_move import JointSetpoint
 from spacearm.controller.planning.resolved_rate import damped_pinv
-
-
-@dataclass(frozen=True)
-class ApproachTuning:
-    gain: float = 1.5                     # 1/s, twist = gain x pose error
-    tol_position: float = 0.0004          # m, measured remaining error to finish
-    tol_rotation: float = np.radians(0.08)  # rad
-    still_speed: float = 0.0005           # m/s: the arm counts as still below this commanded speed
-    lost_frames: int = 6                  # consecutive frames without a pose -> vision_lost
-    no_frame_timeout: float = 10.0        # s of controller time without any frame
-    max_start_distance: float = 0.6       # m
-    grow_margin: float = 0.01             # m above the smallest measured error -> error_grows
-    damping: float = 0.02                 # DLS damping of the Jacobian pseudo-inverse
+from spacearm.base.config.limits import ApproachConfig
 
 
 def marker_T_goal(scene: SceneConfig, marker_T_oru: np.ndarray, dz: float, holding: str | None) -> np.ndarray:
@@ -80,7 +68,7 @@ class ApproachMode(ModeBase):
     limits: CartesianLimits
     period: float
     target: str = ""
-    tuning: ApproachTuning = field(default_factory=ApproachTuning)
+    tuning: ApproachConfig = field(default_factory=ApproachConfig)
     name: str = "approach"
     description: str = ""
     # --- state
@@ -209,7 +197,7 @@ def _angle(R: np.ndarray) -> float:
 
 def approach_factory(model: KinematicModel, scene: SceneConfig, vision, end_T_camera: np.ndarray,
                      marker_T_oru: np.ndarray, limits: CartesianLimits, period: float,
-                     tuning: ApproachTuning | None = None):
+                     tuning: ApproachConfig | None = None):
     """Builds `mode_factories["approach"]`: (target, dz, holding=None) -> ApproachMode."""
     def make(target: str, dz: float, holding: str | None = None) -> ApproachMode:
         scene.store(target)                                  # KeyError names the known stores
@@ -219,6 +207,6 @@ def approach_factory(model: KinematicModel, scene: SceneConfig, vision, end_T_ca
             raise ValueError(f"dz {dz} m outside (0, 0.5] m")
         what = f"holding {holding} to slot {target}" if holding else f"adapter in {target}"
         return ApproachMode(model, vision, end_T_camera, marker_T_goal(scene, marker_T_oru, dz, holding),
-                            limits, period, target=target, tuning=tuning or ApproachTuning(),
+                            limits, period, target=target, tuning=tuning or ApproachConfig(),
                             description=f"{what}, stand-off {dz * 1e3:.0f} mm")
     return make

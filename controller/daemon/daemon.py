@@ -81,7 +81,8 @@ class Daemon:
         self.planner = MotionPlanner(self.model, options.period, self.arm.cartesian)
         names = list(self.model.joint_names)
         self.supervisor = Supervisor(SupervisionLimits(
-            np.array(self.model.q_min), np.array(self.model.q_max), np.array(self.model.v_max)), names)
+            np.array(self.model.q_min), np.array(self.model.q_max), np.array(self.model.v_max),
+            self.arm.supervision), names)
         self.core = ControllerCore(self.supervisor, names, options.period)
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
@@ -150,7 +151,7 @@ class Daemon:
         self.vision = VisionWorker(source).start()
         self.mode_factories["approach"] = approach_factory(
             self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
-            self.vision.pipeline.marker.marker_T_oru, self.arm.cartesian, self.options.period)
+            self.vision.pipeline.marker.marker_T_oru, self.arm.cartesian, self.options.period, self.arm.approach)
 
     def run(self, max_cycles: int | None = None) -> None:
         cycles = 0

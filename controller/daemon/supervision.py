@@ -10,31 +10,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacearm.base.config.limits import SupervisionConfig
 from spacearm.controller.cycle import Finding, FindingCode, Measurement
 
 
 @dataclass(frozen=True)
 class SupervisionLimits:
+    """The arm's joint limits and its supervision settings (the arm file's [supervision] table);
+    the settings read as attributes of the limits (`limits.following_error`)."""
     q_min: np.ndarray
     q_max: np.ndarray
     v_max: np.ndarray
-    position_margin: float = 0.0087      # rad (0.5 deg) beyond a soft limit before stopping
-    velocity_tolerance: float = 0.2      # fraction above v_max before stopping
-    following_error: float = 0.0175      # rad (1 deg) between last target and measurement
-    wrench_force_limit: float = 150.0    # N
-    wrench_torque_limit: float = 30.0    # N m
-    missing_pdo_cycles: int = 5          # consecutive cycles without a node's PDOs (100 ms at 50 Hz,
-                                         # below the 250 ms heartbeat-loss detection)
-    # A wrench step this large from one cycle to the next is not a contact the arm can make
-    # at its speeds (ORU insertion forces build over many cycles): a sensor or cable fault.
-    ft_jump_force: float = 80.0          # N per cycle
-    ft_jump_torque: float = 15.0         # N m per cycle
-    # Frozen sensor: a live F/T sensor is never bit-for-bit constant (noise). The check arms
-    # itself once the reading has changed in `ft_live_changes` consecutive cycles (noise; a
-    # noise-free simulator with step changes never arms it) and then stops on
-    # `ft_frozen_cycles` identical readings in a row.
-    ft_frozen_cycles: int = 25           # 0.5 s at 50 Hz
-    ft_live_changes: int = 3
+    settings: SupervisionConfig = SupervisionConfig()
+
+    def __getattr__(self, name: str):
+        return getattr(self.settings, name)
 
 
 EVENT_LABELS = {FindingCode.HEARTBEAT_LOST: "heartbeat lost", FindingCode.EMCY: "emergency message",
