@@ -134,9 +134,19 @@ class Calibration(Strict):
     da: list[float] = Field(default_factory=list, max_length=12, description="m")
     dd: list[float] = Field(default_factory=list, max_length=12, description="m")
     dbeta: list[float] = Field(default_factory=list, max_length=12, description="rad")
+    # Small-motion corrections of the fixed frames, applied after them: x, y, z (m), rx, ry, rz
+    # (rad) as Tx Ty Tz Rx Ry Rz (the identification's frame parameters, calibration/errormodel.py).
+    dbase: list[float] = Field(default_factory=list, max_length=6, description="m, m, m, rad, rad, rad")
+    dtool: list[float] = Field(default_factory=list, max_length=6, description="m, m, m, rad, rad, rad")
 
     @model_validator(mode="after")
     def _small(self) -> "Calibration":
+        for name in ("dbase", "dtool"):
+            values = getattr(self, name)
+            if values and len(values) != 6:
+                raise ValueError(f"{name} needs 6 values (x, y, z in m, rx, ry, rz in rad), got {len(values)}")
+            if any(abs(v) > 1.0 for v in values[:3]) or any(abs(v) > 0.5 for v in values[3:]):
+                raise ValueError(f"{name}: frame corrections above 1 m / 0.5 rad are not a calibration; check units")
         for name in ("dtheta", "dalpha", "dbeta"):
             if any(abs(v) > 0.1 for v in getattr(self, name)):
                 raise ValueError(f"{name}: corrections above 0.1 rad are not a calibration; check units")

@@ -152,7 +152,8 @@ class KinematicModel:
         if c is None or not calibrated:
             return model
         return model.with_errors(dtheta=c.dtheta or None, dalpha=c.dalpha or None, da=c.da or None,
-                                 dd=c.dd or None, dbeta=c.dbeta or None)
+                                 dd=c.dd or None, dbeta=c.dbeta or None,
+                                 base=_corrected(model.base, c.dbase), tool=_corrected(model.tool, c.dtool))
 
     def with_errors(self, *, dtheta: ArrayLike | None = None, dalpha: ArrayLike | None = None,
                     da: ArrayLike | None = None, dd: ArrayLike | None = None,
@@ -186,6 +187,14 @@ class KinematicModel:
         """True when every joint lies inside [q_min - tol, q_max + tol]."""
         q = np.asarray(q, dtype=float)
         return bool(np.all(q >= self.q_min - tol) and np.all(q <= self.q_max + tol))
+
+
+def _corrected(frame: Array, delta: list[float]) -> Array | None:
+    """frame Tx Ty Tz Rx Ry Rz (delta), or None (unchanged) without a correction."""
+    if not delta:
+        return None
+    x, y, z, rx, ry, rz = delta
+    return frame @ trans(x, y, z) @ rotx(rx) @ roty(ry) @ rotz(rz)
 
 
 def load_model(path: str | Path) -> KinematicModel:

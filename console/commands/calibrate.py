@@ -51,80 +51,25 @@ def register(app: typer.Typer) -> None:
         if as_json:
             print(json.dumps(head, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
-    @cal.command("fit")
-    @friendly_errors
-    def fit(data: Path = typer.Option(..., "--data", help="CSV: q1..qn + T_00..T_23 | x,y,z | h."),
-            model: Path = typer.Option(..., "--model", help="Arm file, e.g. configs/arm/ssrms_7dof.toml."),
-            method: str = typer.Option("lm", help="lm | lse | ekf"),
-            sigma_pos: float = typer.Option(0.3e-3, help="Position / distance noise, m."),
-            sigma_rot: float = typer.Option(np.radians(0.5), help="Orientation noise, rad."),
-            plane: str = typer.Option("", help="Plane 'nx,ny,nz,f' for distance data (n.p + f = 0)."),
-            gauge: str = typer.Option("plane_ny", help="Plane coefficient held fixed (scale)."),
-            frames: bool = typer.Option(False, help="Also consider base/tool frame parameters."),
-            as_json: bool = typer.Option(False, "--json")) -> None:
-        """Identify the identifiable parameters of MODEL from a measurement file."""
-        from spacearm.controller.calibration.datafile import DataFileError, read_measurements
-        from spacearm.controller.calibration.errormodel import ErrorModel
-        from spacearm.controller.calibration.identifiability import find_identifiable
-        from spacearm.controller.calibration.residuals import PlaneTarget, Problem
-        from spacearm.controller.calibration.solvers import EKFTuning, ekf, lm, lse
-        from spacearm.base.kinematics import load_model
-        kin = load_model(model)
-        try:
-            mf = read_measurements(data, kin.nq)
-        except DataFileError as exc:
-            raise CommandFailed(str(exc)) from None
-        em = ErrorModel.from_kinematics(kin)
-        pt = None
-        if mf.kind == "plane":
-            try:
-                vals = [float(v) for v in plane.split(",")]
-            except ValueError:
-                vals = []
-            if len(vals) != 4:
-                raise CommandFailed("distance data needs --plane 'nx,ny,nz,f'")
-            pt = PlaneTarget(tuple(vals[:3]), vals[3])
-        cands = [n for n in em.names if frames or not n.startswith((em.world_prefix + "_", em.tool_prefix + "_"))]
-        cands += pt.names if pt else []
-        if len(mf.Q) < 2:
-            raise CommandFailed("need at least two postures")
-        sig = {"pose": [sigma_pos] * 3 + [sigma_rot] * 3, "position": [sigma_pos] * 3,
-               "plane": [sigma_pos]}[mf.kind]
-        probe = Problem(em, mf.kind, mf.Q, mf.measured, cands, plane=pt, sigma=np.array(sig))
-        rep = find_identifiable(probe, cands, gauge=gauge if pt else None)
-        pr = Problem(em, mf.kind, mf.Q, mf.measured, rep.kept, plane=pt, sigma=np.array(sig))
-        if pr.rows * pr.n_configs < len(rep.kept):
-            raise CommandFailed(f"{pr.rows * pr.n_configs} equations for {len(rep.kept)} parameters")
-        if method == "lm":
-            res = lm(pr)
-        elif method == "lse":
-            res = lse(pr)
-        elif method == "ekf":
-            res = ekf(pr, EKFTuning.paper(pr), passes=3)
-        else:
-            raise CommandFailed(f"unknown method {method!r} (lm, lse, ekf)")
-        if as_json:
-            print(json.dumps({"method": res.method, "status": res.status, "iterations": res.iterations,
-                              "estimate": res.estimate, "std": res.std, "rms_residual": res.rms_residual,
-                              "dropped": {d.name: d.reason for d in rep.dropped}}))
-            return
-        print(rep.summary())
-        print(f"\n{res.method}: {res.status} ({res.message}), {res.iterations} iterations, "
-              f"{res.elapsed * 1e3:.1f} ms, RMS residual {res.rms_residual:.3e}")
-        for name, value in res.estimate.items():
-            print(f"  {name:<12} {_fmt_value(name, value):>18}  +- {_fmt_value(name, res.std[name])}")
+    from spacearm.console.commands.calibrate_fit import register_fit
+    register_fit(cal)
 
     @cal.command("fr3")
     @friendly_errors
     def fr3(splits: int = typer.Option(10, help="Random 80/34 splits."),
             seed: int = typer.Option(0),
-            data: Path = typer.Option(None, help="samples.csv (default ../shared/data/fr3_eye_in_hand).")) -> None:
+            data: Path = typer.Option(None, help="samples.csv (default ../shared/data/fr3_eye_in_hand)."),
+            general: bool = typer.Option(False, help="Through the general pipeline of `calibrate fit` instead."),
+            method: str = typer.Option("lm", help="With --general: lm | lse | ekf | ekf-paper.")) -> None:
         """Fit the real FR3 eye-in-hand data; held-out error, registration-only vs full."""
-        from spacearm.controller.calibration.fr3 import DATA, fr3_study
+        from spacearm.controller.calibration.fr3 import DATA, fr3_study, fr3_trusted_study
         path = data or DATA
         if not Path(path).exists():
             raise CommandFailed(f"FR3 data not found: {path}")
-        text, _ = fr3_study(splits=splits, seed=seed, path=path)
+        if general:
+            text, _ = fr3_trusted_study(splits=splits, seed=seed, path=path, method=method)
+        else:
+            text, _ = fr3_study(splits=splits, seed=seed, path=path)
         print(text)
 
     @cal.command("laser")

@@ -4,6 +4,7 @@ One row per posture: joint angles q1..qn (rad), then one of
   pose      T_00..T_23 (top 3 rows of the measured 4x4 pose, metres)
   position  x, y, z (metres)
   plane     h (laser distance, metres)
+  range     range (distance from an anchor to a point on the tool, metres: draw-wire, tracker)
 The kind is inferred from the columns present.
 """
 from __future__ import annotations
@@ -54,9 +55,11 @@ def read_measurements(path: Path, n_joints: int) -> MeasurementFile:
             return MeasurementFile("position", Q, np.array([[float(r[c]) for c in "xyz"] for r in rows]))
         if "h" in cols:
             return MeasurementFile("plane", Q, np.array([float(r["h"]) for r in rows]))
+        if "range" in cols:
+            return MeasurementFile("range", Q, np.array([float(r["range"]) for r in rows]))
     except (TypeError, ValueError) as exc:
         raise DataFileError(f"{path}: bad number ({exc})") from None
-    raise DataFileError(f"{path}: needs pose columns T_00..T_23, or x,y,z, or h")
+    raise DataFileError(f"{path}: needs pose columns T_00..T_23, or x,y,z, or h, or range")
 
 
 def write_measurements(path: Path, Q: Array, kind: str, measured: Array) -> None:
@@ -70,7 +73,7 @@ def write_measurements(path: Path, Q: Array, kind: str, measured: Array) -> None
         elif kind == "position":
             extra, vals = ["x", "y", "z"], measured
         else:
-            extra, vals = ["h"], measured.reshape(-1, 1)
+            extra, vals = ["h" if kind == "plane" else "range"], measured.reshape(-1, 1)
         w.writerow([f"q{i + 1}" for i in range(n)] + extra)
         for q, v in zip(Q, vals):
             w.writerow([repr(float(x)) for x in q] + [repr(float(x)) for x in v])

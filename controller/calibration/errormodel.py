@@ -41,7 +41,7 @@ class Op:
     kind: str          # 'R' or 'T'
     axis: int          # 0, 1, 2
     param: int         # index into the parameter vector
-    joint: int = -1    # joint index whose q adds to the value (theta ops only)
+    joint: int = -1    # joint index whose q adds to the value (theta, or d of a prismatic joint)
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,12 +75,16 @@ class ErrorModel:
 
         for k in FRAME_KINDS:
             add(f"{self.world_prefix}_{k}", 0.0, "R" if k.startswith("r") else "T", _AXIS[k[-1]])
+        prismatic = prismatic_joints(kin)
         for i in range(kin.nq):
             j = i + 1
             th, d, a, al, be = (kin.theta_offset[i], kin.d[i], kin.a[i], kin.alpha[i], kin.beta[i])
+            # The joint variable adds to theta (revolute) or to d (prismatic); the other one is a
+            # constant whose error is identified the same way.
+            jt, jd = (-1, i) if prismatic[i] else (i, -1)
             if kin.convention == "standard":
-                add(f"theta_{j}", th, "R", 2, i)
-                add(f"d_{j}", d, "T", 2)
+                add(f"theta_{j}", th, "R", 2, jt)
+                add(f"d_{j}", d, "T", 2, jd)
                 add(f"a_{j}", a, "T", 0)
                 add(f"alpha_{j}", al, "R", 0)
                 add(f"beta_{j}", be, "R", 1)
@@ -88,8 +92,8 @@ class ErrorModel:
                 add(f"alpha_{j}", al, "R", 0)
                 add(f"a_{j}", a, "T", 0)
                 add(f"beta_{j}", be, "R", 1)
-                add(f"theta_{j}", th, "R", 2, i)
-                add(f"d_{j}", d, "T", 2)
+                add(f"theta_{j}", th, "R", 2, jt)
+                add(f"d_{j}", d, "T", 2, jd)
         for k in FRAME_KINDS:
             add(f"{self.tool_prefix}_{k}", 0.0, "R" if k.startswith("r") else "T", _AXIS[k[-1]])
         object.__setattr__(self, "names", tuple(names))
@@ -206,6 +210,16 @@ class ErrorModel:
         return dataclasses.replace(kin, theta_offset=get("theta"), d=get("d"), a=get("a"),
                                    alpha=get("alpha"), beta=beta,
                                    beta_mask=kin.beta_mask | (beta != 0.0), base=base, tool=tool)
+
+
+def prismatic_joints(kin: KinematicModel) -> NDArray[np.bool_]:
+    """Which joints are prismatic: the model's `joint_types` ('P'/'prismatic') or `prismatic`
+    mask when it has one (URDF import adds them), else all revolute."""
+    types = getattr(kin, "joint_types", None)
+    if types is not None:
+        return np.array([str(t).lower() in ("p", "prismatic") for t in types], bool)
+    mask = getattr(kin, "prismatic", None)
+    return np.zeros(kin.nq, bool) if mask is None else np.asarray(mask, bool)
 
 
 def _frame(v: Array) -> Array:

@@ -66,7 +66,7 @@ def priority_order(problem: Problem, candidates: list[str], gauge: str | None = 
     plane_last = {f"{problem.plane.prefix}_f"} if problem.plane is not None else set()
     gauge_set = {gauge} if gauge else set()
 
-    def tier(name: str) -> int:
+    def tier(name: str) -> float:
         kind = name.rsplit("_", 1)[0]
         if name in gauge_set or name in plane_last:
             return 6
@@ -78,9 +78,17 @@ def priority_order(problem: Problem, candidates: list[str], gauge: str | None = 
             return 1
         if problem.plane is not None and name.startswith(problem.plane.prefix + "_"):
             return 4
+        if name.endswith(("_tx", "_ty", "_tz", "_ax", "_ay", "_az")):
+            # An instrument's placement first (a marker on the tool, a draw-wire anchor): it is
+            # what is really uncertain, and the first/last joints' D-H rows (which the data cannot
+            # tell from it) would otherwise absorb a roughly known anchor or marker as degrees
+            # and decimetres of arm "error".
+            return -1
         if name.startswith(problem.model.tool_prefix + "_"):
-            return 2
-        return 3  # world frame
+            return 2.5
+        if name.startswith(problem.model.world_prefix + "_"):
+            return 3
+        return 4  # an instrument's own parameters (anchor, tool point)
 
     pos = {n: i for i, n in enumerate(problem.names)}
     return sorted(candidates, key=lambda n: (tier(n), pos[n]))
@@ -107,10 +115,15 @@ def identifiability_jacobian(problem: Problem, candidates: list[str], n_configs:
 
 def find_identifiable(problem: Problem, candidates: list[str] | None = None, n_configs: int = 200,
                       seed: int = 0, tol: float = 1e-6, gauge: str | None = None,
-                      Q: Array | None = None) -> IdentifiabilityReport:
-    """The identifiable subset of `candidates` (default: all parameters) with reasons for drops."""
+                      Q: Array | None = None, A: Array | None = None) -> IdentifiabilityReport:
+    """The identifiable subset of `candidates` (default: all parameters) with reasons for drops.
+
+    `A` (rows, len(candidates)) is a given identification Jacobian, e.g. on the data's own
+    postures (see fit_checks.data_identifiability); otherwise it is evaluated on Q or random postures.
+    """
     candidates = list(problem.names) if candidates is None else list(candidates)
-    A = identifiability_jacobian(problem, candidates, n_configs, seed, Q)
+    if A is None:
+        A = identifiability_jacobian(problem, candidates, n_configs, seed, Q)
     norms = np.linalg.norm(A, axis=0)
     dropped: list[Dropped] = []
     usable = []

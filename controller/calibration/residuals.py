@@ -49,6 +49,15 @@ def rotvec_batch(R: Array) -> Array:
     return 0.5 * w * k[:, None]
 
 
+def free_indices(names: tuple[str, ...], free: list[str]) -> NDArray[np.int_]:
+    """Positions of the free parameters in the full vector; KeyError naming unknown ones."""
+    lookup = {n: i for i, n in enumerate(names)}
+    unknown = [n for n in free if n not in lookup]
+    if unknown:
+        raise KeyError(f"unknown parameters: {unknown}")
+    return np.array([lookup[n] for n in free], dtype=int)
+
+
 def laser_distance(T: Array, n: Array, f: float) -> Array:
     """Eq. (10): distance along tool +z from the tool origin to the plane, (N,)."""
     return -(T[:, :3, 3] @ n + f) / (T[:, :3, 2] @ n)
@@ -83,11 +92,7 @@ class Problem:
         self.measured = np.asarray(self.measured, float)
         extra = self.plane.names if self.plane is not None else []
         self.names = tuple(self.model.names) + tuple(extra)
-        lookup = {n: i for i, n in enumerate(self.names)}
-        unknown = [n for n in self.free if n not in lookup]
-        if unknown:
-            raise KeyError(f"unknown parameters: {unknown}")
-        self.free_idx = np.array([lookup[n] for n in self.free], dtype=int)
+        self.free_idx = free_indices(self.names, self.free)
         if self.x0 is None:
             self.x0 = self.nominal()
         if self.measured.shape[0] != self.Q.shape[0]:

@@ -64,8 +64,14 @@ def _eval(problem: Problem, x_free: Array, W: Array | None) -> tuple[Array, Arra
     return r, rw, Aw
 
 
-def lse(problem: Problem, max_iter: int = 30, xtol: float = 1e-12) -> CalibrationResult:
-    """Unweighted Gauss-Newton (minimum-norm steps for rank-deficient sets)."""
+def lse(problem: Problem, max_iter: int = 30, xtol: float = 1e-12,
+        max_halvings: int = 30) -> CalibrationResult:
+    """Gauss-Newton (minimum-norm steps for rank-deficient sets) with a backtracking line search.
+
+    Plain Gauss-Newton overshoots on ill-conditioned or mis-modelled sets and then diverges; here
+    a step that raises the cost is halved until it lowers it, and when no fraction of the step
+    helps the fit stops with status "stalled" (never a silently worse estimate).
+    """
     t0 = time.perf_counter()
     x = problem.x0[problem.free_idx].copy()
     status, msg = "max_iterations", f"no convergence in {max_iter} iterations"
@@ -74,16 +80,21 @@ def lse(problem: Problem, max_iter: int = 30, xtol: float = 1e-12) -> Calibratio
     cost = float(rw @ rw)
     for it in range(1, max_iter + 1):
         dx, *_ = np.linalg.lstsq(Aw, rw, rcond=1e-10)
-        r2, rw2, Aw2 = _eval(problem, x + dx, None)
-        cost2 = float(rw2 @ rw2)
-        if not np.isfinite(cost2) or cost2 > cost * (1 + 1e-9) + 1e-300:
-            # Undamped Gauss-Newton overshoots on ill-conditioned sets: keep the best iterate
-            # and say so (this is the plain LSE; `lm` is the damped, weighted alternative).
-            status, msg = "diverged", f"cost increased at iteration {it}; kept the best iterate"
+        step = 1.0
+        for _ in range(max_halvings):
+            r2, rw2, Aw2 = _eval(problem, x + step * dx, None)
+            cost2 = float(rw2 @ rw2)
+            if np.isfinite(cost2) and cost2 <= cost * (1 + 1e-12) + 1e-300:
+                break
+            step *= 0.5
+        else:
+            status, msg = "stalled", f"no decrease along the Gauss-Newton step at iteration {it}"
             break
-        x += dx
+        x = x + step * dx
+        small = np.linalg.norm(step * dx) <= xtol * (1.0 + np.linalg.norm(x))
+        flat = cost - cost2 <= 1e-12 * max(cost, 1e-300)
         r, rw, Aw, cost = r2, rw2, Aw2, cost2
-        if np.linalg.norm(dx) <= xtol * (1.0 + np.linalg.norm(x)):
+        if small or (flat and step == 1.0):
             status, msg = "converged", f"step below {xtol:g} after {it} iterations"
             break
     dof = max(rw.size - Aw.shape[1], 1)
@@ -174,11 +185,53 @@ class EKFTuning:
         R = np.diag(np.broadcast_to(np.asarray(sig, float), (problem.rows,)) ** 2)
         return cls(var, var.copy(), R)
 
+    @classmethod
+    def expected(cls, problem: Problem, angle: float = np.radians(0.5), length: float = 2e-3,
+                 frame_length: float | None = None, frame_angle: float | None = None) -> "EKFTuning":
+        """Default tuning: the prior P0 is the stated expected size of the errors (a constant
+        parameter vector, so Q = 0), R the problem's own noise model (covariance or sigmas).
+
+        The paper's P0 = Q = (0.01 deg | 0.01 mm)^2 is ~30x tighter than the errors it must find,
+        so the filter cannot move far enough; with P0 from the expected errors the EKF is the
+        sequential form of the MAP least-squares estimate (see `lm` with the same prior).
+        """
+        var = (expected_sigma(problem.free, angle, length, frame_length, frame_angle)) ** 2
+        if getattr(problem, "cov", None) is not None:
+            R = np.asarray(problem.cov, float)
+        else:
+            R = np.diag(np.broadcast_to(np.asarray(problem.sigma if problem.sigma is not None else 1.0,
+                                                   float), (problem.rows,)) ** 2)
+        return cls(var, np.zeros_like(var), R)
+
+    @classmethod
+    def by_name(cls, name: str, problem: Problem, **kw) -> "EKFTuning":
+        """'expected' (default: prior from the expected error size) or 'paper' (the EKF paper's)."""
+        if name == "paper":
+            return cls.paper(problem)
+        if name == "expected":
+            return cls.expected(problem, **kw)
+        raise ValueError(f"unknown EKF tuning {name!r} (expected, paper)")
+
+
+def expected_sigma(names: list[str], angle: float, length: float, frame_length: float | None = None,
+                   frame_angle: float | None = None) -> Array:
+    """Per-parameter expected error size: D-H angles/lengths, frame/extra lengths/angles."""
+    out = []
+    for n in names:
+        frame = not n.split("_")[0] in ("theta", "d", "a", "alpha", "beta")
+        if _is_length(n):
+            out.append(frame_length if (frame and frame_length is not None) else length)
+        else:
+            out.append(frame_angle if (frame and frame_angle is not None) else angle)
+    return np.array(out, float)
+
 
 def _is_length(name: str) -> bool:
-    kind = name.rsplit("_", 1)[-1] if name.startswith(("base_", "tool_", "board_", "cam_")) else \
-        name.rsplit("_", 1)[0]
-    return kind in ("d", "a", "x", "y", "z", "f")
+    head, _, tail = name.rpartition("_")
+    if head in ("theta", "d", "a", "alpha", "beta"):
+        return head in ("d", "a")
+    # frames (x, y, z), tool points (tx..), anchors (ax.., l0), plane offset (f)
+    return tail in ("x", "y", "z", "f", "tx", "ty", "tz", "ax", "ay", "az", "l0")
 
 
 def ekf(problem: Problem, tuning: EKFTuning, passes: int = 1) -> CalibrationResult:

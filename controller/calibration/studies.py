@@ -78,7 +78,7 @@ def laser_study(runs: int = 20, seed0: int = 0, cases=(50, 100), n_random: int =
 
 # ------------------------------------------------------------------------------------ EKF
 METHOD_LABEL = {"lse": "LSE", "ekf": "EKF (paper P0,Q,R)", "ekf_cov": "EKF (cov-tuned)",
-                "lm": "LM full-cov MAP"}
+                "lm": "LM full-cov MAP", "ekf_default": "EKF (default tuning)"}
 
 
 def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None,
@@ -86,7 +86,7 @@ def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None,
               progress=None) -> tuple[str, dict]:
     t0 = time.perf_counter()
     st = E.setup()
-    methods = ("lse", "ekf", "ekf_cov", "lm")
+    methods = ("lse", "ekf", "ekf_default", "ekf_cov", "lm")
     lines = ["EKF vision calibration study (7-DOF SSRMS-type arm, Table 3 errors, control noise 0.01 deg,",
              f"  50 identification / 200 validation postures, {runs} Monte-Carlo runs)", ""]
     # ---- Table 4 at 0.3 mm / 0.5 deg

@@ -150,6 +150,12 @@ def run_once(st: EKFSetup, seed: int, n_ident: int = 50, n_valid: int = 200,
             res = ekf(pr, EKFTuning(var, np.zeros_like(var),
                                     pose_covariances(st, Q, sigma_p, sigma_r)), passes=2)
             res.method = "ekf_cov"
+        elif meth == "ekf_default":
+            # Default tuning: prior from the expected error size (Table 3 is ~0.3 deg / 1 mm;
+            # stated as 0.5 deg / 2 mm), Q = 0, R = the posture's full noise covariance.
+            pr = Problem(m, "pose", Q, meas, st.free, cov=pose_covariances(st, Q, sigma_p, sigma_r))
+            res = ekf(pr, EKFTuning.expected(pr), passes=3)
+            res.method = "ekf_default"
         elif meth == "lm":
             pr = Problem(m, "pose", Q, meas, st.free,
                          cov=pose_covariances(st, Q, sigma_p, sigma_r))

@@ -26,3 +26,10 @@ def test_full_fit_beats_registration_on_held_out_postures():
     assert r.held_pos_rms["full"] < 0.6 * r.held_pos_rms["registration"]
     assert r.held_pos_rms["full"] < 2.5e-3
     assert r.held_rot_rms["full"] < np.radians(0.35)
+
+
+def test_general_pipeline_on_real_data_is_plausible_and_beats_registration():
+    text, med = F.fr3_trusted_study(splits=2, seed=3)
+    assert "rejected" not in text
+    assert med["full_pos"] < 0.6 * med["registration_pos"]
+    assert med["full_pos"] < 2.5e-3

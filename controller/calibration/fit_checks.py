@@ -1,0 +1,150 @@
+"""Checks that keep a calibration fit honest: identifiability on the data's own postures,
+parameter groups with priors and bounds, and the physical-plausibility verdict.
+
+A fit that did not converge, moved a parameter beyond its stated bound, left residuals far above
+the stated noise, or made held-out postures worse is *rejected* with one line per reason; the
+caller must not write such a result to an arm file.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from spacearm.controller.calibration.composite import CompositeProblem
+from spacearm.controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
+
+Array = NDArray[np.float64]
+DH_KINDS = ("theta", "d", "a", "alpha", "beta")
+GROUPS = ("joint_angle", "joint_length", "frame_length", "frame_angle", "plane")
+
+
+def group_of(name: str) -> str:
+    """Parameter group: D-H angles/lengths, frame (registration, tool, anchor) lengths/angles, plane."""
+    head, _, tail = name.rpartition("_")
+    if head in DH_KINDS:
+        return "joint_length" if head in ("a", "d") else "joint_angle"
+    if tail in ("nx", "ny", "nz") or (tail == "f" and head.startswith("plane")):
+        return "plane"
+    if tail in ("x", "y", "z", "tx", "ty", "tz", "ax", "ay", "az", "l0"):
+        return "frame_length"
+    return "frame_angle"
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """Largest physically plausible correction per group (SI). A fit beyond them is rejected."""
+    joint_angle: float = np.radians(3.0)
+    joint_length: float = 0.05
+    frame_length: float = 0.10
+    frame_angle: float = np.radians(10.0)
+    plane: float = 0.5
+
+    def of(self, name: str) -> float:
+        return float(getattr(self, group_of(name)))
+
+
+@dataclass(frozen=True)
+class Priors:
+    """Regularisation: Gaussian prior sigma per group (inf = none), around the starting values;
+    `by_prefix` overrides it for parameters whose name starts with a prefix (e.g. a surveyed
+    anchor: ("wire_a", 0.002)), the longest matching prefix winning."""
+    joint_angle: float = np.inf
+    joint_length: float = np.inf
+    frame_length: float = np.inf
+    frame_angle: float = np.inf
+    plane: float = np.inf
+    by_prefix: tuple[tuple[str, float], ...] = ()
+
+    def sigma(self, name: str) -> float:
+        hits = [(len(p), s) for p, s in self.by_prefix if name.startswith(p)]
+        return float(max(hits)[1]) if hits else float(getattr(self, group_of(name)))
+
+    def sigmas(self, names: list[str]) -> Array:
+        return np.array([self.sigma(n) for n in names], float)
+
+    @property
+    def any(self) -> bool:
+        return any(np.isfinite(getattr(self, g)) for g in GROUPS) or bool(self.by_prefix)
+
+
+def default_gauge(problem: CompositeProblem) -> str | None:
+    """The plane coefficient that fixes the plane equation's scale (largest nominal component)."""
+    for b in problem.blocks:
+        gauge = getattr(b.model, "gauge", None)
+        if gauge is not None:
+            return gauge()
+    return None
+
+
+def data_identifiability(problem: CompositeProblem, candidates: list[str],
+                         tol: float = 1e-6) -> IdentifiabilityReport:
+    """Identifiable subset of `candidates` on the problem's own postures (at its start values)."""
+    _, A = problem.residual_and_jacobian(problem.x0)
+    idx = [problem.names.index(n) for n in candidates]
+    return find_identifiable(problem, candidates, tol=tol, gauge=default_gauge(problem),
+                             A=A[:, 0, idx])
+
+
+@dataclass
+class WeakDirection:
+    sigma_ratio: float            # smallest / largest singular value of the scaled Jacobian
+    parameters: dict[str, float]  # largest components of the weakest direction
+
+
+def weakest_direction(problem: CompositeProblem, free: list[str]) -> WeakDirection:
+    """The worst-determined combination of the free parameters on the data (unit-norm columns)."""
+    _, A = problem.residual_and_jacobian(problem.x0)
+    idx = [problem.names.index(n) for n in free]
+    G = A[:, 0, idx]
+    G = G / np.maximum(np.linalg.norm(G, axis=0), 1e-300)
+    _, s, Vt = np.linalg.svd(G, full_matrices=False)
+    v = Vt[-1]
+    top = np.argsort(-np.abs(v))[:4]
+    return WeakDirection(float(s[-1] / s[0]), {free[k]: float(v[k]) for k in top if abs(v[k]) > 0.1})
+
+
+@dataclass
+class Verdict:
+    ok: bool
+    reasons: list[str] = field(default_factory=list)
+
+    def message(self) -> str:
+        return "plausible" if self.ok else "fit rejected: " + "; ".join(self.reasons)
+
+
+def plausibility(status: str, message: str, names: list[str], corrections: Array, bounds: Bounds,
+                 train_noise_ratio: float, held_noise_ratio: float | None,
+                 held_before: float | None, held_after: float | None,
+                 max_noise_ratio: float = 3.0) -> Verdict:
+    """Verdict on a finished fit (noise ratios: RMS of the whitened residuals, 1 = as stated)."""
+    reasons = []
+    if status != "converged":
+        reasons.append(f"solver did not converge ({status}: {message})")
+    if not np.all(np.isfinite(corrections)):
+        reasons.append("estimate is not finite")
+    else:
+        over = [(n, c, bounds.of(n)) for n, c in zip(names, corrections) if abs(c) > bounds.of(n)]
+        for n, c, b in sorted(over, key=lambda t: -abs(t[1]) / t[2])[:4]:
+            reasons.append(f"{n} moved by {format_value(n, c)}, beyond its bound {format_value(n, b)}")
+        if len(over) > 4:
+            reasons.append(f"{len(over) - 4} more parameters beyond their bounds")
+    if not np.isfinite(train_noise_ratio) or train_noise_ratio > max_noise_ratio:
+        reasons.append(f"fit residuals are {train_noise_ratio:.1f}x the stated noise (limit {max_noise_ratio:g}x): "
+                       "the measurement model does not describe the data")
+    if held_noise_ratio is not None and not held_noise_ratio <= max_noise_ratio:
+        reasons.append(f"held-out residuals are {held_noise_ratio:.1f}x the stated noise (limit {max_noise_ratio:g}x)")
+    if held_before is not None and held_after is not None and not held_after <= held_before:
+        reasons.append(f"held-out error grew from {held_before * 1e3:.3f} to {held_after * 1e3:.3f} mm")
+    return Verdict(not reasons, reasons)
+
+
+def format_value(name: str, value: float, unit_angle: str = "deg") -> str:
+    """A parameter value in readable units: mm for lengths, deg (or mrad) for angles."""
+    g = group_of(name)
+    if g in ("joint_length", "frame_length"):
+        return f"{value * 1e3:.4g} mm"
+    if g == "plane":
+        return f"{value:.4g}"
+    return f"{value * 1e3:.4g} mrad" if unit_angle == "mrad" else f"{np.degrees(value):.4g} deg"
