@@ -29,6 +29,7 @@ from spacearm.firmware_sim.effects import (DelayLine, TemperatureProfile, dead_z
 from spacearm.firmware_sim.geometry import GeometryErrors
 from spacearm.firmware_sim.laser_ranger import LaserTarget
 from spacearm.firmware_sim.contact.config import ContactConfig
+from spacearm.firmware_sim.rigid_body_config import RigidBodyParams
 
 ARCSEC = math.pi / (180.0 * 3600.0)
 
@@ -107,6 +108,7 @@ class PlantConfig(Strict):
     geometry: GeometryErrors = GeometryErrors()
     laser: LaserTarget | None = None   # a laser ranger on the tool, served on a pty
     contact: ContactConfig | None = None   # the ORU cell's contact world (firmware_sim/contact)
+    rigid_body: RigidBodyParams | None = None   # coupled arm dynamics (firmware_sim/rigid_body.py); None = per joint
     seed: int = 0
 
 
@@ -232,7 +234,12 @@ class JointModel:
             self.thetad = 0.0
         else:
             tau -= math.copysign(static, tau)
-        self.thetad += tau / self.effective_inertia * h   # semi-implicit Euler
+        self.advance_stiff_gear(tau / self.effective_inertia, h)
+
+    def advance_stiff_gear(self, acceleration: float, h: float) -> None:
+        """Semi-implicit Euler of motor and link moving together, plus transmission error."""
+        p = self.params
+        self.thetad += acceleration * h
         self.theta += self.thetad * h
         if p.te_amplitude > 0.0:
             args = (p.te_amplitude, p.te_harmonic, p.te_phase, p.gear_ratio)
@@ -241,18 +248,25 @@ class JointModel:
         else:
             self.q, self.qd = self.theta, self.thetad
 
-    def _substep_two_mass(self, drive: float, h: float) -> None:
-        """Motor and link as two inertias joined by the gear: stiffness, play, transmission error."""
+    def advance_motor(self, drive: float, h: float, j_link: float) -> float:
+        """Integrate the motor side of an elastic/loose gear; returns the coupling torque on
+        the link. Damping defaults to 20 % of critical for the motor and `j_link`."""
         p = self.params
         stiffness = p.joint_stiffness or self.RIGID_GEAR_STIFFNESS
         j_motor = p.motor_inertia * p.gear_ratio ** 2
-        j_link = max(p.link_inertia, 1e-3)
         damping = p.joint_damping or 0.2 * math.sqrt(stiffness * j_motor * j_link / (j_motor + j_link))
         out = self.theta + transmission_error(self.theta, p.te_amplitude, p.te_harmonic, p.te_phase, p.gear_ratio)
         deflection = dead_zone(out - self.q, p.backlash)
         coupling = stiffness * deflection + (damping * (self.thetad - self.qd) if deflection != 0.0 else 0.0)
         self.thetad += (drive - coupling) / j_motor * h
         self.theta += self.thetad * h
+        return coupling
+
+    def _substep_two_mass(self, drive: float, h: float) -> None:
+        """Motor and link as two inertias joined by the gear: stiffness, play, transmission error."""
+        p = self.params
+        j_link = max(p.link_inertia, 1e-3)
+        coupling = self.advance_motor(drive, h, j_link)
         tau = coupling - self.external_torque - self._load()
         static = static_friction(p.coulomb_friction, p.stribeck_friction)
         if abs(self.qd) > 1e-6 or static == 0.0:
@@ -297,6 +311,7 @@ class Plant:
     environment: Environment | None = None
     time: float = 0.0
     steps: int = 0
+    dynamics: object | None = None   # spacearm.firmware_sim.rigid_body.ArmDynamics when [rigid_body] is on
 
     @classmethod
     def create(cls, n_joints: int, config: PlantConfig | None = None) -> "Plant":
@@ -312,6 +327,8 @@ class Plant:
         if config.contact is not None:
             from spacearm.firmware_sim.contact.world import build_contact_world
             plant.environment = build_contact_world(config.contact, plant)
+        if config.rigid_body is not None:
+            plant.dynamics = _rigid_body_dynamics(config, n_joints)
         return plant
 
     def step(self, dt: float) -> None:
@@ -319,8 +336,11 @@ class Plant:
         h = dt / n
         for k in range(n):
             s = (k + 1) / n
-            for joint in self.joints:
-                joint.substep(s, h)
+            if self.dynamics is not None:
+                self.dynamics.step_joints(self, s, h)
+            else:
+                for joint in self.joints:
+                    joint.substep(s, h)
             if self.ee is not None:
                 self.ee.step(h)
             if self.environment is not None:
@@ -367,6 +387,19 @@ class Plant:
 
 
 GRAVITY = 9.81
+
+
+def _rigid_body_dynamics(config: PlantConfig, n_joints: int):
+    """The coupled dynamics of the plant's true arm (imports Pinocchio only when used)."""
+    from spacearm.firmware_sim import rigid_body
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.base.config.errors import ConfigError
+    path = config.geometry.arm_path()
+    model = config.geometry.true_model()
+    if model.nq != n_joints:
+        raise ConfigError(f"{path}: the arm has {model.nq} joints, the bus {n_joints} joint drives")
+    return rigid_body.dynamics_for(model, load_arm_config(path), str(path), config.rigid_body,
+                                   config.payload.mass_error)
 
 
 def _load_amplitude(config: PlantConfig, p: JointParams) -> float:

@@ -12,6 +12,7 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from spacearm.base.config.limits import ApproachConfig, SupervisionConfig
+from spacearm.base.config.inertia import LinkInertial, UrdfSource
 from spacearm.base.config.loader import load_toml_model
 
 TWO_PI = 2.0 * math.pi
@@ -37,17 +38,31 @@ class JointLimits(Strict):
         return self
 
 
+class DriveLimits(Strict):
+    """What the joint's drive allows, as opposed to what the planner asks (JointLimits).
+
+    The defaults are the ORU test bed's drives (1 rad/s, 150 N m, 1 deg following error);
+    an imported arm takes velocity and effort from its URDF."""
+    velocity: float = Field(default=1.0, gt=0.0, le=50.0, description="rad/s (m/s if prismatic)")
+    torque: float = Field(default=150.0, gt=0.0, le=1.0e5, description="N m (N if prismatic)")
+    following_error: float = Field(default=0.0175, gt=0.0, le=1.0, description="rad (m if prismatic)")
+
+
 class Joint(Strict):
     name: str = Field(min_length=1, max_length=64)
+    type: Literal["revolute", "prismatic"] = Field(
+        default="revolute", description="prismatic: q (m) adds to d, theta_offset stays fixed")
     a: float = Field(ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, description="m")
     alpha: float = Field(ge=-TWO_PI, le=TWO_PI, description="rad")
     d: float = Field(ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, description="m")
     theta_offset: float = Field(default=0.0, ge=-TWO_PI, le=TWO_PI, description="rad")
     beta: float | None = Field(default=None, ge=-TWO_PI, le=TWO_PI,
                                description="Hayati rotation about y, rad; None when not modelled")
-    home: float = Field(default=0.0, ge=-3 * TWO_PI, le=3 * TWO_PI, description="rad")
+    home: float = Field(default=0.0, ge=-3 * TWO_PI, le=3 * TWO_PI, description="rad (m if prismatic)")
     limits: JointLimits
-    rated_torque: float = Field(default=150.0, gt=0.0, le=1.0e5, description="N m")
+    rated_torque: float = Field(default=150.0, gt=0.0, le=1.0e5, description="N m (N if prismatic)")
+    drive: DriveLimits = Field(default_factory=lambda: DriveLimits(),
+                               description="the drive's own limits (supervision, simulator, diagnosis)")
 
     @model_validator(mode="after")
     def _home_inside_limits(self) -> "Joint":
@@ -169,6 +184,9 @@ class ArmConfig(Strict):
     calibration: Calibration | None = None
     supervision: SupervisionConfig = SupervisionConfig()
     approach: ApproachConfig = ApproachConfig()
+    urdf: UrdfSource | None = None
+    links: list[LinkInertial] = Field(default_factory=list, max_length=12,
+                                      description="one inertial per joint (rigid-body plant); empty = none")
 
     @model_validator(mode="after")
     def _unique_names(self) -> "ArmConfig":
@@ -183,6 +201,8 @@ class ArmConfig(Strict):
                 if not joint.limits.lower <= value <= joint.limits.upper:
                     raise ValueError(f"posture {name!r}: {joint.name} = {value} is outside "
                                      f"[{joint.limits.lower}, {joint.limits.upper}]")
+        if self.links and len(self.links) != len(self.joints):
+            raise ValueError(f"links has {len(self.links)} entries, the arm has {len(self.joints)} joints")
         if self.calibration is not None:
             for name in ("dtheta", "dalpha", "da", "dd", "dbeta"):
                 values = getattr(self.calibration, name)

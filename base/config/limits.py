@@ -1,5 +1,6 @@
 """Safety limits and closed-loop tuning of an arm, as configuration (the arm file's
-`[supervision]` and `[approach]` tables). Every key is optional: the defaults are the values the
+`[supervision]` and `[approach]` tables; the following-error window is per joint, in
+`[joints.drive]`). Every key is optional: the defaults are the values the
 ORU test bed was commissioned with; an arm file overrides what differs for its arm and sensors."""
 from __future__ import annotations
 
@@ -15,7 +16,6 @@ class _Table(BaseModel):
 class SupervisionConfig(_Table):
     position_margin: float = Field(0.0087, ge=0.0, le=0.2, description="rad beyond a soft limit before stopping")
     velocity_tolerance: float = Field(0.2, ge=0.0, le=2.0, description="fraction above v_max before stopping")
-    following_error: float = Field(0.0175, gt=0.0, le=0.5, description="rad between last target and measurement")
     wrench_force_limit: float = Field(150.0, gt=0.0, le=1.0e4, description="N")
     wrench_torque_limit: float = Field(30.0, gt=0.0, le=1.0e3, description="N m")
     # consecutive cycles without a node's PDOs (100 ms at 50 Hz, below the 250 ms heartbeat-loss detection)

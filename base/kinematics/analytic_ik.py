@@ -110,7 +110,11 @@ def _chain_of(model: KinematicModel, fixed: dict[int, float]) -> tuple[Array, li
     Fs = [np.array(model.F[0])]
     free = []
     for i in range(model.nq):
-        if i in fixed:
+        if i in fixed and model.joint_types[i] == "prismatic":
+            slide = np.eye(4)
+            slide[2, 3] = fixed[i]
+            Fs[-1] = Fs[-1] @ rotz(model.theta_offset[i]) @ slide @ model.F[i + 1]
+        elif i in fixed:
             Fs[-1] = Fs[-1] @ rotz(fixed[i] + model.theta_offset[i]) @ model.F[i + 1]
         else:
             free.append(i)
@@ -288,6 +292,8 @@ class AnalyticIK:
 @functools.lru_cache(maxsize=64)
 def _analytic_for(model: KinematicModel, fixed: tuple[tuple[int, float], ...]) -> AnalyticIK | None:
     fixed_map = dict(fixed)
+    if any(t == "prismatic" for i, t in enumerate(model.joint_types) if i not in fixed_map):
+        return None   # the closed forms are for six revolute joints
     F, free = _chain_of(model, fixed_map)
     if len(free) != 6:
         return None
@@ -311,6 +317,9 @@ def expand_wraps(model: KinematicModel, q: ArrayLike) -> list[Array]:
     q = np.asarray(q, dtype=float)
     choices = []
     for i in range(model.nq):
+        if model.joint_types[i] == "prismatic":
+            choices.append([q[i]])
+            continue
         lo = math.ceil((model.q_min[i] - q[i]) / TWO_PI - 1e-12)
         hi = math.floor((model.q_max[i] - q[i]) / TWO_PI + 1e-12)
         choices.append([q[i] + k * TWO_PI for k in range(lo, hi + 1)])

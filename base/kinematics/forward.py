@@ -11,8 +11,16 @@ Array = NDArray[np.float64]
 
 def compute_chain(model: KinematicModel, data: KinematicData, q: ArrayLike) -> None:
     """Fill data.B with the chain frames for q (B[i] precedes joint i+1, B[n] is the end pose)."""
+    if data.model is not model:
+        data.bind(model)
     angles = data.angles
-    np.add(np.reshape(q, (-1, 1, 1)), data.angle_shift, out=angles)
+    if data.has_prismatic:
+        np.multiply(q, data.revolute, out=data.q_rev)
+        np.add(data.q_rev.reshape(-1, 1, 1), data.angle_shift, out=angles)
+        np.multiply(q, data.prismatic_f, out=data.q_pri)
+        np.add(data.F_z, data.q_pri, out=data._A_z)
+    else:
+        np.add(np.reshape(q, (-1, 1, 1)), data.angle_shift, out=angles)
     np.cos(angles, out=data.rot2)
     np.matmul(data.rot2, data.F_top, out=data.A_top)
     Bv, Av = data._B_views, data._A_views
@@ -32,9 +40,12 @@ def frames(model: KinematicModel, data: KinematicData, q: ArrayLike) -> Array:
     n = model.nq
     out = np.empty((n + 2, 4, 4))
     out[0] = model.base
+    q = np.asarray(q, dtype=float)
     for i in range(n):
         Rz = np.eye(4)
         Rz[:2, :2] = data.rot2[i]
+        if data.prismatic[i]:
+            Rz[2, 3] = q[i]
         out[i + 1] = data.B[i] @ Rz @ model.tails[i]
     out[n + 1] = data.B[n]
     return out
@@ -69,7 +80,9 @@ def fk_batch(model: KinematicModel, Q: ArrayLike, out: Array | None = None) -> A
     if Q.ndim != 2 or Q.shape[1] != model.nq:
         raise ValueError(f"Q must have shape (N, {model.nq}), got {Q.shape}")
     N = Q.shape[0]
-    c, s = cos_sin(Q + model.theta_offset)
+    prismatic = model.prismatic
+    c, s = cos_sin(np.where(prismatic, 0.0, Q) + model.theta_offset if prismatic.any()
+                   else Q + model.theta_offset)
     E = np.empty((N, model.nq), dtype=complex)
     E.real = c
     E.imag = s
@@ -79,6 +92,8 @@ def fk_batch(model: KinematicModel, Q: ArrayLike, out: Array | None = None) -> A
     X[:] = F[0, :3, :]
     for i in range(model.nq):
         X.view(complex)[:, :, 0] *= E[:, i:i + 1]
+        if prismatic[i]:
+            X[:, :, 3] += X[:, :, 2] * Q[:, i:i + 1]   # right-multiply by Tz(q_i)
         X = (X.reshape(3 * N, 4) @ F[i + 1]).reshape(N, 3, 4)
     if out is None:
         out = np.empty((N, 4, 4))

@@ -25,6 +25,10 @@ FIXED_JOINT_STEPS = tuple(sorted(np.arange(-1.5, 1.5001, 0.025), key=abs))
 FIRST_ATTEMPT_ITER = 25
 # Distance (rad) the retry pulls a seed inside the joint limits.
 LIMIT_MARGIN = 0.2
+# Arms without a closed form: DLS restarts from seeds up to RESTARTS * RESTART_SPREAD rad away.
+RESTARTS = 8
+RESTART_SPREAD = 0.25
+RESTART_SEED = 20261124
 
 
 @dataclass
@@ -168,7 +172,7 @@ def solve_ik(model: KinematicModel, data: KinematicData, T_target: ArrayLike, q0
         for step in FIXED_JOINT_STEPS:
             solver = analytic_solver(ref, {1: float(q0[1]) + step})
             if solver is None:
-                return res
+                return _perturbed_restarts(model, data, T_target, q0, res, max_iter, tol_pos, tol_rot)
             for q in solver.solve(T_target, q0):
                 candidates.extend(expand_wraps(model, q))
             if candidates:
@@ -176,19 +180,43 @@ def solve_ik(model: KinematicModel, data: KinematicData, T_target: ArrayLike, q0
     else:
         solver = analytic_solver(ref)
         if solver is None:
-            return res
+            return _perturbed_restarts(model, data, T_target, q0, res, max_iter, tol_pos, tol_rot)
         for q in solver.solve(T_target, q0):
             candidates.extend(expand_wraps(model, q))
+    res = _first_from_seeds(model, data, T_target, _closest(candidates, q0)[:8], res, max_iter, tol_pos,
+                            tol_rot, "converged from analytic seed")
+    if not res.success:
+        res.message += "; analytic seeds failed" if candidates else "; no analytic solution (unreachable?)"
+    return res
+
+
+def _first_from_seeds(model: KinematicModel, data: KinematicData, T_target: Array, seeds, res: IKResult,
+                      max_iter: int, tol_pos: float, tol_rot: float, message: str) -> IKResult:
+    """DLS from each seed in turn: the first success (iterations summed), else `res`."""
     total = res.iterations
-    for q in _closest(candidates, q0)[:8]:
+    for q in seeds:
         r = solve_dls(model, data, T_target, q, max_iter=max_iter, tol_pos=tol_pos, tol_rot=tol_rot)
         total += r.iterations
         if r.success:
             r.iterations = total
-            r.message = "converged from analytic seed"
+            r.message = message
             return r
     res.iterations = total
-    res.message += "; analytic seeds failed" if candidates else "; no analytic solution (unreachable?)"
+    return res
+
+
+def _perturbed_restarts(model: KinematicModel, data: KinematicData, T_target: Array, q0: Array,
+                        res: IKResult, max_iter: int, tol_pos: float, tol_rot: float) -> IKResult:
+    """Arms without a closed form (imported 7-joint arms, prismatic joints): DLS from seeds
+    scattered ever wider around q0 inside the limits (fixed generator: reproducible)."""
+    rng = np.random.default_rng(RESTART_SEED)
+    margin = np.minimum(LIMIT_MARGIN, 0.25 * (model.q_max - model.q_min))
+    seeds = (np.clip(q0 + rng.uniform(-RESTART_SPREAD * (k + 1), RESTART_SPREAD * (k + 1), model.nq),
+                     model.q_min + margin, model.q_max - margin) for k in range(RESTARTS))
+    res = _first_from_seeds(model, data, T_target, seeds, res, max_iter, tol_pos, tol_rot,
+                            "converged from a perturbed seed")
+    if not res.success:
+        res.message += f"; no closed form, {RESTARTS} perturbed seeds failed"
     return res
 
 

@@ -26,6 +26,9 @@ def jacobian_from_chain(data: KinematicData) -> Array:
     np.multiply(data._z_20, data._d_12, out=data.cross_b)
     np.subtract(data.cross_a, data.cross_b, out=data._Jv)
     np.copyto(data._Jw, data._z3)
+    if data.has_prismatic:   # a sliding joint moves the tool along its axis and does not turn it
+        data._Jv[data.prismatic] = data._z3[data.prismatic]
+        data._Jw[data.prismatic] = 0.0
     return data.J
 
 

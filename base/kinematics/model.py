@@ -7,7 +7,9 @@ Both D-H conventions are reduced to one chain of fixed transforms and joint rota
 so FK, the Jacobian and the analytic IK never branch on the convention.
   standard (with Hayati beta): A_i = Rz(theta_i) Tz(d_i) Tx(a_i) Rx(alpha_i) Ry(beta_i)
   modified (Craig):            T_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Ry(beta_i) Rz(theta_i) Tz(d_i)
-The joint-i axis is the z axis of the frame just before Rz(theta_i).
+The joint-i axis is the z axis of the frame just before Rz(theta_i). A prismatic joint adds
+Tz(q_i) right after Rz(theta_i) (its theta stays at theta_offset_i, q adds to d_i); Rz and Tz
+commute, so both conventions keep the same chain.
 """
 from __future__ import annotations
 
@@ -85,6 +87,7 @@ class KinematicModel:
     q_home: Array
     joint_names: tuple[str, ...]
     name: str = "arm"
+    joint_types: tuple[str, ...] = ()   # "revolute"/"prismatic" per joint; empty = all revolute
     F: Array = field(init=False, repr=False)
     tails: Array = field(init=False, repr=False)
 
@@ -101,6 +104,10 @@ class KinematicModel:
         object.__setattr__(self, "base", _frozen(self.base, (4, 4)))
         object.__setattr__(self, "tool", _frozen(self.tool, (4, 4)))
         object.__setattr__(self, "joint_names", tuple(self.joint_names))
+        types = tuple(self.joint_types) or ("revolute",) * n
+        if len(types) != n or any(t not in ("revolute", "prismatic") for t in types):
+            raise ValueError(f"joint_types must be {n} of 'revolute'/'prismatic', got {types}")
+        object.__setattr__(self, "joint_types", types)
         heads = [dh_head(self.convention, self.a[i], self.alpha[i], self.beta[i]) for i in range(n)]
         tails = [dh_tail(self.convention, self.a[i], self.alpha[i], self.d[i], self.beta[i])
                  for i in range(n)]
@@ -118,9 +125,15 @@ class KinematicModel:
         return len(self.joint_names)
 
     @property
+    def prismatic(self) -> NDArray[np.bool_]:
+        """Mask of the prismatic joints (a new array)."""
+        return np.array([t == "prismatic" for t in self.joint_types], dtype=bool)
+
+    @property
     def reach(self) -> float:
-        """Upper bound of the arm's reach (sum of link lengths and offsets), m."""
-        return float(np.abs(self.a).sum() + np.abs(self.d).sum()
+        """Upper bound of the arm's reach (sum of link lengths, offsets and strokes), m."""
+        stroke = np.where(self.prismatic, np.maximum(np.abs(self.q_min), np.abs(self.q_max)), 0.0)
+        return float(np.abs(self.a).sum() + np.abs(self.d).sum() + stroke.sum()
                      + np.linalg.norm(self.base[:3, 3]) + np.linalg.norm(self.tool[:3, 3]))
 
     @classmethod
@@ -147,6 +160,7 @@ class KinematicModel:
             q_home=[j.home for j in joints],
             joint_names=[j.name for j in joints],
             name=config.arm.name,
+            joint_types=tuple(j.type for j in joints),
         )
         c = config.calibration
         if c is None or not calibrated:
@@ -207,26 +221,25 @@ class KinematicData:
 
     Not thread safe; use one per thread. Results returned by the algorithms may be views
     into this object (documented per function) and are overwritten by the next call.
+    The geometry copied in here belongs to `self.model`; the algorithms call `bind` whenever
+    they are handed another model (an identity check per call), so data never carries another
+    model's geometry into a result.
     """
 
     def __init__(self, model: KinematicModel) -> None:
         n = model.nq
         self.nq = n
+        self.model = model
         # A[i] = Rz(theta_{i+1}) F_{i+1}; rows 2, 3 never change, rows 0, 1 are
         # [[c, -s], [s, c]] @ F_{i+1}[:2]. That 2x2 block is cos() of the angle block
         # [[th, th + pi/2], [th - pi/2, th]], so one add, one cos and one batched matmul
         # build all of A (each numpy call costs ~1 us here; fewer calls is what matters).
         self.A = np.empty((n, 4, 4))
-        self.A[:, 2:, :] = model.F[1:, 2:, :]
-        self.F_top = np.ascontiguousarray(model.F[1:, :2, :])
-        self.angle_shift = (model.theta_offset[:, None, None]
-                            + np.array([[0.0, 0.5 * np.pi], [-0.5 * np.pi, 0.0]]))
         self.angles = np.empty((n, 2, 2))
         self.rot2 = np.empty((n, 2, 2))
         self.A_top = self.A[:, :2, :]
         # B[0] = F_0, B[i] = B[i-1] A[i-1]; joint i+1 axis is z of B[i]; B[n] is the end pose.
         self.B = np.empty((n + 1, 4, 4))
-        self.B[0] = model.F[0]
         # Jacobian stored transposed (row per joint) so the cross product writes contiguously.
         self.Jt = np.empty((n, 6))
         self.J = self.Jt.T
@@ -247,3 +260,25 @@ class KinematicData:
         self._z_12, self._z_20 = self.zext[:, 1:4], self.zext[:, 2:5]
         self._d_12, self._d_20 = self.dext[:, 1:4], self.dext[:, 2:5]
         self._Jv, self._Jw = self.Jt[:, :3], self.Jt[:, 3:]
+        # Prismatic joints: A[i][2, 3] = F_{i+1}[2, 3] + q_i (Tz(q) before F only shifts row 2).
+        self._A_z = self.A[:, 2, 3]
+        self.q_rev = np.empty(n)
+        self.q_pri = np.empty(n)
+        self.bind(model)
+
+    def bind(self, model: KinematicModel) -> None:
+        """Copy `model`'s geometry into this scratch (same number of joints required)."""
+        if model.nq != self.nq:
+            raise ValueError(f"kinematic data for {self.nq} joints used with a {model.nq}-joint model "
+                             f"({model.name!r})")
+        self.model = model
+        self.A[:, 2:, :] = model.F[1:, 2:, :]
+        self.F_top = np.ascontiguousarray(model.F[1:, :2, :])
+        self.F_z = np.ascontiguousarray(model.F[1:, 2, 3])
+        self.angle_shift = (model.theta_offset[:, None, None]
+                            + np.array([[0.0, 0.5 * np.pi], [-0.5 * np.pi, 0.0]]))
+        self.B[0] = model.F[0]
+        self.prismatic = model.prismatic
+        self.has_prismatic = bool(self.prismatic.any())
+        self.revolute = (~self.prismatic).astype(float)
+        self.prismatic_f = self.prismatic.astype(float)

@@ -26,6 +26,14 @@ def _pose_text(T: np.ndarray) -> str:
 NUMERIC_ARGS = {"ignore_unknown_options": True}
 
 
+def _joints_text(model, q, column: str = "10.4f", unit: str = "  deg") -> str:
+    """Joint values for people: revolute joints in deg, prismatic joints in mm."""
+    if "prismatic" not in model.joint_types:
+        return " ".join(f"{math.degrees(v):{column}}" for v in q) + unit
+    return " ".join(f"{v * 1e3:.3f}mm" if kind == "prismatic" else f"{math.degrees(v):.4f}deg"
+                    for v, kind in zip(q, model.joint_types))
+
+
 def register(app: typer.Typer) -> None:
     kin_app = typer.Typer(help="Forward and inverse kinematics of an arm file.", no_args_is_help=True)
 
@@ -37,7 +45,10 @@ def register(app: typer.Typer) -> None:
         """Tool pose in the base frame for joint angles Q."""
         model = load_model(arm)
         try:
-            angles = np.array([parse_angle(v) for v in q]) if q else np.array(model.q_home)
+            # a prismatic joint takes a length (m, or with mm)
+            angles = (np.array([parse_length(v) if kind == "prismatic" else parse_angle(v)
+                                for v, kind in zip(q, model.joint_types + ("revolute",) * len(q))])
+                      if q else np.array(model.q_home))
         except UnitError as exc:
             raise CommandFailed(str(exc)) from None
         if len(angles) != model.nq:
@@ -79,7 +90,7 @@ def register(app: typer.Typer) -> None:
                 raise CommandFailed("no closed-form solution within the joint limits")
             result = [s.tolist() for s in solutions]
             print(json.dumps(result) if as_json else
-                  "\n".join(" ".join(f"{math.degrees(v):10.4f}" for v in s) + "  deg" for s in solutions))
+                  "\n".join(_joints_text(model, s) for s in solutions))
             return
         found = solve_ik(model, KinematicData(model), T, q0)
         if not found.success:
@@ -87,7 +98,7 @@ def register(app: typer.Typer) -> None:
         if as_json:
             print(json.dumps({"q": found.q.tolist(), "pos_error": found.pos_error, "rot_error": found.rot_error}))
         else:
-            print(" ".join(f"{math.degrees(v):.4f}" for v in found.q) + " deg"
+            print(_joints_text(model, found.q, ".4f", " deg") +
                   f"  (error {found.pos_error * 1e3:.2e} mm, {math.degrees(found.rot_error):.2e} deg)")
 
     app.add_typer(kin_app, name="kin")

@@ -82,7 +82,8 @@ class Daemon:
         names = list(self.model.joint_names)
         self.supervisor = Supervisor(SupervisionLimits(
             np.array(self.model.q_min), np.array(self.model.q_max), np.array(self.model.v_max),
-            self.arm.supervision), names)
+            following_error=np.array([j.drive.following_error for j in self.arm.joints]),
+            settings=self.arm.supervision), names)
         self.core = ControllerCore(self.supervisor, names, options.period)
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)

@@ -17,10 +17,12 @@ from spacearm.controller.cycle import Finding, FindingCode, Measurement
 @dataclass(frozen=True)
 class SupervisionLimits:
     """The arm's joint limits and its supervision settings (the arm file's [supervision] table);
-    the settings read as attributes of the limits (`limits.following_error`)."""
+    the settings read as attributes of the limits (`limits.ft_jump_force`)."""
     q_min: np.ndarray
     q_max: np.ndarray
     v_max: np.ndarray
+    # rad between last target and measurement, per joint from the arm file's [joints.drive]
+    following_error: float | np.ndarray = 0.0175
     settings: SupervisionConfig = SupervisionConfig()
 
     def __getattr__(self, name: str):
@@ -70,9 +72,10 @@ class Supervisor:
                                     f"above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
         if moving and last_target is not None:
             error = np.abs(last_target - m.q)
-            for i in np.flatnonzero(error > lim.following_error):
+            window = np.broadcast_to(lim.following_error, error.shape)
+            for i in np.flatnonzero(error > window):
                 findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
-                                        f"{error[i]:.4f} rad above {lim.following_error:.4f} rad", joint=self.names[i]))
+                                        f"{error[i]:.4f} rad above {window[i]:.4f} rad", joint=self.names[i]))
         force = float(np.linalg.norm(m.wrench[:3]))
         torque = float(np.linalg.norm(m.wrench[3:]))
         if m.wrench_overload:

@@ -22,15 +22,16 @@ def with_tables(tmp_path: Path, tables: str) -> Path:
 
 def test_defaults_are_the_commissioned_values():
     arm = load_arm_config(ORU)
-    assert arm.supervision.following_error == 0.0175      # rad, 1 deg
+    assert [j.drive.following_error for j in arm.joints] == [0.0175] * 6      # rad, 1 deg, per joint
     assert (arm.supervision.wrench_force_limit, arm.supervision.ft_jump_force) == (150.0, 80.0)
     assert arm.approach.lost_frames == 6
 
 
 def test_an_override_reaches_the_supervisor(tmp_path):
-    arm = load_arm_config(with_tables(tmp_path, "[supervision]\nfollowing_error = 0.005\nwrench_force_limit = 60.0\n"))
-    limits = SupervisionLimits(np.full(6, -3.0), np.full(6, 3.0), np.full(6, 1.0), arm.supervision)
-    assert limits.following_error == 0.005 and limits.ft_jump_force == 80.0
+    arm = load_arm_config(with_tables(tmp_path, "[supervision]\nwrench_force_limit = 60.0\n"))
+    limits = SupervisionLimits(np.full(6, -3.0), np.full(6, 3.0), np.full(6, 1.0), settings=arm.supervision,
+                               following_error=np.array([0.01, 0.005, 0.01, 0.01, 0.01, 0.01]))
+    assert limits.wrench_force_limit == 60.0 and limits.ft_jump_force == 80.0
     sup = Supervisor(limits, [j.name for j in arm.joints])
     m = Measurement(0.0, 0, np.zeros(6), np.zeros(6), np.zeros(6), np.ones(6, bool), np.zeros(6, bool),
                     np.array([70.0, 0, 0, 0, 0, 0]))
@@ -41,7 +42,7 @@ def test_an_override_reaches_the_supervisor(tmp_path):
 
 
 @pytest.mark.parametrize("tables, key", [
-    ("[supervision]\nfollowing_error = 2.0\n", "supervision.following_error"),
+    ("[supervision]\nft_jump_force = 0\n", "supervision.ft_jump_force"),
     ("[supervision]\nwrench_force_limit = -1\n", "supervision.wrench_force_limit"),
     ("[supervision]\nfollowing_eror = 0.01\n", "supervision.following_eror"),
     ("[approach]\nlost_frames = 0\n", "approach.lost_frames"),
