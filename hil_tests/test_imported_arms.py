@@ -36,7 +36,7 @@ def test_arm_runs_checkout_on_virtual_bus_with_rigid_body_plant(arm: str, tmp_pa
         daemon = Daemon(DaemonOptions(bus=bus, arm=arm_file, bus_config=bus_file,
                                       clock="lockstep", api=None, record_dir=tmp_path))
         daemon.start()
-        assert len(daemon.network.drivers) == ARMS[arm] + 2   # drives + end-effector + F/T sensor
+        assert daemon.hardware.node_count == ARMS[arm] + 2   # drives + end-effector + F/T sensor
         cycle = threading.Thread(target=daemon.run, daemon=True)
         cycle.start()
         result = run_checkout(daemon, lambda *_: None)
