@@ -37,6 +37,10 @@ def status_lines(status: dict[str, Any]) -> list[str]:
                      + " ".join(f"{v:6.3f}" for v in wrench[3:]) + " N m")
     if status.get("end_effector"):
         lines.append(f"end effector: {status['end_effector']}")
+    skipped = {node: [s.split()[0] for s in r.get("skipped", [])] for node, r in (status.get("bringup") or {}).items()}
+    if any(skipped.values()):
+        lines.append("absent optional objects (skipped at bring-up): "
+                     + "; ".join(f"{node} {' '.join(objs)}" for node, objs in skipped.items() if objs))
     return lines
 
 

@@ -5,18 +5,19 @@ dataclasses below and commands in SI units back into PDO bytes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import math
+from dataclasses import dataclass
 
 import canopen
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
-from spacearm.base.config.bus import BusSettings, NodeConfig
+from spacearm.base.config.bus import BusSettings, NodeConfig, parse_object_ref
 from spacearm.drivers.cia402 import Cia402Axis
 from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
-from spacearm.base.canopen.pdo_maps import PDO_MAPS
+from spacearm.drivers.pdo_config import PdoSpec, resolve_layout
 
 
 @dataclass
@@ -29,8 +30,8 @@ class JointState:
     velocity: float = 0.0          # rad/s
     torque: float = 0.0            # N m at the joint (motor torque x gear ratio)
     following_error: float = 0.0   # rad
-    temperature: float = 0.0       # degC
-    brake_engaged: bool = True
+    temperature: float = float("nan")  # degC (nan: the drive's configuration names no such object)
+    brake_engaged: bool | None = True  # None: not reported
     error_code: int = 0
     mode: int = 0
 
@@ -74,16 +75,6 @@ class FtState:
     tared: bool = False
 
 
-@dataclass
-class _PdoSpec:
-    cob_id: int
-    entries: list[tuple[int, int, int, object]] = field(default_factory=list)  # index, sub, bytes, ODVariable
-
-    @property
-    def length(self) -> int:
-        return sum(e[2] for e in self.entries)
-
-
 class DeviceDriver:
     device = ""
 
@@ -92,49 +83,30 @@ class DeviceDriver:
         self.bus = bus
         self.od = object_dictionary
         self.name, self.node_id, self.label = cfg.name, cfg.node_id, cfg.label
-        maps = PDO_MAPS[self.device]
-        self.rpdos = [self._spec(od.RPDO_BASE[n], m) for n, m in enumerate(maps["rpdo"])]
-        self.tpdos = [self._spec(od.TPDO_BASE[n], m) for n, m in enumerate(maps["tpdo"])]
+        # the configured layout, checked against the EDS (MappingError names node, PDO, object)
+        self.rpdos, self.tpdos = resolve_layout(cfg, object_dictionary)
         self.values: dict[tuple[int, int], int] = {}
         self.rpdo_values: dict[tuple[int, int], int] = {}
-
-    def _spec(self, base: int, mapping) -> _PdoSpec:
-        entries = []
-        for index, sub, bits in mapping:
-            var = self.od[index] if sub == 0 and not hasattr(self.od[index], "subindices") else self.od[index][sub]
-            entries.append((index, sub, bits // 8, var))
-        return _PdoSpec(base + self.node_id, entries)
 
     # bring-up -------------------------------------------------------------------
     def config_writes(self) -> list[tuple[int, int, int]]:
         """(index, sub, value) written by SDO before PDO mapping; device specific."""
         return []
 
-    def pdo_writes(self) -> list[tuple[int, int, int]]:
-        writes = []
-        maps = PDO_MAPS[self.device]
-        for kind, comm, mapi, bases in (("rpdo", od.RPDO_COMM, od.RPDO_MAP, od.RPDO_BASE),
-                                        ("tpdo", od.TPDO_COMM, od.TPDO_MAP, od.TPDO_BASE)):
-            for n in range(od.N_PDOS):
-                cob = bases[n] + self.node_id
-                writes.append((comm + n, od.PDO_COB_ID, cob | od.PDO_COB_ID_INVALID))
-                if n >= len(maps[kind]):
-                    continue
-                mapping = maps[kind][n]
-                writes.append((mapi + n, 0, 0))
-                for i, (index, sub, bits) in enumerate(mapping, start=1):
-                    writes.append((mapi + n, i, (index << 16) | (sub << 8) | bits))
-                writes.append((mapi + n, 0, len(mapping)))
-                writes.append((comm + n, od.PDO_TRANSMISSION_TYPE, od.TRANSMISSION_SYNC))
-                writes.append((comm + n, od.PDO_COB_ID, cob))
-        return writes
+    def hardware_objects(self) -> list[tuple[int, int, int]]:
+        """(index, sub, configured value) of fixed hardware data (scaling). Bring-up writes
+        them where the EDS says writable, else reads them and calls use_hardware()."""
+        return []
+
+    def use_hardware(self, values: dict[tuple[int, int], int]) -> None:
+        """Scaling from the hardware data the device reported (read-only objects)."""
 
     # cycle ------------------------------------------------------------------------
-    def decode(self, spec: _PdoSpec, data: bytes) -> None:
+    def decode(self, spec: PdoSpec, data: bytes) -> None:
         offset = 0
-        for index, sub, size, var in spec.entries:
-            self.values[(index, sub)] = var.decode_raw(data[offset:offset + size])
-            offset += size
+        for e in spec.entries:
+            self.values[(e.index, e.sub)] = e.var.decode_raw(data[offset:offset + e.size])
+            offset += e.size
 
     def value(self, index: int, sub: int = 0, default=0):
         return self.values.get((index, sub), default)
@@ -145,8 +117,8 @@ class DeviceDriver:
     def rpdo_frames(self) -> list[tuple[int, bytes]]:
         frames = []
         for spec in self.rpdos:
-            data = b"".join(var.encode_raw(self.rpdo_values.get((index, sub), 0))
-                            for index, sub, _, var in spec.entries)
+            data = b"".join(e.var.encode_raw(self.rpdo_values.get((e.index, e.sub), 0))
+                            for e in spec.entries)
             frames.append((spec.cob_id, data))
         return frames
 
@@ -157,7 +129,8 @@ class JointDriver(DeviceDriver):
     def __init__(self, cfg, bus, object_dictionary):
         super().__init__(cfg, bus, object_dictionary)
         self.settings = cfg.joint
-        self.k = self.settings.increments_per_rad
+        self.k = self.settings.increments_per_rad          # increments per joint radian
+        self.rated_joint_torque = self.settings.rated_joint_torque   # N m at the joint per 1000 per mille
         self.axis = Cia402Axis(cfg.label)
         self.target: float | None = None        # rad, CSP target requested by the caller
         self.velocity_ff = 0.0                   # rad/s
@@ -167,6 +140,11 @@ class JointDriver(DeviceDriver):
         self._pp_pending = False                 # profile position: set-point sent, not yet acknowledged
         self._pp_sent: float | None = None
         self.rpdo_values[(od.MODES_OF_OPERATION, 0)] = od.MODE_CSP
+        # reported only where this node's configuration names the object and a TPDO carries it
+        mapped = {(e.index, e.sub) for spec in self.tpdos for e in spec.entries}
+        s = self.settings
+        self._temperature = _mapped_ref(s.temperature_object, mapped)
+        self._brake = _mapped_ref(s.brake_object, mapped)
 
     def set_mode(self, mode: int) -> None:
         """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
@@ -178,14 +156,29 @@ class JointDriver(DeviceDriver):
         self._pp_pending, self._pp_sent = False, None
         self.rpdo_values[(od.MODES_OF_OPERATION, 0)] = mode
 
+    def hardware_objects(self):
+        s = self.settings
+        return [(od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments),
+                (od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions),
+                (od.GEAR_RATIO, 1, s.gear_motor_revolutions),
+                (od.GEAR_RATIO, 2, s.gear_shaft_revolutions),
+                (od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000))]
+
+    def use_hardware(self, values):
+        """Scaling from the drive's own 608Fh/6091h/6076h where it reported them."""
+        s = self.settings
+        get = lambda index, sub, default: values.get((index, sub)) or default  # noqa: E731 (0 = not usable)
+        increments = get(od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments)
+        motor_revs = get(od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions)
+        gear_motor = get(od.GEAR_RATIO, 1, s.gear_motor_revolutions)
+        gear_shaft = get(od.GEAR_RATIO, 2, s.gear_shaft_revolutions)
+        rated = get(od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000)) / 1000.0
+        self.k = increments / motor_revs * gear_motor / gear_shaft / (2.0 * math.pi)
+        self.rated_joint_torque = rated * gear_motor / gear_shaft
+
     def config_writes(self):
         s, k = self.settings, self.k
         return [
-            (od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments),
-            (od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions),
-            (od.GEAR_RATIO, 1, s.gear_motor_revolutions),
-            (od.GEAR_RATIO, 2, s.gear_shaft_revolutions),
-            (od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000)),
             (od.MAX_TORQUE, 0, round(s.max_torque * 1000)),
             (od.FOLLOWING_ERROR_WINDOW, 0, round(s.following_error_window * k)),
             (od.FOLLOWING_ERROR_TIMEOUT, 0, round(s.following_error_timeout * 1000)),
@@ -233,7 +226,7 @@ class JointDriver(DeviceDriver):
         self.rpdo_values[(od.CONTROLWORD, 0)] = cw
         self.rpdo_values[(od.TARGET_POSITION, 0)] = _clamp32(round(target * self.k))
         self.rpdo_values[(od.VELOCITY_OFFSET, 0)] = _clamp32(round(self.velocity_ff * self.k))
-        ratio = self.settings.rated_joint_torque
+        ratio = self.rated_joint_torque
         self.rpdo_values[(od.TORQUE_OFFSET, 0)] = max(-32768, min(32767, round(self.torque_ff / ratio * 1000)))
 
     def state(self) -> JointState:
@@ -243,10 +236,10 @@ class JointDriver(DeviceDriver):
             state=decode_statusword(self.value(od.STATUSWORD)), statusword=self.value(od.STATUSWORD),
             position=self.value(od.POSITION_ACTUAL) / k,
             velocity=self.value(od.VELOCITY_ACTUAL) / k,
-            torque=self.value(od.TORQUE_ACTUAL) / 1000.0 * self.settings.rated_joint_torque,
+            torque=self.value(od.TORQUE_ACTUAL) / 1000.0 * self.rated_joint_torque,
             following_error=self.value(od.FOLLOWING_ERROR_ACTUAL) / k,
-            temperature=self.value(od.DRIVE_TEMPERATURE) / 10.0,
-            brake_engaged=bool(self.value(od.BRAKE_STATUS, default=1)),
+            temperature=self.value(*self._temperature) / 10.0 if self._temperature else float("nan"),
+            brake_engaged=bool(self.value(*self._brake, default=1)) if self._brake else None,
             error_code=self.value(od.ERROR_CODE),
             mode=self.value(od.MODES_OF_OPERATION_DISPLAY),
         )
@@ -297,6 +290,11 @@ class FtDriver(DeviceDriver):
 
 
 DRIVERS = {"joint_drive": JointDriver, "end_effector": EndEffectorDriver, "ft_sensor": FtDriver}
+
+
+def _mapped_ref(ref: str | None, mapped: set[tuple[int, int]]) -> tuple[int, int] | None:
+    obj = parse_object_ref(ref) if ref else None
+    return obj if obj in mapped else None
 
 
 def _clamp32(value: int) -> int:

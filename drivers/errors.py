@@ -4,7 +4,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import time
 
-from canopen.sdo.exceptions import SdoAbortedError
 
 
 class DriverError(Exception):
@@ -20,7 +19,7 @@ class SdoError(DriverError):
 
     def __init__(self, node_label: str, action: str, index: int, subindex: int, code: int):
         self.node_label, self.index, self.subindex, self.code = node_label, index, subindex, code
-        self.meaning = SdoAbortedError.CODES.get(code, "unknown abort code")
+        self.meaning = abort_text(code)
         super().__init__(f"{node_label}: SDO {action} 0x{index:04X}:{subindex:02X} aborted with "
                          f"0x{code:08X} ({self.meaning})")
 
@@ -33,33 +32,16 @@ class FaultResetError(DriverError):
     """A fault reset did not clear the fault."""
 
 
-# EMCY error codes -> text (CiA 301 / 402 plus ours)
-EMCY_TEXT = {
-    0x0000: "error reset / no error",
-    0x1000: "generic error",
-    0x4210: "device over temperature",
-    0x4310: "drive over temperature",
-    0x8130: "life guard / heartbeat error",
-    0x8210: "PDO not processed due to length error",
-    0x8611: "following error",
-    0x8612: "position limit",
-    0xFF01: "end-effector mechanism jammed",
-    0xFF02: "end-effector lock torque not reached",
-    0xFF10: "force/torque sensor overload",
-}
-
-
-def emcy_text(code: int) -> str:
-    if code in EMCY_TEXT:
-        return EMCY_TEXT[code]
-    return EMCY_TEXT.get(code & 0xFF00, f"error 0x{code:04X}")
+# EMCY error codes -> text: one table (drivers/canopen_codes.py)
+from spacearm.base.canopen.codes import EMCY_TEXT, abort_text, emcy_text  # noqa: E402,F401
 
 
 @dataclass
 class NetworkEvent:
     """Something the controller must act on. kind is one of:
     heartbeat_lost, heartbeat_restored, bootup (unexpected reboot), nmt_state, emcy,
-    emcy_reset, fault_reset_failed, fault_cleared, tpdo_timeout."""
+    emcy_reset, fault_reset_failed, fault_cleared, tpdo_timeout, tpdo_missing (a mapped TPDO
+    of a live node absent for bus.tpdo_loss_cycles SYNCs: a fault like heartbeat_lost)."""
     kind: str
     node: str
     node_id: int

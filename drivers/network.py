@@ -35,11 +35,13 @@ import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from spacearm.base.canopen import od
+from spacearm.drivers.bringup import BringupReport, NodeBringup
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
 from spacearm.base.canopen.cia402_defs import State
 from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, EndEffectorState, FtDriver,
                              FtState, JointDriver, JointState)
-from spacearm.base.canopen.eds import EdsError, load_od
+from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
+from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
 from spacearm.base.transport import open_bus
 
@@ -142,11 +144,11 @@ class ArmNetwork:
         self.end_effector: EndEffectorDriver | None = None
         self.ft: FtDriver | None = None
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
+        self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
+        self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
+        self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
         for cfg in self.config.nodes:
-            try:
-                object_dictionary = load_od(cfg.eds_path, cfg.node_id)
-            except EdsError as exc:
-                raise BootError(f"{cfg.name}: {exc}") from None
+            object_dictionary = load_od(cfg.eds_path, cfg.node_id)   # EdsError: bad input, exit 2
             driver = DRIVERS[cfg.device](cfg, self.config.bus, object_dictionary)
             self.drivers[cfg.name] = driver
             self.health[cfg.name] = NodeHealth(cfg.name, cfg.node_id)
@@ -276,25 +278,10 @@ class ArmNetwork:
                             f"(reports {self.health[driver.name].nmt_state_name})")
 
     def _configure(self, driver: DeviceDriver) -> None:
-        try:
-            for index, sub in ((od.DEVICE_TYPE, 0), (od.IDENTITY, 1), (od.IDENTITY, 2)):
-                var = driver.od[index] if sub == 0 else driver.od[index][sub]
-                actual = self.sdo_read(driver.name, index, sub)
-                if actual != var.default:
-                    raise BootError(f"{driver.label}: {var.name} is 0x{actual:08X}, the EDS "
-                                    f"{driver.cfg.eds_path.name} expects 0x{var.default:08X} (wrong device?)")
-            b = self.config.bus
-            consume = (b.master_node_id << 16) | round(b.master_heartbeat_timeout * 1000) \
-                if b.master_heartbeat_period > 0 and b.master_heartbeat_timeout > 0 else 0
-            writes = [(od.PRODUCER_HEARTBEAT, 0, round(driver.cfg.heartbeat_period * 1000)),
-                      (od.CONSUMER_HEARTBEAT, 1, consume),
-                      (od.COB_ID_SYNC, 0, od.SYNC_COB_ID_DEFAULT),
-                      (od.COMM_CYCLE_PERIOD, 0, round(self.config.bus.sync_period * 1e6))]
-            writes += driver.config_writes() + driver.pdo_writes()
-            for index, sub, value in writes:
-                self.sdo_write(driver.name, index, sub, value)
-        except (SdoError, SdoTimeoutError) as exc:
-            raise BootError(f"boot failed while configuring {exc}") from exc
+        """Configure one node from its EDS and configuration (drivers/bringup.py)."""
+        report = self.bringup[driver.name] = NodeBringup(self, driver, self.config.bus).run()
+        if report.node_guarding:       # polled by the monitor thread; answers arrive as heartbeats
+            self._guarded[driver.node_id] = 0.0
 
     # ------------------------------------------------------------------ SDO (acyclic)
     def _driver(self, node: str | int) -> DeviceDriver:
@@ -332,8 +319,8 @@ class ArmNetwork:
             try:
                 data = self._var(d, index, subindex).encode_raw(value)
             except KeyError:
-                raise SdoError(d.label, "write", index, subindex, 0x06020000 if index not in d.od
-                               else 0x06090011) from None
+                raise SdoError(d.label, "write", index, subindex, ABORT_NO_OBJECT if index not in d.od
+                               else ABORT_NO_SUBINDEX) from None
         try:
             self.remote[d.name].sdo.download(index, subindex, data)
         except SdoAbortedError as exc:
@@ -363,6 +350,8 @@ class ArmNetwork:
     def send_sync(self) -> int:
         """Send one SYNC; returns its number. TPDOs arriving from now on belong to it."""
         with self._cv:
+            if self._expected is not None and self._monitoring:
+                self._count_missing_tpdos(self._expected_tpdos() - self._received)
             self._sync += 1
             self._received = set()
             self._expected = self._expected_tpdos()
@@ -370,6 +359,20 @@ class ArmNetwork:
         self.network.send_message(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
+
+    def _count_missing_tpdos(self, missing: set[int]) -> None:
+        """A mapped TPDO of a live node missing for tpdo_loss_cycles SYNCs in a row is a
+        fault event naming the node and the PDO (once per loss; re-armed when it returns)."""
+        limit = self.config.bus.tpdo_loss_cycles
+        for cob in list(self._tpdo_misses):
+            if cob not in missing:
+                del self._tpdo_misses[cob]
+        for cob in missing:
+            n = self._tpdo_misses[cob] = self._tpdo_misses.get(cob, 0) + 1
+            if n == limit:
+                driver, spec = self._tpdo_routes[cob]
+                self._event("tpdo_missing", driver, f"{driver.label}: {spec.label} missing for {n} SYNCs "
+                                                    f"(mapped, node alive)")
 
     def _expected_tpdos(self) -> set[int]:
         cobs = set()
@@ -521,6 +524,8 @@ class ArmNetwork:
         (profile velocity/acceleration from the bus config); JointState.target_reached."""
         for j in self._select(joint):
             j.set_mode(mode)
+            if not any(e.index == od.MODES_OF_OPERATION for spec in j.rpdos for e in spec.entries):
+                self.sdo_write(j.name, od.MODES_OF_OPERATION, 0, mode)   # not in its RPDOs (compact drive)
 
     def shutdown(self, cycles: int = 5) -> None:
         """Disable all joints (brakes engage), put the nodes in PRE-OPERATIONAL, disconnect."""
@@ -611,6 +616,16 @@ class ArmNetwork:
             if self._expected is None or self._expected <= self._received:
                 self._cv.notify_all()
 
+    def _poll_guarded(self, now: float) -> None:
+        """Node guarding: an RTR on 700h + ID every heartbeat period of each guarded node."""
+        for node_id, due in list(self._guarded.items()):
+            if now >= due:
+                self._guarded[node_id] = max(due + self._driver(node_id).cfg.heartbeat_period, now)
+                try:
+                    self.network.send_message(od.HEARTBEAT_BASE + node_id, b"\x00", remote=True)
+                except Exception as exc:
+                    logger.warning("node guarding request to node %d not sent: %s", node_id, exc)
+
     def _monitor_loop(self) -> None:
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
@@ -626,6 +641,7 @@ class ArmNetwork:
                     logger.warning("controller heartbeat not sent: %s", exc)
             if not self._monitoring:
                 continue
+            self._poll_guarded(now)
             with self._cv:
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]

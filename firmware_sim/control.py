@@ -23,8 +23,8 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-ABORT_NO_SUCH_NODE = 0x08000020     # data cannot be transferred: no such target node
-ABORT_WRONG_DEVICE = 0x08000022     # not possible in the target's device type
+# data cannot be transferred: no such target node / not possible in the target's device type
+from spacearm.base.canopen.codes import ABORT_DEVICE_STATE as ABORT_WRONG_DEVICE, ABORT_STORE as ABORT_NO_SUCH_NODE  # noqa: E402
 
 
 class SimControlNode:

@@ -17,9 +17,9 @@ from spacearm.base.canopen.pdo_maps import PDO_MAPS
 
 EDS_DIR = Path(__file__).resolve().parents[1] / "configs" / "eds"
 
-BOOLEAN, INTEGER8, INTEGER16, INTEGER32 = 0x1, 0x2, 0x3, 0x4
-UNSIGNED8, UNSIGNED16, UNSIGNED32, VISIBLE_STRING = 0x5, 0x6, 0x7, 0x9
-VAR, ARRAY, RECORD = 0x7, 0x8, 0x9
+from spacearm.base.canopen.codes import (BOOLEAN, INTEGER8, INTEGER16, INTEGER32, UNSIGNED8,  # noqa: E402,F401
+                                   UNSIGNED16, UNSIGNED32, VISIBLE_STRING)
+from spacearm.base.canopen.codes import OBJECT_ARRAY as ARRAY, OBJECT_RECORD as RECORD, OBJECT_VAR as VAR  # noqa: E402
 
 VENDOR_ID = 0x0000_05A7  # simulated vendor ("SpaceArm sim"); not a registered CiA ID
 
@@ -48,7 +48,7 @@ def v(index, name, dt, access="rw", default=0, pdo=False, low=None, high=None) -
     return Obj(index, name, VAR, Var(name, dt, access, default, pdo, low, high))
 
 
-def comm_objects(device_type: int, product: int, name: str) -> list[Obj]:
+def comm_objects(device_type: int, product: int, name: str, consumer_heartbeat: bool = True) -> list[Obj]:
     objs = [
         v(od.DEVICE_TYPE, "Device type", UNSIGNED32, "ro", device_type),
         v(od.ERROR_REGISTER, "Error register", UNSIGNED8, "ro", 0, pdo=True),
@@ -72,15 +72,20 @@ def comm_objects(device_type: int, product: int, name: str) -> list[Obj]:
                   3: Var("Revision number", UNSIGNED32, "ro", 0x0001_0000),
                   4: Var("Serial number", UNSIGNED32, "ro", 0)}),
     ]
+    if not consumer_heartbeat:
+        objs = [o for o in objs if o.index != od.CONSUMER_HEARTBEAT]
     return objs
 
 
-def pdo_objects(rpdo_maps: list[list[tuple[int, int, int]]], tpdo_maps: list[list[tuple[int, int, int]]]) -> list[Obj]:
-    """Four RPDOs and four TPDOs; the given default mappings are (index, sub, bits)."""
+def pdo_objects(rpdo_maps: list[list[tuple[int, int, int]]], tpdo_maps: list[list[tuple[int, int, int]]],
+                counts: tuple[int, int] = (od.N_PDOS, od.N_PDOS)) -> list[Obj]:
+    """counts = (RPDOs, TPDOs) the device has (four each by default); the given default
+    mappings are (index, sub, bits)."""
     objs: list[Obj] = []
-    for kind, comm, mapi, bases, maps in (("RPDO", od.RPDO_COMM, od.RPDO_MAP, od.RPDO_BASE, rpdo_maps),
-                                          ("TPDO", od.TPDO_COMM, od.TPDO_MAP, od.TPDO_BASE, tpdo_maps)):
-        for n in range(od.N_PDOS):
+    for kind, comm, mapi, bases, maps, count in (
+            ("RPDO", od.RPDO_COMM, od.RPDO_MAP, od.RPDO_BASE, rpdo_maps, counts[0]),
+            ("TPDO", od.TPDO_COMM, od.TPDO_MAP, od.TPDO_BASE, tpdo_maps, counts[1])):
+        for n in range(count):
             mapping = maps[n] if n < len(maps) else []
             # unmapped PDOs start disabled (bit 31 set)
             cob = f"$NODEID+0x{bases[n] if mapping else od.PDO_COB_ID_INVALID + bases[n]:X}"
@@ -112,7 +117,28 @@ FT_RPDOS, FT_TPDOS = PDO_MAPS["ft_sensor"]["rpdo"], PDO_MAPS["ft_sensor"]["tpdo"
 def joint_drive() -> tuple[str, list[Obj]]:
     objs = comm_objects(0x0002_0192, 0x0402_0001, "SpaceArm joint drive (sim)")
     objs += pdo_objects(JOINT_RPDOS, JOINT_TPDOS)
-    objs += [
+    objs += drive_objects(scaling_access="rw", encoder=1 << 20, gear=100, rated_torque=1500)
+    return "SpaceArm joint drive (CiA 402: CSP, PP)", objs
+
+
+# The second drive model: a smaller wrist drive of another make. One RPDO and two TPDOs, no
+# heartbeat consumer (1016h), an encoder of 2^17 increments behind a 160:1 gear, and its
+# hardware data (608Fh, 6091h, 6076h) read-only; its default TPDO2 maps its own temperature.
+COMPACT_RPDOS = [[(od.CONTROLWORD, 0, 16), (od.TARGET_POSITION, 0, 32)]]
+COMPACT_TPDOS = [[(od.STATUSWORD, 0, 16), (od.POSITION_ACTUAL, 0, 32), (od.MODES_OF_OPERATION_DISPLAY, 0, 8)],
+                 [(od.VELOCITY_ACTUAL, 0, 32), (od.TORQUE_ACTUAL, 0, 16), (od.DRIVE_TEMPERATURE, 0, 16)]]
+
+
+def joint_drive_compact() -> tuple[str, list[Obj]]:
+    objs = comm_objects(0x0002_0192, 0x0402_0C01, "SpaceArm compact wrist drive (sim)", consumer_heartbeat=False)
+    objs += pdo_objects(COMPACT_RPDOS, COMPACT_TPDOS, counts=(1, 2))
+    objs += drive_objects(scaling_access="ro", encoder=1 << 17, gear=160, rated_torque=600)
+    return "SpaceArm compact wrist drive (CiA 402: CSP, PP; 1 RPDO, 2 TPDOs)", objs
+
+
+def drive_objects(scaling_access: str, encoder: int, gear: int, rated_torque: int) -> list[Obj]:
+    """The CiA 402 objects of a joint drive (and its two manufacturer objects)."""
+    return [
         v(od.DRIVE_TEMPERATURE, "Drive temperature", INTEGER16, "ro", 250, pdo=True),
         v(od.BRAKE_STATUS, "Brake status", UNSIGNED8, "ro", 1, pdo=True),
         v(od.ERROR_CODE, "Error code", UNSIGNED16, "ro", 0, pdo=True),
@@ -130,7 +156,7 @@ def joint_drive() -> tuple[str, list[Obj]]:
         v(od.VELOCITY_ACTUAL, "Velocity actual value", INTEGER32, "ro", 0, pdo=True),
         v(od.TARGET_TORQUE, "Target torque", INTEGER16, "rw", 0, pdo=True),
         v(od.MAX_TORQUE, "Max torque", UNSIGNED16, "rw", 1000, pdo=True),
-        v(od.MOTOR_RATED_TORQUE, "Motor rated torque", UNSIGNED32, "rw", 1500),
+        v(od.MOTOR_RATED_TORQUE, "Motor rated torque", UNSIGNED32, scaling_access, rated_torque),
         v(od.TORQUE_ACTUAL, "Torque actual value", INTEGER16, "ro", 0, pdo=True),
         v(od.TARGET_POSITION, "Target position", INTEGER32, "rw", 0, pdo=True),
         Obj(od.SOFTWARE_POSITION_LIMIT, "Software position limit", ARRAY,
@@ -144,12 +170,12 @@ def joint_drive() -> tuple[str, list[Obj]]:
         v(od.QUICK_STOP_DECELERATION, "Quick stop deceleration", UNSIGNED32, "rw", 16_688_600),
         Obj(od.POSITION_ENCODER_RESOLUTION, "Position encoder resolution", ARRAY,
             subs={0: Var("Number of entries", UNSIGNED8, "ro", 2),
-                  1: Var("Encoder increments", UNSIGNED32, "rw", 1 << 20, low=1),
-                  2: Var("Motor revolutions", UNSIGNED32, "rw", 1, low=1)}),
+                  1: Var("Encoder increments", UNSIGNED32, scaling_access, encoder, low=1),
+                  2: Var("Motor revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
         Obj(od.GEAR_RATIO, "Gear ratio", ARRAY,
             subs={0: Var("Number of entries", UNSIGNED8, "ro", 2),
-                  1: Var("Motor revolutions", UNSIGNED32, "rw", 100, low=1),
-                  2: Var("Shaft revolutions", UNSIGNED32, "rw", 1, low=1)}),
+                  1: Var("Motor revolutions", UNSIGNED32, scaling_access, gear, low=1),
+                  2: Var("Shaft revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
         v(od.VELOCITY_OFFSET, "Velocity offset", INTEGER32, "rw", 0, pdo=True),
         v(od.TORQUE_OFFSET, "Torque offset", INTEGER16, "rw", 0, pdo=True),
         Obj(od.INTERPOLATION_TIME_PERIOD, "Interpolation time period", RECORD,
@@ -159,7 +185,6 @@ def joint_drive() -> tuple[str, list[Obj]]:
         v(od.FOLLOWING_ERROR_ACTUAL, "Following error actual value", INTEGER32, "ro", 0, pdo=True),
         v(od.SUPPORTED_DRIVE_MODES, "Supported drive modes", UNSIGNED32, "ro", 0x81),
     ]
-    return "SpaceArm joint drive (CiA 402: CSP, PP)", objs
 
 
 def end_effector() -> tuple[str, list[Obj]]:
@@ -179,7 +204,8 @@ def end_effector() -> tuple[str, list[Obj]]:
 
 
 def ft_sensor() -> tuple[str, list[Obj]]:
-    objs = comm_objects(0x0000_0194, 0x0F70_0001, "SpaceArm 6-axis F/T sensor (sim)")
+    # device type 0: no standard device profile (its objects are manufacturer specific, not CiA 404's)
+    objs = comm_objects(0x0000_0000, 0x0F70_0001, "SpaceArm 6-axis F/T sensor (sim)")
     objs += pdo_objects(FT_RPDOS, FT_TPDOS)
     names = ("Fx", "Fy", "Fz", "Tx", "Ty", "Tz")
     objs += [
@@ -231,8 +257,11 @@ def sim_control() -> tuple[str, list[Obj]]:
     return "SpaceArm simulation fault-injection unit (test rig only)", objs
 
 
-BUILDERS = {"joint_drive": joint_drive, "end_effector": end_effector, "ft_sensor": ft_sensor,
-            "sim_control": sim_control}
+BUILDERS = {"joint_drive": joint_drive, "joint_drive_compact": joint_drive_compact, "end_effector": end_effector,
+            "ft_sensor": ft_sensor, "sim_control": sim_control}
+# CiA 306 [FileInfo] dates of this generation of the files (mm-dd-yyyy, hh:mm AM/PM)
+CREATED = ("11-23-2026", "12:00AM")
+MODIFIED = ("11-24-2026", "12:00AM")
 
 
 def _fmt(value) -> str:
@@ -257,15 +286,20 @@ def _var_lines(section: str, var: Var, obj_type: int = VAR) -> list[str]:
 def render(device: str) -> str:
     description, objs = BUILDERS[device]()
     objs = sorted(objs, key=lambda o: o.index)
+    identity = next(o for o in objs if o.index == od.IDENTITY)
+    product = identity.subs[2].default
     mandatory = [o for o in objs if o.index in (od.DEVICE_TYPE, od.ERROR_REGISTER, od.IDENTITY)]
     optional = [o for o in objs if o not in mandatory and o.index < 0x2000 or o.index >= 0x6000]
     manufacturer = [o for o in objs if 0x2000 <= o.index < 0x6000]
     out = [
         "; Generated by firmware_sim/eds_builder.py from drivers/od.py. Do not edit by hand.",
         "[FileInfo]", f"FileName={device}.eds", "FileVersion=1", "FileRevision=0", "EDSVersion=4.0",
-        f"Description={description}", "CreatedBy=spacearm", "",
+        f"Description={description}", f"CreationTime={CREATED[1]}", f"CreationDate={CREATED[0]}",
+        "CreatedBy=spacearm", f"ModificationTime={MODIFIED[1]}", f"ModificationDate={MODIFIED[0]}",
+        "ModifiedBy=spacearm", "",
         "[DeviceInfo]", "VendorName=SpaceArm simulation", f"VendorNumber=0x{VENDOR_ID:X}",
-        f"ProductName={description}", "RevisionNumber=0x00010000",
+        f"ProductName={description}", f"ProductNumber=0x{product:X}", "RevisionNumber=0x00010000",
+        f"OrderCode=SA-{device.upper().replace('_', '-')}",
         "BaudRate_10=0", "BaudRate_20=0", "BaudRate_50=0", "BaudRate_125=0", "BaudRate_250=0",
         "BaudRate_500=0", "BaudRate_800=0", "BaudRate_1000=1",
         "SimpleBootUpMaster=0", "SimpleBootUpSlave=1", "Granularity=8", "DynamicChannelsSupported=0",

@@ -17,6 +17,8 @@ from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_FAULT_R
                                  SW_TARGET_REACHED, SW_WARNING, Command, State, decode_controlword)
 from canopen.sdo import SdoAbortedError
 
+from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
+
 from spacearm.firmware_sim.node import SimNode
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
@@ -59,7 +61,7 @@ class JointDriveNode(SimNode):
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.MODES_OF_OPERATION and int.from_bytes(data, "little", signed=True) not in (
                 od.MODE_CSP, od.MODE_PROFILE_POSITION):
-            raise SdoAbortedError(0x06090030)      # value range: only CSP (8) and PP (1) supported
+            raise SdoAbortedError(ABORT_VALUE_INVALID)      # value range: only CSP (8) and PP (1) supported
 
     def on_heartbeat_lost(self, producer: int) -> None:
         """Controller lost: fault reaction (quick-stop ramp, then brake)."""

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import struct
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -23,20 +24,16 @@ from canopen.sdo import SdoAbortedError
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen.eds import load_od
+from spacearm.firmware_sim.sdo_session import SdoSession
 
 if TYPE_CHECKING:
     from spacearm.firmware_sim.plant import Plant
 
 logger = logging.getLogger(__name__)
 
-ABORT_NOT_MAPPABLE = 0x06040041
-ABORT_PDO_LENGTH = 0x06040042
-ABORT_PARAM_INCOMPATIBLE = 0x06040043
-ABORT_LENGTH_HIGH = 0x06070012
-ABORT_LENGTH_LOW = 0x06070013
-ABORT_VALUE_HIGH = 0x06090031
-ABORT_VALUE_LOW = 0x06090032
-ABORT_DEVICE_STATE = 0x08000022
+from spacearm.base.canopen.codes import (ABORT_DEVICE_STATE, ABORT_LENGTH_HIGH, ABORT_LENGTH_LOW,  # noqa: E402
+                                   ABORT_NOT_MAPPABLE, ABORT_PDO_LENGTH, ABORT_READ_ONLY, ABORT_VALUE_HIGH,
+                                   ABORT_VALUE_INVALID, ABORT_VALUE_LOW)
 
 
 class SimLocalNode(canopen.LocalNode):
@@ -55,7 +52,7 @@ class SimLocalNode(canopen.LocalNode):
     def set_data(self, index, subindex, data, check_writable=False):
         obj = self._find_object(index, subindex)
         if check_writable and not obj.writable:
-            raise SdoAbortedError(0x06010002)
+            raise SdoAbortedError(ABORT_READ_ONLY)
         if obj.data_type in odlib.NUMBER_TYPES:
             size = len(obj) // 8
             if len(data) > size:
@@ -110,6 +107,8 @@ class _Pdo:
     cob_id: int
     transmission_type: int
     entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
+    event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
+    next_event: float = 0.0      # monotonic time of the next event-timer transmission
 
     @property
     def length(self) -> int:
@@ -145,6 +144,7 @@ class SimNode:
         self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
+        self.sdo_session = SdoSession()
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
@@ -206,6 +206,7 @@ class SimNode:
             self._tpdos = self._rpdos = None
             self._sync_counter = 0
             self.consumer_last.clear()
+            self._guard_toggle = 0
             self.send(od.HEARTBEAT_BASE + self.node_id, bytes([od.NMT_STATE_BOOTUP]))
             self.nmt_state = od.NMT_STATE_PRE_OPERATIONAL
             self.next_heartbeat = 0.0
@@ -226,6 +227,8 @@ class SimNode:
         self.stats.tx_frames += 1
         if can_id == od.SDO_TX_BASE + self.node_id and data[:1] == b"\x80":
             self.stats.sdo_aborts_sent += 1
+            self.sdo_session.aborted()
+            self.local.sdo._buffer = None      # no stale segments after an abort
         self._send(can_id, data)
 
     def heartbeat_period(self) -> float:
@@ -234,6 +237,16 @@ class SimNode:
     def send_heartbeat(self) -> None:
         if not self.faults.heartbeat_stopped and self.nmt_state != od.NMT_STATE_BOOTUP:
             self.send(od.HEARTBEAT_BASE + self.node_id, bytes([self.nmt_state]))
+
+    def on_guard_request(self) -> None:
+        """Node guarding (CiA 301 7.2.8.3.2.1): answer the master's RTR with the NMT state and
+        a toggle bit that alternates from 0 after each boot-up."""
+        if od.GUARD_TIME not in self.od or self.faults.heartbeat_stopped or self.nmt_state == od.NMT_STATE_BOOTUP:
+            return
+        self.send(od.HEARTBEAT_BASE + self.node_id, bytes([self._guard_toggle | self.nmt_state]))
+        self._guard_toggle ^= 0x80
+
+    _guard_toggle = 0
 
     def emcy(self, code: int, register_bits: int = 0, info: bytes = b"") -> None:
         """Produce an EMCY; code 0 = error reset. Keeps 1001h and 1003h up to date."""
@@ -282,13 +295,38 @@ class SimNode:
             self.send(od.SDO_TX_BASE + self.node_id,
                       struct.pack("<BHBL", 0x80, index, sub, self.faults.sdo_abort))
             return
-        ccs = data[0] & 0xE0
         sdo = self.local.sdo
+        go, abort = self.sdo_session.screen(data, time.monotonic(), self._object_size)
+        if abort is not None:
+            self._sdo_abort(self.sdo_session.index, self.sdo_session.sub, abort)
+        if not go:
+            sdo._buffer = None
+            return
+        ccs = data[0] & 0xE0
+        if ccs in (0x20, 0x40, 0xA0):
+            sdo._buffer = None      # a new transfer: nothing left over from the last one
         if ccs not in (0x00, 0x60) or sdo._index is None:   # not a segment: the frame names the object
             # (canopen's SdoServer.abort() needs these; it fails on the first request otherwise)
             _, sdo._index, sdo._subindex = struct.unpack_from("<BHB", data)
         with self._lock:
-            self.local.sdo.on_request(od.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)
+            sdo.on_request(od.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)
+            self.sdo_session.after(data, bool(sdo._buffer))
+
+    def _object_size(self, index: int, sub: int) -> int | None:
+        try:
+            return len(self.raw(index, sub))
+        except Exception:   # absent object: the library answers the request itself
+            return None
+
+    def _sdo_abort(self, index: int, sub: int, code: int) -> None:
+        self.send(od.SDO_TX_BASE + self.node_id, struct.pack("<BHBL", 0x80, index, sub, code))
+
+    def check_sdo_timeout(self, now: float) -> None:
+        """Server-side SDO timeout: abort a transfer the client left unfinished."""
+        expired = self.sdo_session.expired(now)
+        if expired is not None:
+            self.local.sdo._buffer = None
+            self._sdo_abort(*expired)
 
     def on_rpdo(self, cob_id: int, data: bytes) -> None:
         if self.nmt_state != od.NMT_STATE_OPERATIONAL:
@@ -315,6 +353,8 @@ class SimNode:
     def consumer_entries(self) -> dict[int, float]:
         """1016h: producer node ID -> timeout (s), for the active entries."""
         out = {}
+        if od.CONSUMER_HEARTBEAT not in self.od:     # a device without a heartbeat consumer
+            return out
         for sub in range(1, self.get(od.CONSUMER_HEARTBEAT, 0) + 1):
             value = self.get(od.CONSUMER_HEARTBEAT, sub)
             producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
@@ -371,21 +411,50 @@ class SimNode:
             t = pdo.transmission_type
             if not (0 <= t <= 240) or (t > 1 and self._sync_counter % t):
                 continue
-            with self._lock:
-                data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
-            if self.faults.drop_tx > 0:
-                self.faults.drop_tx -= 1
-                self.stats.dropped_tx += 1
+            self._transmit(pdo)
+
+    @property
+    def has_event_tpdos(self) -> bool:
+        """Cheap check for the timer thread: any event-timer TPDO (or not known yet)?"""
+        if self.nmt_state != od.NMT_STATE_OPERATIONAL:
+            return False
+        tpdos = self._tpdos
+        return tpdos is None or any(p.transmission_type >= 254 and p.event_timer > 0 for p in tpdos)
+
+    def send_event_tpdos(self, now: float) -> None:
+        """Event-driven TPDOs (transmission type 254/255) with an event timer: sent every
+        event-timer period while OPERATIONAL (the simulator's timer thread calls this)."""
+        if self.nmt_state != od.NMT_STATE_OPERATIONAL or self.faults.ignore_sync:
+            return
+        if self._tpdos is None:
+            self._tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
+        for pdo in self._tpdos:
+            if pdo.transmission_type < 254 or pdo.event_timer <= 0.0:
                 continue
-            if self.faults.corrupt_tx > 0 and data:
-                self.faults.corrupt_tx -= 1
-                self.stats.corrupted_tx += 1
-                data = data[:-1]
-            self.send(pdo.cob_id, data)
+            if pdo.next_event == 0.0:
+                pdo.next_event = now + pdo.event_timer
+            elif now >= pdo.next_event:
+                pdo.next_event = max(pdo.next_event + pdo.event_timer, now)
+                self._transmit(pdo)
+
+    def _transmit(self, pdo: _Pdo) -> None:
+        with self._lock:
+            data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
+        if self.faults.drop_tx > 0:
+            self.faults.drop_tx -= 1
+            self.stats.dropped_tx += 1
+            return
+        if self.faults.corrupt_tx > 0 and data:
+            self.faults.corrupt_tx -= 1
+            self.stats.corrupted_tx += 1
+            data = data[:-1]
+        self.send(pdo.cob_id, data)
 
     def _read_pdos(self, comm_base: int, map_base: int) -> list[_Pdo]:
         pdos = []
         for n in range(od.N_PDOS):
+            if comm_base + n not in self.od:     # the device has fewer PDOs
+                break
             cob = self.get(comm_base + n, od.PDO_COB_ID)
             if cob & od.PDO_COB_ID_INVALID:
                 continue
@@ -393,7 +462,11 @@ class SimNode:
             for i in range(1, self.get(map_base + n, 0) + 1):
                 value = self.get(map_base + n, i)
                 entries.append((value >> 16, (value >> 8) & 0xFF, (value & 0xFF) // 8))
-            pdos.append(_Pdo(cob & 0x7FF, self.get(comm_base + n, od.PDO_TRANSMISSION_TYPE), entries))
+            timer = 0.0
+            if comm_base == od.TPDO_COMM and (comm_base + n) in self.od \
+                    and od.PDO_EVENT_TIMER in self.od[comm_base + n]:
+                timer = self.get(comm_base + n, od.PDO_EVENT_TIMER) / 1000.0
+            pdos.append(_Pdo(cob & 0x7FF, self.get(comm_base + n, od.PDO_TRANSMISSION_TYPE), entries, timer))
         return pdos
 
     # ------------------------------------------------------------------ OD write rules
@@ -427,7 +500,7 @@ class SimNode:
                 self._routing_dirty = True
         if index == ids.PREDEFINED_ERROR_FIELD and subindex == 0:
             if int.from_bytes(bytes(data), "little") != 0:
-                raise SdoAbortedError(ABORT_VALUE_HIGH)  # CiA 301: only 0 may be written (clears history)
+                raise SdoAbortedError(ABORT_VALUE_INVALID)  # CiA 301: only 0 may be written (clears history)
             for i in range(1, 9):
                 self.put(ids.PREDEFINED_ERROR_FIELD, i, 0)
         if index == ids.COB_ID_SYNC:

@@ -194,6 +194,11 @@ class Simulator:
 
     def _route(self, msg: can.Message) -> None:
         self.stats.rx_frames += 1
+        if msg.is_remote_frame and not msg.is_extended_id and msg.arbitration_id & ~0x7F == od.HEARTBEAT_BASE:
+            node = self.nodes.get(msg.arbitration_id & 0x7F)     # node guarding request
+            if node is not None and node.powered and not node.faults.silent:
+                node.on_guard_request()
+            return
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
             self.stats.ignored += 1
             return
@@ -277,6 +282,10 @@ class Simulator:
                 if node.consumer_last and not node.faults.silent:
                     with self._sync_lock:
                         node.check_consumers(now)
+                node.check_sdo_timeout(now)
+                if node.has_event_tpdos:
+                    with self._sync_lock:
+                        node.send_event_tpdos(now)
                 try:
                     period = node.heartbeat_period()
                 except Exception:

@@ -6,8 +6,12 @@ from pathlib import Path
 
 import canopen
 
-class EdsError(Exception):
-    """An EDS file that cannot be read or parsed; the message names the file."""
+from spacearm.base.config.errors import ConfigError
+
+
+class EdsError(ConfigError):
+    """An EDS file that cannot be read or parsed; the message names the file. A ConfigError:
+    the commands report it as bad input in one line, whoever loads it first."""
 
 
 @lru_cache(maxsize=None)

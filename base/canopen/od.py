@@ -19,6 +19,8 @@ COMM_CYCLE_PERIOD = 0x1006
 DEVICE_NAME = 0x1008
 HW_VERSION = 0x1009
 SW_VERSION = 0x100A
+GUARD_TIME = 0x100C            # UNSIGNED16 ms (node guarding)
+LIFE_TIME_FACTOR = 0x100D      # UNSIGNED8
 COB_ID_EMCY = 0x1014
 CONSUMER_HEARTBEAT = 0x1016
 PRODUCER_HEARTBEAT = 0x1017
@@ -37,18 +39,12 @@ PDO_TRANSMISSION_TYPE = 2
 PDO_INHIBIT_TIME = 3
 PDO_EVENT_TIMER = 5
 PDO_SYNC_START = 6
-PDO_COB_ID_INVALID = 0x8000_0000   # bit 31 of the COB-ID: PDO does not exist / disabled
+PDO_COB_ID_INVALID = 0x8000_0000   # bit 31 of the COB-ID: PDO does not exist / disabled (= canopen_codes.COB_ID_INVALID)
 TRANSMISSION_SYNC = 1              # transmission type 1: on every SYNC
 
-# Pre-defined connection set (CiA 301 7.3.5)
-NMT_COB_ID = 0x000
-SYNC_COB_ID_DEFAULT = 0x080
-EMCY_BASE = 0x080
-TPDO_BASE = (0x180, 0x280, 0x380, 0x480)
-RPDO_BASE = (0x200, 0x300, 0x400, 0x500)
-SDO_TX_BASE = 0x580   # server -> client
-SDO_RX_BASE = 0x600   # client -> server
-HEARTBEAT_BASE = 0x700
+# Pre-defined connection set (CiA 301 7.3.5): the numbers live in drivers/canopen_codes.py
+from spacearm.base.canopen.codes import (EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, RPDO_BASE,  # noqa: E402,F401
+                                   SDO_RX_BASE, SDO_TX_BASE, SYNC_COB_ID_DEFAULT, TPDO_BASE)
 
 # Error register bits (1001h)
 ERR_REG_GENERIC = 0x01
@@ -59,18 +55,11 @@ ERR_REG_COMMUNICATION = 0x10
 ERR_REG_PROFILE = 0x20
 ERR_REG_MANUFACTURER = 0x80
 
-# EMCY error codes used by the devices
-EMCY_NO_ERROR = 0x0000
-EMCY_GENERIC = 0x1000
-EMCY_OVER_TEMPERATURE_DEVICE = 0x4210
-EMCY_OVER_TEMPERATURE_DRIVE = 0x4310
-EMCY_PDO_LENGTH = 0x8210
-EMCY_HEARTBEAT_ERROR = 0x8130
-EMCY_FOLLOWING_ERROR = 0x8611
-EMCY_POSITION_LIMIT = 0x8612  # CiA 402: positioning controller / limit
-EMCY_EE_JAM = 0xFF01          # manufacturer specific: end-effector mechanism jammed
-EMCY_EE_SCREW_TORQUE = 0xFF02 # manufacturer specific: screw torque limit before lock
-EMCY_FT_OVERLOAD = 0xFF10     # manufacturer specific: force/torque overload
+# EMCY error codes used by the devices (drivers/canopen_codes.py)
+from spacearm.base.canopen.codes import (EMCY_EE_JAM, EMCY_EE_SCREW_TORQUE, EMCY_FOLLOWING_ERROR,  # noqa: E402,F401
+                                   EMCY_FT_OVERLOAD, EMCY_GENERIC, EMCY_HEARTBEAT_ERROR, EMCY_NO_ERROR,
+                                   EMCY_OVER_TEMPERATURE_DEVICE, EMCY_OVER_TEMPERATURE_DRIVE, EMCY_PDO_LENGTH,
+                                   EMCY_POSITION_LIMIT)
 
 # --- CiA 402 drive profile (joint drives) -----------------------------------------
 ERROR_CODE = 0x603F

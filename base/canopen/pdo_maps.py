@@ -1,4 +1,6 @@
-"""PDO mappings the controller configures at bring-up (also the EDS defaults).
+"""Default PDO mappings of our simulated devices: firmware_sim/eds_builder.py writes them
+into configs/eds/*.eds as the mapping defaults. The master does not read this module: it
+takes a node's layout from its bus file ([nodes.pdo]) or, without one, from its EDS.
 
 Each entry is (index, subindex, bits). RPDO n / TPDO n use the pre-defined connection set
 COB-IDs (spacearm.base.canopen.od.RPDO_BASE / TPDO_BASE + node ID), transmission type 1 (every SYNC).

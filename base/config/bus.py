@@ -11,7 +11,7 @@ from __future__ import annotations
 import json
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
@@ -20,6 +20,16 @@ from spacearm.base.paths import CONFIGS
 
 EDS_DIR = CONFIGS / "eds"
 DeviceType = Literal["joint_drive", "end_effector", "ft_sensor"]
+
+
+ObjectRef = Annotated[str, Field(pattern=r"^0x[0-9A-Fa-f]{4}(:(0x)?[0-9A-Fa-f]{1,2})?$",
+                                   description="object as 0xINDEX or 0xINDEX:SUB (sub in hex)")]
+
+
+def parse_object_ref(ref: str) -> tuple[int, int]:
+    """'0x6040' -> (0x6040, 0); '0x607D:2' / '0x607D:0x02' -> (0x607D, 2)."""
+    index, _, sub = ref.partition(":")
+    return int(index, 16), int(sub, 16) if sub else 0
 
 
 class Strict(BaseModel):
@@ -43,6 +53,9 @@ class BusSettings(Strict):
         default=0.3, ge=0.0, le=65.0,
         description="s; every node consumes the controller heartbeat (1016h) and faults/stops "
                     "when it is silent this long; 0 = off")
+    tpdo_loss_cycles: int = Field(default=5, ge=2, le=1000,
+                                  description="a mapped TPDO missing for this many SYNCs in a row is a "
+                                              "fault (tpdo_missing), like a lost heartbeat")
 
 
 class JointSettings(Strict):
@@ -61,6 +74,11 @@ class JointSettings(Strict):
     profile_acceleration: float = Field(default=0.2, gt=0.0, le=100.0, description="rad/s^2 (6083h/6084h)")
     quick_stop_deceleration: float = Field(default=1.0, gt=0.0, le=100.0, description="rad/s^2 (6085h)")
     quick_stop_option: int = Field(default=2, ge=0, le=8, description="605Ah: 2 stop then disable, 6 stay in quick stop")
+    # Manufacturer objects mean what this drive's maker says: named here per node, never assumed
+    temperature_object: ObjectRef | None = Field(
+        default=None, description="object holding the drive temperature (INTEGER16, 0.1 degC); none: not reported")
+    brake_object: ObjectRef | None = Field(
+        default=None, description="object that is 1 while the holding brake is engaged; none: not reported")
 
     @model_validator(mode="after")
     def _ordered(self) -> "JointSettings":
@@ -97,6 +115,14 @@ class FtSettings(Strict):
     torque_limit: int = Field(default=30, ge=1, le=65535, description="N m, overload (2205h.2)")
 
 
+class PdoLayout(Strict):
+    """The PDOs a node is configured with: a list per direction, one list of mapped objects
+    per PDO (RPDO1.. / TPDO1..); an empty list leaves that PDO disabled. Object sizes come
+    from the node's EDS, which must allow the mapping (checked at load)."""
+    rpdo: list[list[ObjectRef]] = Field(default_factory=list, max_length=512)
+    tpdo: list[list[ObjectRef]] = Field(default_factory=list, max_length=512)
+
+
 class NodeConfig(Strict):
     name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     node_id: int = Field(ge=1, le=127)
@@ -105,6 +131,13 @@ class NodeConfig(Strict):
     joint: JointSettings | None = None
     end_effector: EndEffectorSettings | None = None
     ft: FtSettings | None = None
+    eds: str | None = Field(default=None, min_length=1, description=(
+        "the node's EDS/DCF (relative to configs/eds/ or absolute); default configs/eds/<device>.eds"))
+    pdo: PdoLayout | None = Field(default=None, description="PDO mapping; default: the device type's "
+                                  "standard layout (drivers/pdo_maps.py)")
+    sdo: dict[ObjectRef, int] = Field(default_factory=dict, description=(
+        "extra SDO writes at bring-up, object -> raw value, in file order (as ros2_canopen's sdo: "
+        "list); each object must exist and be writable in the EDS"))
 
     @model_validator(mode="after")
     def _settings_match_device(self) -> "NodeConfig":
@@ -122,7 +155,10 @@ class NodeConfig(Strict):
 
     @property
     def eds_path(self) -> Path:
-        return EDS_DIR / f"{self.device}.eds"
+        if self.eds is None:
+            return EDS_DIR / f"{self.device}.eds"
+        path = Path(self.eds)
+        return path if path.is_absolute() else EDS_DIR / path
 
     @property
     def label(self) -> str:
@@ -187,10 +223,13 @@ def dump_toml(config: BusConfig) -> str:
     for node in config.nodes:
         lines += ["", "[[nodes]]"]
         data = node.model_dump()
-        tables = {k: data.pop(k) for k in ("joint", "end_effector", "ft")}
+        tables = {k: data.pop(k) for k in ("joint", "end_effector", "ft", "pdo", "sdo")}
+        if data.get("eds") is None:
+            data.pop("eds", None)
         lines += [f"{k} = {value(v)}" for k, v in data.items()]
         for key, table in tables.items():
-            if table is not None:
+            if table:
                 lines.append(f"[nodes.{key}]")
-                lines += [f"{k} = {value(v)}" for k, v in table.items()]
+                lines += [f"{json.dumps(k) if ':' in k else k} = {value(v)}" for k, v in table.items()
+                          if v is not None]          # TOML has no null: an absent key is the default
     return "\n".join(lines) + "\n"

@@ -26,13 +26,14 @@ from pathlib import Path
 
 import can
 
+from spacearm.base.canopen.codes import HEARTBEAT_BASE, RPDO_BASE, SDO_TX_BASE, SYNC_COB_ID_DEFAULT, TPDO_BASE
 from spacearm.base.runtime.child_process import module_env, readline_within
 
 ROOT = Path(__file__).resolve().parents[2]
 
 STOP_ID = 0x7FF
-SYNC_ID = 0x080
-TPDO_BASES = (0x180, 0x280, 0x380, 0x480)
+SYNC_ID = SYNC_COB_ID_DEFAULT
+TPDO_BASES = TPDO_BASE   # CiA 301 pre-defined connection set (drivers/canopen_codes.py)
 
 
 def open_any(spec: str) -> can.BusABC:
@@ -106,7 +107,7 @@ def mode_pdo(bus: can.BusABC, args) -> dict:
             with send_lock:
                 for node in nodes:
                     try:
-                        bus.send(can.Message(arbitration_id=0x700 + node, data=b"\x05", is_extended_id=False))
+                        bus.send(can.Message(arbitration_id=HEARTBEAT_BASE + node, data=b"\x05", is_extended_id=False))
                         hb_sent[0] += 1
                     except can.CanError:
                         pass
@@ -132,7 +133,7 @@ def mode_pdo(bus: can.BusABC, args) -> dict:
                     for cob, size in frames_per_sync:
                         bus.send(can.Message(arbitration_id=cob, data=(counter + bytes(4))[:size],
                                              is_extended_id=False))
-            elif 0x200 <= aid < 0x580 and (aid & 0x7F) in nodes:
+            elif RPDO_BASE[0] <= aid < SDO_TX_BASE and (aid & 0x7F) in nodes:
                 rpdos[aid] = rpdos.get(aid, 0) + 1
     finally:
         stop.set()
@@ -144,7 +145,7 @@ def mode_pdo(bus: can.BusABC, args) -> dict:
 
 # The spacearm PDO set (see bench/bench_bus.py for the assumptions): node -> [(COB-ID, bytes)]
 FULL_LAYOUT = {
-    **{n: [(0x180 + n, 6), (0x280 + n, 6)] for n in range(1, 7)},   # joint drives: TPDO1, TPDO2
+    **{n: [(TPDO_BASE[0] + n, 6), (TPDO_BASE[1] + n, 6)] for n in range(1, 7)},   # joint drives: TPDO1, TPDO2
     7: [(0x187, 8)],                                                 # end-effector
     8: [(0x188, 8), (0x288, 6)],                                     # F/T sensor
 }

@@ -264,6 +264,8 @@ class Daemon:
             "recording": vars(recorder.info()) if (recorder := self.recorder) else None,
             "events": list(self.event_log),
             "network": self.hardware.statistics(),
+            # per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded
+            "bringup": self.hardware.bringup_report(),
         }
 
     def _session_closed(self, session: Session) -> None:

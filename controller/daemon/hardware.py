@@ -72,6 +72,10 @@ class CanopenHardware:
     def statistics(self) -> dict:
         return dict(vars(self.network.stats))
 
+    def bringup_report(self) -> dict:
+        """Per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded."""
+        return {name: vars(report) for name, report in getattr(self.network, "bringup", {}).items()}
+
     def read(self, time: float) -> Measurement:
         sync = self.network.send_sync()
         timeout = None if self.lockstep else self.realtime_budget

@@ -32,3 +32,11 @@ def test_sim_bad_bus_spec_and_bad_config_are_one_line_errors(tmp_path):
     bad.write_text('[[nodes]]\nname = "j"\nnode_id = 300\ndevice = "joint_drive"\n')
     result = CliRunner().invoke(app(), ["sim", "--bus", "virtual:x", "--bus-config", str(bad), "--duration", "0.1"])
     assert result.exit_code == 2 and "nodes[0].node_id" in result.output and "Traceback" not in result.output
+
+
+def test_sim_with_a_missing_eds_is_a_one_line_error(tmp_path):
+    bus = tmp_path / "bus.toml"
+    bus.write_text('[[nodes]]\nname = "j"\nnode_id = 3\ndevice = "joint_drive"\neds = "nothere.eds"\n')
+    result = CliRunner().invoke(app(), ["sim", "--bus", "virtual:x", "--bus-config", str(bus), "--duration", "0.1"])
+    assert result.exit_code == 2 and "nothere.eds: cannot read" in result.output
+    assert "Traceback" not in result.output

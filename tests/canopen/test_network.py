@@ -42,7 +42,7 @@ def test_boot_detects_wrong_device_type(vbus, bus_config, sim):
              for n in bus_config.nodes]
     net = ArmNetwork(vbus, BusConfig(bus=bus_config.bus, nodes=nodes))
     try:
-        with pytest.raises(BootError, match=r"node 17 'ft_sensor' \(end_effector\): Device type"):
+        with pytest.raises(BootError, match=r"node 17 'ft_sensor' \(end_effector\): Product code \(0x1018:02\) is 0x0F700001"):
             net.boot()
     finally:
         net.close()

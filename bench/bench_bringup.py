@@ -1,0 +1,194 @@
+#!/usr/bin/env python3
+"""Bring-up benchmark of the EDS-driven CANopen master.
+
+    .venv/bin/python bench/bench_bringup.py [--repeats 5] [--before ad1693b]
+
+1. Bring-up time of all nodes (reset communication -> every node OPERATIONAL), the arm's bus
+   file and the mixed-drive bus file, simulator in this process, on the virtual bus and through
+   the loopback hub (own process on 127.0.0.1): median and worst of --repeats boots
+   (target <= 2 s).
+2. SDO requests the master sends per node during boot, counted on the bus by a listener,
+   for this tree and for the tree at --before (exported with `git archive`, run with the same
+   interpreter): fewer is better.
+3. Interop matrix: our master against the durand-based drives of hil_tests/interop (responders
+   x checks), pass count (target all).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+BRINGUP_TARGET_S = 2.0
+BUS_FILES = {"arm": ROOT / "configs/bus/arm.toml", "arm_mixed": ROOT / "configs/bus/arm_mixed.toml"}
+
+# Runs in a child process with PYTHONPATH set to the tree under test; uses only the public API
+# both trees share (load_bus_config, Simulator, ArmNetwork.boot).
+COUNT_SNIPPET = r"""
+import json, sys, time, uuid
+import can
+from spacearm.base.config.bus import load_bus_config
+from spacearm.drivers.network import ArmNetwork
+from spacearm.firmware_sim.runner import Simulator
+cfg = load_bus_config(sys.argv[1])
+channel = "count-" + uuid.uuid4().hex[:8]
+sim = Simulator("virtual:" + channel, cfg).start()
+spy = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+net = ArmNetwork("virtual:" + channel, cfg)
+result = {"error": None, "writes": {}, "reads": {}}
+try:
+    net.boot()
+except Exception as exc:
+    result["error"] = str(exc).splitlines()[0]
+net.close()
+sim.stop()
+names = {n.node_id: n.name for n in cfg.nodes}
+while (msg := spy.recv(0)) is not None:
+    node = msg.arbitration_id - 0x600
+    if node in names and msg.dlc == 8:
+        kind = {0x20: "writes", 0x40: "reads"}.get(msg.data[0] & 0xE0)
+        if kind:
+            result[kind][names[node]] = result[kind].get(names[node], 0) + 1
+spy.shutdown()
+print(json.dumps(result))
+"""
+
+
+def machine_info() -> list[str]:
+    cpu = "?"
+    try:
+        cpu = next(line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                   if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    load = os.getloadavg()
+    return [f"machine : {platform.node()} {platform.machine()}, {os.cpu_count()} cpus ({cpu})",
+            f"python  : {platform.python_version()}",
+            f"load avg: {' '.join(f'{x:.2f}' for x in load)} (at start)",
+            f"date    : {time.strftime('%Y-%m-%d %H:%M:%S UTC', time.gmtime())}"]
+
+
+def boot_times(spec_of, bus_file: Path, repeats: int) -> tuple[list[float], dict]:
+    from spacearm.base.config.bus import load_bus_config
+    from spacearm.drivers.network import ArmNetwork
+    from spacearm.firmware_sim.runner import Simulator
+
+    cfg = load_bus_config(bus_file)
+    times, report = [], {}
+    for k in range(repeats):
+        spec = spec_of(f"bringup{k}")
+        sim = Simulator(spec, cfg).start()
+        net = ArmNetwork(spec, cfg)
+        try:
+            net.connect()
+            t0 = time.perf_counter()
+            net.boot()
+            times.append(time.perf_counter() - t0)
+            report = net.bringup
+        finally:
+            net.close()
+            sim.stop()
+    return times, report
+
+
+def count_requests(tree: Path, bus_file: Path) -> dict:
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, "-c", COUNT_SNIPPET, str(bus_file)], cwd=tree, env=env,
+                         capture_output=True, text=True, timeout=120)
+    if out.returncode != 0:
+        return {"error": (out.stderr.strip().splitlines() or ["no output"])[-1], "writes": {}, "reads": {}}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def export_tree(rev: str, into: Path) -> Path:
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "drivers", "firmware_sim", "controller",
+                              "configs"], capture_output=True, check=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(into)], input=archive, check=True)
+    return into
+
+
+def table(headers: list[str], rows: list[list[str]]) -> None:
+    widths = [max(len(str(x)) for x in col) for col in zip(headers, *rows)]
+    print("  ".join(h.ljust(w) for h, w in zip(headers, widths)))
+    print("  ".join("-" * w for w in widths))
+    for r in rows:
+        print("  ".join(str(c).ljust(w) for c, w in zip(r, widths)))
+    print()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--before", default="ad1693b", help="git revision of the master to compare SDO counts with")
+    args = ap.parse_args(argv)
+    print("\n".join(machine_info()), "\n", sep="")
+
+    from spacearm.base.transport.hub import HubProcess
+    rows = []
+    hub = HubProcess()
+    try:
+        for transport, spec_of in (("virtual", lambda name: f"virtual:{name}"), ("loopback", hub.spec)):
+            for name, path in BUS_FILES.items():
+                times, _ = boot_times(spec_of, path, args.repeats)
+                worst = max(times)
+                rows.append([f"bring-up {name} ({transport}), {args.repeats} boots",
+                             f"median {statistics.median(times):.3f} s, worst {worst:.3f} s",
+                             f"<= {BRINGUP_TARGET_S:g} s", "pass" if worst <= BRINGUP_TARGET_S else "MISS"])
+    finally:
+        hub.stop()
+    print("1. Bring-up time (reset communication -> all nodes OPERATIONAL), 8 nodes")
+    table(["figure", "measured", "target", "result"], rows)
+
+    print(f"2. SDO requests per node during boot (counted on the bus): {args.before} vs this tree")
+    with tempfile.TemporaryDirectory(prefix="bringup-before-") as tmp:
+        before_tree = export_tree(args.before, Path(tmp))
+        rows = []
+        for name, path in BUS_FILES.items():
+            old_file = before_tree / "configs/bus" / path.name     # each tree with its own bus file
+            before = count_requests(before_tree, old_file) if old_file.exists() \
+                else {"error": "bus file not in that revision", "writes": {}, "reads": {}}
+            after = count_requests(ROOT, path)
+            for node in sorted(set(before["writes"]) | set(after["writes"]) | {"joint_1"},
+                               key=lambda n: (not n.startswith("joint"), n)):
+                rows.append([name, node, before["writes"].get(node, "-"), before["reads"].get(node, "-"),
+                             after["writes"].get(node, "-"), after["reads"].get(node, "-")])
+            for label, r in (("before", before), ("after", after)):
+                if r["error"]:
+                    rows.append([name, f"({label}: boot failed)", r["error"][:90], "", "", ""])
+            total = [("-" if r["error"] else sum(r[k].values())) for r in (before, after) for k in ("writes", "reads")]
+            rows.append([name, "total", *total])
+    table(["bus file", "node", "writes before", "reads before", "writes after", "reads after"], rows)
+
+    print("3. Interop matrix: our master vs durand-based CiA 402 drives (hil_tests/interop)")
+    try:
+        from hil_tests.interop.durand_drive import VARIANTS
+        from hil_tests.interop.matrix import CHECKS, run_variant
+    except ImportError as exc:
+        print(f"   not run: {exc} (pip install durand)")
+        return 1
+    rows, passed, total = [], 0, 0
+    for variant in VARIANTS:
+        with tempfile.TemporaryDirectory(prefix="durand-") as tmp:
+            r = run_variant(variant, Path(tmp))
+        marks = ["pass" if r.passed.get(c) else ("FAIL" if c in r.passed else "not run") for c in CHECKS]
+        passed += sum(m == "pass" for m in marks)
+        total += len(CHECKS)
+        rows.append([variant, *marks, r.sdo_writes, f"{r.boot_time:.3f} s"])
+    table(["responder", *CHECKS, "SDO writes", "boot"], rows)
+    print(f"interop checks passed: {passed}/{total} (target {total}/{total})")
+    print(f"load avg at end: {' '.join(f'{x:.2f}' for x in os.getloadavg())} -- 2 cores shared with other jobs")
+    return 0 if passed == total else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,189 @@
+"""CiA 402 drives built on `durand` (PyPI), a CANopen responder stack nobody here wrote.
+
+durand provides the CiA 301 side (NMT, SDO server, PDOs, SYNC consumer, EMCY and heartbeat
+producers) and writes the device's EDS itself (``node.eds.content``); this module adds only a
+small CiA 402 application (power state machine, cyclic synchronous position) and, for one
+variant, a heartbeat consumer (1016h), so that the master is tried against:
+
+    minimal       CiA 301 mandatory objects + the 402 objects its PDOs use, 4+4 PDOs
+    ro_scaling    608Fh / 6091h / 6076h read-only, with values other than our bus file's
+    exact_pdos    exactly one RPDO and one TPDO
+    consumer      a 1016h heartbeat consumer (all the others have none)
+    vendor_2000   vendor objects of its own at 2000h/2001h (not temperature/brake)
+
+The 402 constants are written out here from the standard on purpose (not imported from
+drivers/): the point is a second, independent reading of CiA 402.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import can
+from durand import CANBusNetwork, Node, Variable
+from durand.datatypes import DatatypeEnum as DT
+from durand.node import NodeCapabilities
+from durand.object_dictionary import Array
+from durand.scheduler import SyncScheduler, set_scheduler
+
+VENDOR_ID = 0x0000_0DDD          # made-up vendor of these test drives
+PRODUCT_CODE = 0x0000_402D
+DEVICE_TYPE_402 = 0x0002_0192    # CiA 402, servo drive, with the profile number in the low word
+
+# CiA 402 statusword values (bit pattern of the power state machine) and controlword commands
+SW_SWITCH_ON_DISABLED, SW_READY, SW_SWITCHED_ON, SW_OP_ENABLED = 0x0250, 0x0231, 0x0233, 0x0237
+SW_QUICK_STOP, SW_FAULT = 0x0217, 0x0218
+
+
+@dataclass(frozen=True)
+class Variant:
+    name: str
+    ro_scaling: bool = False
+    pdos: tuple[int, int] = (4, 4)      # (RPDOs, TPDOs) the device has
+    consumer: bool = False
+    vendor: bool = False
+    encoder_increments: int = 1 << 20
+    gear: int = 100
+
+
+VARIANTS = {
+    "minimal": Variant("minimal"),
+    # a different encoder and gear: positions only match if the master reads them
+    "ro_scaling": Variant("ro_scaling", ro_scaling=True, encoder_increments=1 << 17, gear=160),
+    "exact_pdos": Variant("exact_pdos", pdos=(1, 1)),
+    "consumer": Variant("consumer", consumer=True),
+    "vendor_2000": Variant("vendor_2000", vendor=True),
+}
+
+_scheduler_lock = threading.Lock()
+_scheduler: SyncScheduler | None = None
+
+
+def _ensure_scheduler() -> None:
+    """durand's timers (heartbeat, inhibit) need a scheduler; one thread for all drives."""
+    global _scheduler
+    with _scheduler_lock:
+        if _scheduler is None:
+            _scheduler = SyncScheduler()
+            set_scheduler(_scheduler)
+            threading.Thread(target=_scheduler.run, name="durand-scheduler", daemon=True).start()
+
+
+class DurandDrive:
+    """One durand node with a CSP drive application, on python-can's virtual bus."""
+
+    def __init__(self, channel: str, node_id: int, variant: Variant):
+        _ensure_scheduler()
+        self.variant = variant
+        self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        self.network = CANBusNetwork(self.bus)
+        rpdos, tpdos = variant.pdos
+        self.node = Node(self.network, node_id, capabilities=NodeCapabilities(1, rpdos, tpdos))
+        od = self.od = self.node.object_dictionary
+        od[0x1000] = Variable(DT.UNSIGNED32, "ro", DEVICE_TYPE_402, name="Device Type")
+        od[0x1018][1] = Variable(DT.UNSIGNED32, "ro", VENDOR_ID, name="Vendor-ID")
+        od[0x1018][2] = Variable(DT.UNSIGNED32, "ro", PRODUCT_CODE, name="Product Code")
+        od[0x603F] = Variable(DT.UNSIGNED16, "ro", 0, name="Error code")
+        od[0x6040] = Variable(DT.UNSIGNED16, "rw", 0, name="Controlword")
+        od[0x6041] = Variable(DT.UNSIGNED16, "ro", SW_SWITCH_ON_DISABLED, name="Statusword")
+        od[0x6060] = Variable(DT.INTEGER8, "rw", 8, name="Modes of operation")
+        od[0x6061] = Variable(DT.INTEGER8, "ro", 8, name="Modes of operation display")
+        od[0x6064] = Variable(DT.INTEGER32, "ro", 0, name="Position actual value")
+        od[0x606C] = Variable(DT.INTEGER32, "ro", 0, name="Velocity actual value")
+        od[0x607A] = Variable(DT.INTEGER32, "rw", 0, name="Target position")
+        if variant.ro_scaling:
+            enc = Array(Variable(DT.UNSIGNED32, "ro", 0), 2, name="Position encoder resolution")
+            od[0x608F] = enc
+            gear = Array(Variable(DT.UNSIGNED32, "ro", 0), 2, name="Gear ratio")
+            od[0x6091] = gear
+            od[0x6076] = Variable(DT.UNSIGNED32, "ro", 2000, name="Motor rated torque")
+            for index, values in ((0x608F, (variant.encoder_increments, 1)), (0x6091, (variant.gear, 1))):
+                for sub, value in enumerate(values, start=1):
+                    od.write(index, sub, value)
+        if variant.vendor:
+            od[0x2000] = Variable(DT.UNSIGNED32, "ro", 48000, name="DC link voltage mV")
+            od[0x2001] = Variable(DT.UNSIGNED16, "rw", 0, name="Vendor tuning word")
+        if variant.consumer:
+            od[0x1016] = Array(Variable(DT.UNSIGNED32, "rw", 0, name="Consumer heartbeat time"), 1,
+                               name="Consumer heartbeat time")
+            od.write(0x1016, 1, 0)
+            self._consumer_last: dict[int, float] = {}
+        self.eds_text = self.node.eds.content    # the device description durand writes itself
+        self.state = "SWITCH_ON_DISABLED"
+        self._last_cw = 0
+        self.consumer_faults = 0
+        self.node.sync.callbacks.add(self._on_sync)
+        if variant.consumer:
+            self.network.add_subscription(0x700 + 127, self._on_master_heartbeat)
+
+    # -- test hooks --------------------------------------------------------------
+    def write_eds(self, path: Path) -> Path:
+        path.write_text(self.eds_text)
+        return path
+
+    def raise_fault(self, code: int) -> None:
+        """The drive detects an error: EMCY with this code, 402 state FAULT."""
+        self.state = "FAULT"
+        self.od.write(0x603F, 0, code)
+        self.od.write(0x6041, 0, SW_FAULT)
+        self.node.emcy.set(code, 0x01)
+
+    def stop_heartbeat(self) -> None:
+        self.od.write(0x1017, 0, 0)   # durand cancels its producer timer
+
+    def close(self) -> None:
+        self.od.write(0x1017, 0, 0)
+        self.network.stop()
+        self.bus.shutdown()
+
+    # -- the drive's application ---------------------------------------------------
+    def _on_master_heartbeat(self, cob_id: int, data: bytes) -> None:
+        self._consumer_last[127] = time.monotonic()
+
+    def _check_consumer(self) -> None:
+        entry = self.od.read(0x1016, 1)
+        producer, ms = (entry >> 16) & 0x7F, entry & 0xFFFF
+        last = self._consumer_last.get(producer)
+        if ms and last is not None and time.monotonic() - last > ms / 1000.0:
+            del self._consumer_last[producer]
+            self.consumer_faults += 1
+            self.raise_fault(0x8130)
+
+    def _on_sync(self) -> None:
+        if self.variant.consumer:
+            self._check_consumer()
+        cw = self.od.read(0x6040, 0)
+        rising_reset = cw & 0x80 and not self._last_cw & 0x80
+        self._last_cw = cw
+        s = self.state
+        if s == "FAULT":
+            if rising_reset:
+                self.od.write(0x603F, 0, 0)
+                self.node.emcy.set(0x0000, 0)
+                s = "SWITCH_ON_DISABLED"
+        elif not cw & 0x02:                                  # disable voltage
+            s = "SWITCH_ON_DISABLED"
+        elif not cw & 0x04:                                  # quick stop
+            s = "QUICK_STOP" if s == "OPERATION_ENABLED" else "SWITCH_ON_DISABLED"
+        elif cw & 0x0F == 0x06:                              # shutdown
+            s = "READY_TO_SWITCH_ON"
+        elif cw & 0x0F == 0x07 and s in ("READY_TO_SWITCH_ON", "OPERATION_ENABLED"):
+            s = "SWITCHED_ON"
+        elif cw & 0x0F == 0x0F and s in ("SWITCHED_ON", "OPERATION_ENABLED"):
+            s = "OPERATION_ENABLED"
+        self.state = s
+        sw = {"SWITCH_ON_DISABLED": SW_SWITCH_ON_DISABLED, "READY_TO_SWITCH_ON": SW_READY,
+              "SWITCHED_ON": SW_SWITCHED_ON, "OPERATION_ENABLED": SW_OP_ENABLED,
+              "QUICK_STOP": SW_QUICK_STOP, "FAULT": SW_FAULT}[s]
+        position = self.od.read(0x6064, 0)
+        if s == "OPERATION_ENABLED":                        # CSP: follow the target each SYNC
+            target = self.od.read(0x607A, 0)
+            self.od.write(0x606C, 0, target - position)
+            position = target
+        else:
+            self.od.write(0x607A, 0, position)
+        self.od.write(0x6064, 0, position)
+        self.od.write(0x6061, 0, self.od.read(0x6060, 0))
+        self.od.write(0x6041, 0, sw)

@@ -1,0 +1,101 @@
+"""Our master (spacearm.drivers.network.ArmNetwork) against each durand drive variant: one check
+after the other on one virtual bus, each recorded pass/fail with what was seen. Used by
+hil_tests/interop/test_master_vs_durand.py and bench/bench_bringup.py (the interop matrix).
+"""
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from spacearm.base.config.bus import BusConfig, BusSettings, NodeConfig, PdoLayout
+from spacearm.drivers.errors import DriverError
+from spacearm.drivers.network import ArmNetwork
+from hil_tests.interop.durand_drive import VARIANTS, DurandDrive, Variant
+
+CHECKS = ("boot", "enable", "csp_move", "emcy", "heartbeat_loss")
+NODE_ID = 5
+MOVE = 0.3          # rad, the CSP move every drive must track
+
+
+def layout(variant: Variant) -> PdoLayout:
+    """What the bus file of this drive says: what the master needs, nothing vendor-specific."""
+    tpdo = [["0x6041", "0x6064", "0x6061"]]
+    if variant.pdos[1] > 1:
+        tpdo.append(["0x606C", "0x603F"])
+    return PdoLayout(rpdo=[["0x6040", "0x607A"]], tpdo=tpdo)
+
+
+def bus_config(variant: Variant, eds: Path) -> BusConfig:
+    node = NodeConfig(name="joint_1", node_id=NODE_ID, device="joint_drive", heartbeat_period=0.1,
+                      eds=str(eds), pdo=layout(variant))
+    return BusConfig(bus=BusSettings(), nodes=[node])
+
+
+@dataclass
+class Result:
+    variant: str
+    passed: dict[str, bool] = field(default_factory=dict)
+    detail: dict[str, str] = field(default_factory=dict)
+    sdo_writes: int = 0
+    boot_time: float = 0.0
+    skipped: list[str] = field(default_factory=list)
+
+    def record(self, check: str, ok: bool, detail: str = "") -> bool:
+        self.passed[check], self.detail[check] = bool(ok), detail
+        return bool(ok)
+
+
+def run_variant(name: str, workdir: Path | None = None) -> Result:
+    variant = VARIANTS[name]
+    result = Result(name)
+    channel = f"durand-{name}-{uuid.uuid4().hex[:6]}"
+    workdir = workdir or Path(tempfile.mkdtemp(prefix="durand-"))
+    drive = DurandDrive(channel, NODE_ID, variant)
+    net = ArmNetwork(f"virtual:{channel}",
+                     bus_config(variant, drive.write_eds(workdir / f"durand_{name}.eds")))
+    try:
+        t0 = time.perf_counter()
+        try:
+            net.boot()
+        except DriverError as exc:
+            result.record("boot", False, str(exc))
+            return result
+        result.boot_time = time.perf_counter() - t0
+        report = net.bringup["joint_1"]
+        result.sdo_writes, result.skipped = report.sdo_writes, report.skipped
+        result.record("boot", True, f"{report.sdo_writes} SDO writes, {len(report.skipped)} skipped")
+        try:
+            state = net.enable_all(max_cycles=20)
+            result.record("enable", state.all_enabled, state.joints[0].state.value)
+        except DriverError as exc:
+            result.record("enable", False, str(exc))
+            return result
+        state = net.move_to([MOVE], 0.4)
+        joint = net.joints[0]
+        raw = net.sdo_read("joint_1", 0x6064, 0)
+        expected_raw = round(MOVE * variant.encoder_increments * variant.gear / (2 * math.pi))
+        ok = abs(state.joints[0].position - MOVE) < 1e-5 and abs(raw - expected_raw) <= 1
+        result.record("csp_move", ok, f"{state.joints[0].position:.6f} rad, 6064h={raw} "
+                                      f"(drive scaling {expected_raw}), k={joint.k:.1f}/rad")
+        net.poll_events()
+        drive.raise_fault(0x8611)
+        for _ in range(3):
+            state = net.cycle()
+        events = [e for e in net.poll_events() if e.kind == "emcy"]
+        result.record("emcy", any(e.code == 0x8611 for e in events) and state.joints[0].fault,
+                      "; ".join(e.message for e in events) or "no EMCY event")
+        drive.stop_heartbeat()
+        deadline = time.monotonic() + 1.0
+        lost = []
+        while time.monotonic() < deadline and not lost:
+            time.sleep(0.02)
+            lost = [e for e in net.poll_events() if e.kind == "heartbeat_lost"]
+        result.record("heartbeat_loss", bool(lost), lost[0].message if lost else "not detected in 1 s")
+        return result
+    finally:
+        net.close()
+        drive.close()
