@@ -9,22 +9,18 @@ import math
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
 from spacearm.base.config.limits import ApproachConfig, SupervisionConfig
 from spacearm.base.config.inertia import LinkInertial, UrdfSource
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.loader import StrictModel, load_toml_model
 
 TWO_PI = 2.0 * math.pi
 # Longest link we accept: 30 m (SSRMS booms are 7.1 m). Catches mm-for-m mistakes.
 MAX_LENGTH_M = 30.0
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class JointLimits(Strict):
+class JointLimits(StrictModel):
     lower: float = Field(ge=-3 * TWO_PI, le=3 * TWO_PI, description="rad")
     upper: float = Field(ge=-3 * TWO_PI, le=3 * TWO_PI, description="rad")
     velocity: float = Field(gt=0.0, le=10.0, description="rad/s")
@@ -38,7 +34,7 @@ class JointLimits(Strict):
         return self
 
 
-class DriveLimits(Strict):
+class DriveLimits(StrictModel):
     """What the joint's drive allows, as opposed to what the planner asks (JointLimits).
 
     The defaults are the ORU test bed's drives (1 rad/s, 150 N m, 1 deg following error);
@@ -48,7 +44,7 @@ class DriveLimits(Strict):
     following_error: float = Field(default=0.0175, gt=0.0, le=1.0, description="rad (m if prismatic)")
 
 
-class Joint(Strict):
+class Joint(StrictModel):
     name: str = Field(min_length=1, max_length=64)
     type: Literal["revolute", "prismatic"] = Field(
         default="revolute", description="prismatic: q (m) adds to d, theta_offset stays fixed")
@@ -72,14 +68,14 @@ class Joint(Strict):
         return self
 
 
-class DHRow(Strict):
+class DHRow(StrictModel):
     a: float = Field(default=0.0, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, description="m")
     alpha: float = Field(default=0.0, ge=-TWO_PI, le=TWO_PI, description="rad")
     d: float = Field(default=0.0, ge=-MAX_LENGTH_M, le=MAX_LENGTH_M, description="m")
     theta: float = Field(default=0.0, ge=-TWO_PI, le=TWO_PI, description="rad")
 
 
-class FixedFrame(Strict):
+class FixedFrame(StrictModel):
     """A constant transform, either as a D-H row (in the arm's convention) or xyz + rpy.
 
     rpy is roll-pitch-yaw about fixed x, y, z (R = Rz(yaw) Ry(pitch) Rx(roll)).
@@ -97,7 +93,7 @@ class FixedFrame(Strict):
         return self
 
 
-class Plane(Strict):
+class Plane(StrictModel):
     """A plane n . p + f = 0 in the base frame (n need not be unit; it is normalised)."""
     normal: tuple[float, float, float]
     offset: float
@@ -109,12 +105,12 @@ class Plane(Strict):
         return self
 
 
-class Sensors(Strict):
+class Sensors(StrictModel):
     resolver_accuracy: float = Field(default=1.2120342e-4, gt=0.0, le=0.1,
                                      description="rad (25 arcsec by default)")
 
 
-class CartesianLimits(Strict):
+class CartesianLimits(StrictModel):
     """Limits of straight-line tool moves (the tool frame's origin and orientation)."""
     linear_velocity: float = Field(default=0.05, gt=0.0, le=2.0, description="m/s")
     linear_acceleration: float = Field(default=0.1, gt=0.0, le=10.0, description="m/s^2")
@@ -122,7 +118,7 @@ class CartesianLimits(Strict):
     angular_acceleration: float = Field(default=0.2, gt=0.0, le=30.0, description="rad/s^2")
 
 
-class ArmInfo(Strict):
+class ArmInfo(StrictModel):
     name: str = Field(min_length=1)
     description: str = ""
     source: str = ""
@@ -131,7 +127,7 @@ class ArmInfo(Strict):
     payload: float | None = Field(default=None, ge=0.0, le=1.0e5, description="kg")
 
 
-class Calibration(Strict):
+class Calibration(StrictModel):
     """Identified corrections to the nominal rows above, with where they came from.
 
     Written by `spacearm calibrate ... --apply`; the kinematic model adds them to the nominal
@@ -171,7 +167,7 @@ class Calibration(Strict):
         return self
 
 
-class ArmConfig(Strict):
+class ArmConfig(StrictModel):
     arm: ArmInfo
     joints: list[Joint] = Field(min_length=1, max_length=12)
     base: FixedFrame = FixedFrame()

@@ -5,18 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.config.scene import ScenePose
 from spacearm.base.paths import CONFIGS
 
 DEFAULT_BOARD = CONFIGS / "calibration" / "board.toml"
 
 
-class BoardConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class BoardConfig(StrictModel):
     squares: tuple[int, int] = Field(description="squares along x, y (inner corners: one fewer)")
     square: float = Field(gt=0.001, lt=0.5, description="m")
     pose: ScenePose                       # base_T_board, nominal

@@ -13,9 +13,9 @@ import math
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.paths import CONFIGS
 
 EDS_DIR = CONFIGS / "eds"
@@ -32,11 +32,7 @@ def parse_object_ref(ref: str) -> tuple[int, int]:
     return int(index, 16), int(sub, 16) if sub else 0
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class BusSettings(Strict):
+class BusSettings(StrictModel):
     sync_period: float = Field(default=0.02, ge=0.001, le=1.0, description="s, SYNC producer period")
     boot_timeout: float = Field(default=3.0, gt=0.0, le=60.0, description="s to wait for all boot-ups")
     sdo_timeout: float = Field(default=0.5, ge=0.01, le=10.0, description="s per SDO response")
@@ -58,7 +54,7 @@ class BusSettings(Strict):
                                               "fault (tpdo_missing), like a lost heartbeat")
 
 
-class JointSettings(Strict):
+class JointSettings(StrictModel):
     encoder_increments: int = Field(default=1 << 20, ge=1, le=2**31, description="608Fh.1 per motor_revolutions")
     motor_revolutions: int = Field(default=1, ge=1, le=2**16, description="608Fh.2")
     gear_motor_revolutions: int = Field(default=100, ge=1, le=2**20, description="6091h.1")
@@ -103,19 +99,19 @@ class JointSettings(Strict):
         return self.rated_torque * self.gear_ratio
 
 
-class EndEffectorSettings(Strict):
+class EndEffectorSettings(StrictModel):
     lock_torque: float = Field(default=8.0, ge=0.1, le=30.0, description="N m screw torque that means locked (2110h)")
     lock_turns: float = Field(default=6.0, ge=0.1, le=100.0, description="screw turns to full lock (2111h)")
 
 
-class FtSettings(Strict):
+class FtSettings(StrictModel):
     force_counts_per_n: int = Field(default=100, ge=1, le=10000, description="2201h")
     torque_counts_per_nm: int = Field(default=1000, ge=1, le=100000, description="2202h")
     force_limit: int = Field(default=300, ge=1, le=65535, description="N, overload (2205h.1)")
     torque_limit: int = Field(default=30, ge=1, le=65535, description="N m, overload (2205h.2)")
 
 
-class PdoLayout(Strict):
+class PdoLayout(StrictModel):
     """The PDOs a node is configured with: a list per direction, one list of mapped objects
     per PDO (RPDO1.. / TPDO1..); an empty list leaves that PDO disabled. Object sizes come
     from the node's EDS, which must allow the mapping (checked at load)."""
@@ -123,7 +119,7 @@ class PdoLayout(Strict):
     tpdo: list[list[ObjectRef]] = Field(default_factory=list, max_length=512)
 
 
-class NodeConfig(Strict):
+class NodeConfig(StrictModel):
     name: str = Field(min_length=1, max_length=64, pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     node_id: int = Field(ge=1, le=127)
     device: DeviceType
@@ -165,7 +161,7 @@ class NodeConfig(Strict):
         return f"node {self.node_id} '{self.name}' ({self.device})"
 
 
-class BusConfig(Strict):
+class BusConfig(StrictModel):
     bus: BusSettings = BusSettings()
     nodes: list[NodeConfig] = Field(min_length=1, max_length=127)
 

@@ -7,14 +7,12 @@ imported arm came from; the URDF stays the reference for meshes.
 """
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
+
+from spacearm.base.config.loader import StrictModel
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class LinkInertial(Strict):
+class LinkInertial(StrictModel):
     """One link's mass, centre of mass and inertia about the centre of mass (link frame axes)."""
     mass: float = Field(ge=0.0, le=1.0e5, description="kg")
     com: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="m, in the link frame")
@@ -35,7 +33,7 @@ class LinkInertial(Strict):
         return self
 
 
-class UrdfSource(Strict):
+class UrdfSource(StrictModel):
     """Where an imported arm came from: URDF file (relative to the arm file) and the chain."""
     file: str = Field(min_length=1)
     base: str = Field(min_length=1, description="URDF link the arm's base frame is")

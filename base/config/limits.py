@@ -6,14 +6,12 @@ from __future__ import annotations
 
 import math
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from spacearm.base.config.loader import StrictModel
 
 
-class _Table(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class SupervisionConfig(_Table):
+class SupervisionConfig(StrictModel):
     position_margin: float = Field(0.0087, ge=0.0, le=0.2, description="rad beyond a soft limit before stopping")
     velocity_tolerance: float = Field(0.2, ge=0.0, le=2.0, description="fraction above v_max before stopping")
     wrench_force_limit: float = Field(150.0, gt=0.0, le=1.0e4, description="N")
@@ -31,7 +29,7 @@ class SupervisionConfig(_Table):
     ft_live_changes: int = Field(3, ge=1, le=1000)
 
 
-class ApproachConfig(_Table):
+class ApproachConfig(StrictModel):
     """The closed-loop (visual servo) approach."""
     gain: float = Field(1.5, gt=0.0, le=20.0, description="1/s, twist = gain x pose error")
     tol_position: float = Field(0.0004, gt=0.0, le=0.05, description="m, measured remaining error to finish")

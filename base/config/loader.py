@@ -6,12 +6,17 @@ from pathlib import Path
 from typing import TypeVar, get_args
 
 import annotated_types
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError
 from pydantic.fields import FieldInfo
 
 from spacearm.base.config.errors import ConfigError
 
 M = TypeVar("M", bound=BaseModel)
+
+
+class StrictModel(BaseModel):
+    """Base of every configuration table: unknown keys are errors, values are frozen."""
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
 
 def format_location(loc: tuple) -> str:

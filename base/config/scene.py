@@ -10,19 +10,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.spatial import xyz_rpy_to_transform
 
 DEFAULT_SCENE = Path(__file__).resolve().parents[2] / "configs" / "scene" / "oru_testbed.toml"
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class ScenePose(Strict):
+class ScenePose(StrictModel):
     xyz: tuple[float, float, float] = Field(description="m")
     rpy: tuple[float, float, float] = Field(default=(0.0, 0.0, 0.0), description="rad")
 
@@ -38,7 +34,7 @@ class ScenePose(Strict):
         return xyz_rpy_to_transform(self.xyz, self.rpy)
 
 
-class Store(Strict):
+class Store(StrictModel):
     """An ORU store slot. Slot frame: origin at the centre of the slot opening, z out of the
     slot (the insertion direction is -z), x along the ORU's 120 mm side."""
     name: str = Field(min_length=1, max_length=64)
@@ -48,13 +44,13 @@ class Store(Strict):
     description: str = ""
 
 
-class Oru(Strict):
+class Oru(StrictModel):
     name: str = Field(min_length=1, max_length=64)
     mass: float = Field(default=2.0, gt=0.0, le=500.0, description="kg")
     centroid_height: float = Field(default=0.05, ge=0.0, le=2.0, description="m above the ORU's bottom face")
 
 
-class CellGeometry(Strict):
+class CellGeometry(StrictModel):
     """Nominal shapes of the ORU, its adapter, the store slot and the end-effector guide
     blocks (ORU paper Section 3.3, Figure 9). ORU frame: origin at the centre of the bottom
     face, z up through the adapter. The same numbers drive the plant's contact world and the
@@ -95,7 +91,7 @@ class CellGeometry(Strict):
         return base_T_slot @ self.slot_T_oru() @ np.linalg.inv(self.tool_T_oru())
 
 
-class SceneConfig(Strict):
+class SceneConfig(StrictModel):
     name: str = "cell"
     stores: list[Store] = Field(min_length=1, max_length=16)
     orus: list[Oru] = Field(default_factory=list, max_length=16)
