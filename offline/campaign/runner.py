@@ -37,7 +37,16 @@ def execute_trial(task: TrialTask) -> dict[str, Any]:
     outcome = kind.run(task.parameters, task.options, task.seed)
     timings = {"task_wall_time": time.perf_counter() - started, **outcome.timings}
     return {"success": bool(outcome.success), "failure": outcome.failure, "figures": dict(outcome.figures),
-            "timings": timings, "worker": f"{socket.gethostname()}:{os.getpid()}"}
+            "timings": timings, "worker": _worker_name()}
+
+
+def _worker_name() -> str:
+    """The Dask worker's address (which host or namespace ran the trial), else host:pid."""
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except ValueError:              # not inside a worker (replay runs in this process)
+        return f"{socket.gethostname()}:{os.getpid()}"
 
 
 def make_task(campaign: Campaign, index: int) -> TrialTask:
