@@ -94,6 +94,7 @@ def register(app: typer.Typer) -> None:
         """Summary table, plots (PNG) and report.md of a result directory."""
         store = ResultStore(results)
         try:
+            store.manifest()          # a result directory, or one clear line
             store.merge()
             path = write_report(store)
         except StoreError as exc:
