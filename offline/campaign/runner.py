@@ -61,7 +61,9 @@ class RunSummary:
     ran: int              # finished in this run
     failed: int           # finished, not successful (this run)
     errors: int           # raised after all retries (this run)
-    wall_time: float
+    wall_time: float      # s, the whole run (cluster start to merged file)
+    startup_time: float   # s, client (and LocalCluster) start until workers are there
+    trials_time: float    # s, first submit to last result written
     workers: int
     scheduler: str
     results: Path
@@ -102,6 +104,7 @@ def run_campaign(campaign: Campaign, results: str | Path, scheduler: str | None 
     client, cluster = start_client(scheduler, workers)
     try:
         n_workers = len(client.nthreads())
+        startup = time.perf_counter() - started
         tasks = {}
         for i in pending:
             task = make_task(campaign, i)
@@ -121,13 +124,14 @@ def run_campaign(campaign: Campaign, results: str | Path, scheduler: str | None 
             errors += int(record.error is not None)
             if on_progress:
                 on_progress(len(done) + ran, failed, errors, total)
+        trials_time = time.perf_counter() - started - startup
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
     store.merge()
-    return RunSummary(total, len(done), ran, failed, errors, time.perf_counter() - started, n_workers,
-                      scheduler or "LocalCluster", store.root)
+    return RunSummary(total, len(done), ran, failed, errors, time.perf_counter() - started, startup, trials_time,
+                      n_workers, scheduler or "LocalCluster", store.root)
 
 
 def _record(future, task: TrialTask, version: str, campaign_hash: str) -> TrialRecord:
