@@ -10,23 +10,22 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from spacearm.offline.campaign.kinds import KINDS
 from spacearm.offline.campaign.runner import execute_trial, make_task
 from spacearm.offline.campaign.store import ResultStore, code_version
-
-RTOL = 1e-9          # same code, same seed: equal to rounding (bitwise on one machine)
-
 
 @dataclass
 class FigureCheck:
     name: str
     stored: float
     replayed: float
+    rtol: float = 1e-9     # the kind's replay tolerance (rounding for seed-determined kinds)
 
     @property
     def equal(self) -> bool:
         if math.isnan(self.stored) and math.isnan(self.replayed):
             return True
-        return math.isclose(self.stored, self.replayed, rel_tol=RTOL, abs_tol=1e-15)
+        return math.isclose(self.stored, self.replayed, rel_tol=self.rtol, abs_tol=1e-15)
 
 
 @dataclass
@@ -56,7 +55,8 @@ def replay(results: str | Path, trial: str) -> ReplayResult:
     out = execute_trial(task)
     stored_figures = {k[2:]: v for k, v in row.items() if k.startswith("f_") and v is not None}
     names = sorted(set(stored_figures) | set(out["figures"]))
-    checks = [FigureCheck(n, float(stored_figures.get(n, math.nan)), float(out["figures"].get(n, math.nan)))
+    rtol = KINDS[task.kind].replay_rtol
+    checks = [FigureCheck(n, float(stored_figures.get(n, math.nan)), float(out["figures"].get(n, math.nan)), rtol)
               for n in names]
     return ReplayResult(trial, int(row["seed"]), row["code_version"], code_version(), params_equal,
                         bool(row["success"]), out["success"], checks)
