@@ -53,9 +53,11 @@ def run_diagnosis_case(params: dict[str, float], options: dict[str, Any], seed: 
     score = bench.score_case(summary, truth)
     visibility = min((t["visibility"] for t in truth["truths"]), default=0.0)
     figures = {"visibility": float(visibility), "named_first": float(score.named),
-               "false_alarm": float(score.false_alarm),
-               "parameter_within_15pct": float(all(score.param_ok)) if score.param_ok else float("nan"),
-               "rms_reduction": float(min(score.rms_reduction)) if score.rms_reduction else float("nan")}
+               "false_alarm": float(score.false_alarm)}
+    if score.param_ok:               # only where the effect was found and has a fitted parameter
+        figures["parameter_within_15pct"] = float(all(score.param_ok))
+    if score.rms_reduction:
+        figures["rms_reduction"] = float(min(score.rms_reduction))
     effects = ", ".join(score.effects) or "none"
     failure = None if score.named else f"{effects} not named first ({score.why or score.answer})"
     return TrialOutcome(bool(score.named), failure, figures)

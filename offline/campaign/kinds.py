@@ -177,8 +177,9 @@ def run_checkout_trial(params: dict[str, float], options: dict[str, Any], seed: 
         sim.stop()
     steps = result.steps
     finals = [s.final_position_error for s in steps if s.final_position_error is not None]
-    figures = {"max_tracking_error": max(s.max_tracking_error for s in steps),
-               "final_position_error": max(finals) if finals else math.nan}
+    figures = {"max_tracking_error": max(s.max_tracking_error for s in steps)}
+    if finals:
+        figures["final_position_error"] = max(finals)
     # arm time and cycles count when the scenario thread's commands land in the cycle: timing
     return TrialOutcome(True, None, figures, {"trial_wall_time": time.perf_counter() - started,
                                               "arm_time": sum(s.duration for s in steps),
@@ -187,7 +188,9 @@ def run_checkout_trial(params: dict[str, float], options: dict[str, Any], seed: 
 
 CHECKOUT = TrialKind(
     "checkout", run_checkout_trial, (),
-    {"arm": "configs/arm/oru_testbed_6dof.toml", "bus_config": "configs/bus/arm.toml",
+    # slower heartbeats (0.25 s, loss after 0.625 s): trials run side by side on a loaded machine, and a node thread
+    # starved for 0.25 s is the machine's load, not the bus under test
+    {"arm": "configs/arm/oru_testbed_6dof.toml", "bus_config": "configs/oru/bus_shared_machine.toml",
      "plant": "configs/plant/oru_testbed_nominal.toml"},
     "max_tracking_error", "soak: the functional checkout over CAN, simulator + daemon in lockstep",
     # not bit-reproducible: the scenario (a thread) sends each command on whichever cycle is
