@@ -49,8 +49,7 @@ def conditions(steal: CpuSteal) -> str:
 
 
 def deterministic(results: Path) -> dict:
-    return {r["trial_id"]: (r["seed"], r["success"], {k: v for k, v in r.items() if k[:2] in ("p_", "f_")})
-            for r in ResultStore(results).rows()}
+    return ResultStore(results).outcomes()
 
 
 def task_times(results: Path) -> np.ndarray:

@@ -16,46 +16,42 @@ from hil_tests.netns_cluster import NetnsCluster, NetnsUnavailable
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture
-def netns_cluster():
-    cluster = NetnsCluster(workers=2)
+def started(workers: int) -> NetnsCluster:
+    cluster = NetnsCluster(workers=workers)
     try:
-        cluster.start()
+        return cluster.start()
     except NetnsUnavailable as exc:
         pytest.skip(f"network namespaces not available here: {exc}")
+
+
+@pytest.fixture
+def netns_cluster():
+    cluster = started(2)
     try:
         yield cluster
     finally:
         cluster.close()
 
 
-def deterministic(rows):
-    return {r["trial_id"]: (r["seed"], r["success"], {k: v for k, v in r.items() if k[:2] in ("p_", "f_")})
-            for r in rows}
-
-
 def test_campaign_on_namespace_cluster_equals_local_run_and_replay(tmp_path, netns_cluster):
     campaign = load_campaign(CONFIGS / "campaigns" / "insertion_smoke.toml")
     remote = run_campaign(campaign, tmp_path / "netns", scheduler=netns_cluster.address)
     assert (remote.ran, remote.errors, remote.workers) == (6, 0, 2)
-    rows = ResultStore(tmp_path / "netns").rows()
+    store = ResultStore(tmp_path / "netns")
+    rows = store.rows()
     subnet = f"tcp://10.213.{netns_cluster.subnet}."
     assert all(r["worker"].startswith(subnet) for r in rows)       # ran inside the namespaces
     assert len({r["worker"] for r in rows}) == 2                   # on both worker hosts
 
     local = run_campaign(campaign, tmp_path / "local", workers=1)
     assert local.ran == 6
-    assert deterministic(rows) == deterministic(ResultStore(tmp_path / "local").rows())
+    assert store.outcomes() == ResultStore(tmp_path / "local").outcomes()
     assert replay(tmp_path / "netns", "t000004").matches
 
 
 def test_namespaces_are_gone_after_close():
     import subprocess
-    cluster = NetnsCluster(workers=1)
-    try:
-        cluster.start()
-    except NetnsUnavailable as exc:
-        pytest.skip(f"network namespaces not available here: {exc}")
+    cluster = started(1)
     names = list(cluster.namespaces)
     cluster.close()
     listed = subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout

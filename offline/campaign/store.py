@@ -148,6 +148,12 @@ class ResultStore:
     def rows(self) -> list[dict[str, Any]]:
         return self.table().to_pylist()
 
+    def outcomes(self) -> dict[str, tuple]:
+        """trial id -> (seed, success, parameters and figures): what equal seeds must reproduce
+        (no timings, workers or dates), for comparing two runs of a campaign."""
+        return {r["trial_id"]: (r["seed"], r["success"], {k: v for k, v in r.items() if k[:2] in ("p_", "f_")})
+                for r in self.rows()}
+
     def row(self, trial_id: str) -> dict[str, Any]:
         path = self.trials_dir / f"{trial_id}.parquet"
         if not path.exists():

@@ -20,11 +20,6 @@ from spacearm.offline.campaign.store import ResultStore, StoreError
 pytestmark = pytest.mark.slow
 
 
-def figures(rows):
-    return {r["trial_id"]: (r["seed"], r["success"], {k: v for k, v in r.items() if k[:2] in ("p_", "f_")})
-            for r in rows}
-
-
 def test_resumed_campaign_skips_done_trials_and_equals_a_one_shot_run(tmp_path, ekf_campaign):
     campaign = load_campaign(ekf_campaign(trials=8))
     part = run_campaign(campaign, tmp_path / "resumed", workers=1, limit=3)
@@ -36,7 +31,7 @@ def test_resumed_campaign_skips_done_trials_and_equals_a_one_shot_run(tmp_path, 
     one_shot = run_campaign(campaign, tmp_path / "one_shot", workers=2)
     resumed = ResultStore(tmp_path / "resumed")
     assert sorted(resumed.done_ids()) == [trial_id(i) for i in range(8)]
-    assert figures(resumed.rows()) == figures(ResultStore(tmp_path / "one_shot").rows())
+    assert resumed.outcomes() == ResultStore(tmp_path / "one_shot").outcomes()
     merged = pq.read_table(tmp_path / "resumed" / "results.parquet")
     assert merged.num_rows == 8 and set(merged.column("campaign_hash").to_pylist()) == {campaign.file_hash}
     assert all(v for v in merged.column("code_version").to_pylist())
