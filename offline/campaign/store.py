@@ -79,6 +79,13 @@ class ResultStore:
         self.root = Path(root)
         self.trials_dir = self.root / TRIALS
 
+    def _metadata(self) -> dict[bytes, bytes]:
+        """Parquet key-value metadata: each file names its campaign on its own (file, text, hash)."""
+        m = self.manifest()
+        return {b"spacearm.campaign_file": m.get("campaign_file", "").encode(),
+                b"spacearm.campaign_hash": m["campaign_hash"].encode(),
+                b"spacearm.campaign_text": m["campaign_text"].encode()}
+
     # --- opening -----------------------------------------------------------------------------
     def open_for(self, campaign: Campaign, resume: bool) -> dict[str, Any]:
         """Create the directory for `campaign`, or (resume) check it holds this same campaign."""
@@ -127,7 +134,8 @@ class ResultStore:
         """Atomic: a reader (or a resume after a crash) sees the whole file or none of it."""
         path = self.trials_dir / f"{record.trial_id}.parquet"
         tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        pq.write_table(pa.Table.from_pylist([record.row()]), tmp)
+        table = pa.Table.from_pylist([record.row()])
+        pq.write_table(table.replace_schema_metadata(self._metadata()), tmp)
         os.replace(tmp, path)
         return path
 
@@ -141,7 +149,7 @@ class ResultStore:
     def merge(self) -> Path:
         path = self.root / MERGED
         tmp = path.with_name(f".{MERGED}.tmp")
-        pq.write_table(self.table(), tmp)
+        pq.write_table(self.table().replace_schema_metadata(self._metadata()), tmp)
         os.replace(tmp, path)
         return path
 

@@ -35,6 +35,7 @@ def test_resumed_campaign_skips_done_trials_and_equals_a_one_shot_run(tmp_path, 
     merged = pq.read_table(tmp_path / "resumed" / "results.parquet")
     assert merged.num_rows == 8 and set(merged.column("campaign_hash").to_pylist()) == {campaign.file_hash}
     assert all(v for v in merged.column("code_version").to_pylist())
+    assert merged.schema.metadata[b"spacearm.campaign_text"].decode() == campaign.text
     report = write_report(resumed)
     assert (report.parent / "success.png").stat().st_size > 1000
     text = report.read_text()
