@@ -32,7 +32,10 @@ class NetnsUnavailable(Exception):
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
-    out = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20)
+    try:
+        out = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired) as exc:     # no iproute2, or it hangs
+        raise NetnsUnavailable(f"ip {' '.join(args)}: {exc}") from None
     if check and out.returncode != 0:
         raise NetnsUnavailable(f"ip {' '.join(args)}: {out.stderr.strip() or out.returncode}")
     return out

@@ -137,12 +137,12 @@ def register(app: typer.Typer) -> None:
 
 def _print_summary(store: ResultStore) -> None:
     s = summarise(store)
-    lo, hi = s.interval
     table = Table(title=f"campaign {s.name} ({s.kind}), code {s.code_version}")
     for col in ("figure", "n", "median", "p95", "max"):
         table.add_column(col)
-    table.add_row("success rate", str(s.finished - s.errors), f"{100 * s.success_rate:.1f} %",
-                  f"95 % CI {100 * lo:.1f}-{100 * hi:.1f} %", f"{s.failed} failed, {s.errors} broken")
+    rate, _, interval = s.rate_text().partition(" (")
+    table.add_row("success rate", str(s.finished - s.errors), rate, interval.rstrip(")"),
+                  f"{s.failed} failed, {s.errors} broken")
     for f in s.figures:
         table.add_row(f.name, str(f.count), f"{f.median:.4g}", f"{f.p95:.4g}", f"{f.maximum:.4g}")
     Console().print(table)

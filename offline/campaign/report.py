@@ -56,6 +56,13 @@ class CampaignSummary:
         n = self.finished - self.errors
         return self.successes / n if n else math.nan
 
+    def rate_text(self) -> str:
+        """'97.0 % (95 % CI 91.5 - 99.0 %)', or '-' with no valid trial."""
+        if math.isnan(self.success_rate):
+            return "- (no trial finished without raising)"
+        lo, hi = self.interval
+        return f"{100 * self.success_rate:.1f} % (95 % CI {100 * lo:.1f} - {100 * hi:.1f} %)"
+
 
 def summarise(store: ResultStore, worst_count: int = 5) -> CampaignSummary:
     manifest = store.manifest()
@@ -128,7 +135,7 @@ def write_report(store: ResultStore, out: Path | None = None) -> Path:
           "| figure | value |", "| --- | --- |",
           f"| trials planned / finished | {s.trials} / {s.finished} |",
           f"| succeeded / failed / broken (raised) | {s.successes} / {s.failed} / {s.errors} |",
-          f"| success rate (95 % Wilson interval) | {100 * rate:.1f} % ({100 * lo:.1f} - {100 * hi:.1f} %) |", "",
+          f"| success rate (95 % Wilson interval) | {s.rate_text()} |", "",
           "![success rate](success.png)", "", "## Figures", "",
           "| figure | n | median | p95 | max |", "| --- | --- | --- | --- | --- |"]
     md += [f"| {f.name} | {f.count} | {f.median:.4g} | {f.p95:.4g} | {f.maximum:.4g} |" for f in s.figures]

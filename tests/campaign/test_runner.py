@@ -92,3 +92,16 @@ def test_a_killed_workers_trial_is_rerun_elsewhere(tmp_path):
     rows = ResultStore(tmp_path / "r").rows()
     assert sorted(r["trial_id"] for r in rows) == [trial_id(i) for i in range(6)]
     assert all(r["error"] is None for r in rows)
+
+
+def test_a_trial_that_raises_is_recorded_as_broken_and_the_campaign_goes_on(tmp_path):
+    """A start pose out of reach makes the insertion raise: an error row, not a lost campaign."""
+    path = tmp_path / "reach.toml"
+    path.write_text('[campaign]\nname = "reach"\nkind = "insertion"\nseed = 1\ntrials = 2\nretries = 0\n'
+                    '[parameters.lateral_radius]\nlow = 2.0\nhigh = 2.0\n')
+    summary = run_campaign(load_campaign(path), tmp_path / "r", workers=1)
+    assert (summary.ran, summary.errors) == (2, 0 + 2)
+    rows = ResultStore(tmp_path / "r").rows()
+    assert all("unreachable" in r["error"] and not r["success"] for r in rows)
+    report = write_report(ResultStore(tmp_path / "r")).read_text()
+    assert "0 / 0 / 2" in report
