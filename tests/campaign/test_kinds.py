@@ -29,3 +29,10 @@ def test_checkout_soak_runs_over_a_bus_of_its_own():
     outcome = KINDS["checkout"].run({}, {}, 1)
     assert outcome.success, outcome.failure
     assert outcome.figures["final_position_error"] < 1e-3 and outcome.timings["cycles"] > 100
+
+
+def test_approach_from_a_random_start_converges_on_a_bus_of_its_own():
+    start = {"start_x": 0.01, "start_y": -0.008, "start_z": -0.05, "start_roll": 0.02, "start_yaw": -0.03}
+    outcome = KINDS["approach"].run(start, {}, 1)
+    assert outcome.success, outcome.failure
+    assert outcome.figures["final_position_error"] < 1e-3
