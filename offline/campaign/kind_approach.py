@@ -10,15 +10,13 @@ Not bit-reproducible: the vision worker is a thread, so which frame a cycle uses
 from __future__ import annotations
 
 import functools
-import importlib.util
-import sys
 import time
 from typing import Any
 
 import numpy as np
 
 from spacearm.base.paths import REPO_ROOT
-from spacearm.offline.campaign.kinds import TrialKind, TrialOutcome, in_clone
+from spacearm.offline.campaign.kinds import TrialKind, TrialOutcome, in_clone, load_from_clone
 
 STACK = REPO_ROOT / "tests" / "vision" / "approach_stack.py"
 POSITION_LIMIT, ROTATION_LIMIT = 1e-3, np.radians(0.2)     # bench_vision's target
@@ -26,11 +24,7 @@ POSITION_LIMIT, ROTATION_LIMIT = 1e-3, np.radians(0.2)     # bench_vision's targ
 
 @functools.lru_cache(maxsize=1)
 def _stack_class():
-    spec = importlib.util.spec_from_file_location("campaign_approach_stack", STACK)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module.ApproachStack
+    return load_from_clone(STACK, "campaign_approach_stack").ApproachStack
 
 
 def run_approach(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:

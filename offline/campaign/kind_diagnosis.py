@@ -9,25 +9,19 @@ single-case trial is always a one-effect case (effect type, joint and size rando
 from __future__ import annotations
 
 import functools
-import importlib.util
-import sys
 import tempfile
 from pathlib import Path
 from typing import Any
 
 from spacearm.base.paths import REPO_ROOT
-from spacearm.offline.campaign.kinds import TrialKind, TrialOutcome, in_clone
+from spacearm.offline.campaign.kinds import TrialKind, TrialOutcome, in_clone, load_from_clone
 
 BENCH = REPO_ROOT / "bench" / "bench_diagnosis.py"
 
 
 @functools.lru_cache(maxsize=1)
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnosis", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["bench_diagnosis"] = module        # its dataclasses look their module up there
-    spec.loader.exec_module(module)
-    return module
+    return load_from_clone(BENCH, "bench_diagnosis")
 
 
 def run_diagnosis_case(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:

@@ -49,6 +49,19 @@ def in_clone() -> None:
         os.chdir(REPO_ROOT)
 
 
+def load_from_clone(path, module_name: str):
+    """A benchmark's or test's own module that is not part of the package (bench/, tests/),
+    loaded from the clone by path: campaigns call the very code those benches loop over."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location(module_name, path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[module_name] = module       # dataclasses look their module up there
+    spec.loader.exec_module(module)
+    return module
+
+
 # --- insertion / capture: the contact subtasks of bench_oru (no bus, DirectLoop) -----------------
 
 @functools.lru_cache(maxsize=4)

@@ -130,6 +130,7 @@ def write_report(store: ResultStore, out: Path | None = None) -> Path:
         plt.close(fig)
         images.append(name)
 
+    worst_png = _worst_plot(s, out / "worst.png", plt)
     md = [f"# Campaign {s.name} ({s.kind})", "",
           f"code version `{s.code_version}`, campaign file hash `{s.campaign_hash}`", "",
           "| figure | value |", "| --- | --- |",
@@ -149,7 +150,26 @@ def write_report(store: ResultStore, out: Path | None = None) -> Path:
         value = r.get(f"f_{s.worst_figure}")
         md.append(f"| {r['trial_id']} | {r['seed']} | {bool(r['success'])} | {why} | {params} | "
                   f"{'' if value is None else f'{value:.4g}'} |")
+    if worst_png:
+        md += ["", "![worst trials](worst.png)"]
     md += ["", "Replay one trial alone: `spacearm campaign replay RESULTS TRIAL_ID`."]
     path = out / "report.md"
     path.write_text("\n".join(md) + "\n")
     return path
+
+
+def _worst_plot(s: CampaignSummary, path: Path, plt) -> bool:
+    """The worst trials' worst figure as bars, red where the trial failed; False if none has it."""
+    key = f"f_{s.worst_figure}"
+    rows = [r for r in s.worst if r.get(key) is not None]
+    if not rows:
+        return False
+    fig, ax = plt.subplots(figsize=(5, 0.4 * len(rows) + 1.2))
+    ax.barh([r["trial_id"] for r in rows][::-1], [r[key] for r in rows][::-1],
+            color=["tab:blue" if r["success"] else "tab:red" for r in rows][::-1])
+    ax.set_xlabel(f"{s.worst_figure} (SI); red: failed")
+    ax.set_title("worst trials")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return True
