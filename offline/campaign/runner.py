@@ -116,7 +116,7 @@ def run_campaign(campaign: Campaign, results: str | Path, scheduler: str | None 
         if on_progress:
             on_progress(len(done), 0, 0, total)
         for future in as_completed([f for f, _ in tasks.values()]):
-            task = tasks[future.key][1]
+            task = tasks.pop(future.key)[1]      # drop our reference: the workers free the result
             record = _record(future, task, version, manifest["campaign_hash"])
             store.write(record)
             ran += 1
