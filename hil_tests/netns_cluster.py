@@ -146,6 +146,11 @@ class NetnsCluster:
                 time.sleep(0.3)
         raise NetnsUnavailable(f"dask scheduler on {host}:{port} did not come up in {timeout} s")
 
+    def kill_worker_host(self, i: int) -> None:
+        """SIGKILL everything of worker namespace i (its `dask worker`, nanny and worker process):
+        a host that dies mid-trial."""
+        os.killpg(self.processes[1 + i].pid, signal.SIGKILL)
+
     def close(self) -> None:
         for proc in reversed(self.processes):
             if proc.poll() is None:

@@ -49,6 +49,39 @@ def test_campaign_on_namespace_cluster_equals_local_run_and_replay(tmp_path, net
     assert replay(tmp_path / "netns", "t000004").matches
 
 
+def test_a_worker_host_killed_mid_trial_has_its_trial_rerun_on_the_other(tmp_path, netns_cluster):
+    import threading
+    import time
+
+    from distributed import Client
+
+    campaign = load_campaign(CONFIGS / "campaigns" / "insertion_smoke.toml")
+    victim = netns_cluster.worker_ip(0)
+    killed: list[str] = []
+
+    def kill_when_busy():
+        with Client(netns_cluster.address, timeout="20s") as client:
+            deadline = time.monotonic() + 120
+            while time.monotonic() < deadline:
+                busy = [w for w, keys in client.processing().items() if keys and f"//{victim}:" in w]
+                if busy:
+                    time.sleep(1.0)                   # mid-trial
+                    netns_cluster.kill_worker_host(0)
+                    killed.extend(busy)
+                    return
+                time.sleep(0.1)
+
+    killer = threading.Thread(target=kill_when_busy)
+    killer.start()
+    summary = run_campaign(campaign, tmp_path / "r", scheduler=netns_cluster.address)
+    killer.join()
+    assert killed, "worker host 0 never ran a trial"
+    assert (summary.ran, summary.errors) == (6, 0)
+    rows = ResultStore(tmp_path / "r").rows()
+    assert len({r["trial_id"] for r in rows}) == 6
+    assert any(r["worker"].startswith(f"tcp://{netns_cluster.worker_ip(1)}:") for r in rows)
+
+
 def test_namespaces_are_gone_after_close():
     import subprocess
     cluster = started(1)
