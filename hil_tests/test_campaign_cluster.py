@@ -4,9 +4,11 @@ scheduler and workers in network namespaces of their own on this machine
 the embedded LocalCluster run and as one trial replayed alone."""
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
+import sys
 import threading
 import time
 from typing import Callable
@@ -14,7 +16,7 @@ from typing import Callable
 import pytest
 from distributed import Client, LocalCluster
 
-from spacearm.base.paths import CONFIGS
+from spacearm.base.paths import CONFIGS, REPO_ROOT
 from spacearm.offline.campaign.replay import replay
 from spacearm.offline.campaign.runner import RunSummary, run_campaign
 from spacearm.offline.campaign.schema import load_campaign, trial_id
@@ -84,16 +86,20 @@ def netns_cluster():
 
 
 def test_campaign_on_namespace_cluster_equals_local_run_and_replay(tmp_path, netns_cluster):
-    campaign = load_campaign(SMOKE)
-    remote = run_campaign(campaign, tmp_path / "netns", scheduler=netns_cluster.address)
-    assert (remote.ran, remote.errors, remote.workers) == (6, 0, 2)
+    """`spacearm campaign run --scheduler tcp://10.213.N.1:8786` from the host side."""
+    out = subprocess.run([sys.executable, "-m", "spacearm.console.main", "campaign", "run", str(SMOKE),
+                          "--results", str(tmp_path / "netns"), "--scheduler", netns_cluster.address, "--json"],
+                         capture_output=True, text=True, timeout=240, cwd=REPO_ROOT)
+    assert out.returncode == 0, out.stderr[-2000:]
+    remote = json.loads(out.stdout)
+    assert (remote["ran"], remote["errors"], remote["workers"]) == (6, 0, 2)
     store = ResultStore(tmp_path / "netns")
     rows = store.rows()
     subnet = f"tcp://10.213.{netns_cluster.subnet}."
     assert all(r["worker"].startswith(subnet) for r in rows)       # ran inside the namespaces
     assert len({r["worker"] for r in rows}) == 2                   # on both worker hosts
 
-    local = run_campaign(campaign, tmp_path / "local", workers=1)
+    local = run_campaign(load_campaign(SMOKE), tmp_path / "local", workers=1)
     assert local.ran == 6
     assert store.outcomes() == ResultStore(tmp_path / "local").outcomes()
     assert replay(tmp_path / "netns", "t000004").matches
