@@ -74,6 +74,8 @@ def run_insertion(params: dict[str, float], options: dict[str, Any], seed: int) 
     in_clone()
     from spacearm.offline.contact.trials import PLANT
     opts = {**INSERTION.options, **options}
+    if opts["subtask"] not in ("insert", "capture"):
+        raise ValueError(f"options.subtask: expected insert or capture, got {opts['subtask']!r}")
     trials = _contact_trials(opts["plant"] or PLANT)
     r, phi = params.get("lateral_radius", 0.0), params.get("lateral_phase", 0.0)
     angle, axis = params.get("tilt_angle", 0.0), params.get("tilt_axis", 0.0)

@@ -150,7 +150,12 @@ def _check_kind(spec: CampaignFile, path: str) -> None:
         if name not in kind.parameters:
             raise ConfigError(f"{path}: parameters.{name}: not a parameter of kind {kind.name!r} "
                               f"(allowed: {', '.join(kind.parameters) or 'none'})")
-    for name in spec.options:
+    for name, value in spec.options.items():
         if name not in kind.options:
             raise ConfigError(f"{path}: options.{name}: not an option of kind {kind.name!r} "
                               f"(allowed: {', '.join(kind.options) or 'none'})")
+        default = kind.options[name]
+        expected = (int, float) if isinstance(default, float) else type(default)
+        if isinstance(value, bool) != isinstance(default, bool) or not isinstance(value, expected):
+            raise ConfigError(f"{path}: options.{name}: expected {type(default).__name__} "
+                              f"like the default {default!r}, got {value!r}")

@@ -46,6 +46,8 @@ def test_draws_stay_in_range(dist):
     ('[campaign]\nname="x"\nkind="insertion"\nseed=1\ntrials=2\n[parameters.tilt_angle]\nlow=1\nhigh=0\n',
      "parameters.tilt_angle"),
     ('[campaign]\nname="x"\nkind="checkout"\nseed=1\ntrials=2\n[options]\nwarp=9\n', "options.warp"),
+    ('[campaign]\nname="x"\nkind="insertion"\nseed=1\ntrials=2\n[options]\nmax_cycles="many"\n',
+     "options.max_cycles"),
 ])
 def test_bad_campaign_file_names_the_key(tmp_path, text, key):
     path = tmp_path / "bad.toml"
