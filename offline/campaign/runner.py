@@ -8,6 +8,7 @@ result store at once, so a killed campaign resumes with only the unfinished tria
 """
 from __future__ import annotations
 
+import functools
 import os
 import socket
 import time
@@ -37,7 +38,13 @@ def execute_trial(task: TrialTask) -> dict[str, Any]:
     outcome = kind.run(task.parameters, task.options, task.seed)
     timings = {"task_wall_time": time.perf_counter() - started, **outcome.timings}
     return {"success": bool(outcome.success), "failure": outcome.failure, "figures": dict(outcome.figures),
-            "timings": timings, "worker": _worker_name()}
+            "timings": timings, "worker": _worker_name(), "code_version": _worker_code_version()}
+
+
+@functools.lru_cache(maxsize=1)
+def _worker_code_version() -> str:
+    """The code that ran the trial: the worker's own clone (another host may run another commit)."""
+    return code_version()
 
 
 def _worker_name() -> str:
@@ -98,7 +105,7 @@ def run_campaign(campaign: Campaign, results: str | Path, scheduler: str | None 
     pending = [i for i in range(total) if trial_id(i) not in done]
     if limit is not None:
         pending = pending[:limit]
-    version = code_version()      # of this run (a resumed campaign may run newer code)
+    version = code_version()      # this client's, for trials that raised (no worker answer)
     started = time.perf_counter()
     ran = failed = errors = 0
     client, cluster = start_client(scheduler, workers)
@@ -143,4 +150,4 @@ def _record(future, task: TrialTask, version: str, campaign_hash: str) -> TrialR
         error = f"{type(exc).__name__}: {exc}"
     return TrialRecord(trial_id(task.index), task.index, task.seed, out["success"], out["failure"], error,
                        task.parameters, out["figures"], out["timings"], out["worker"],
-                       version, campaign_hash, time.time())
+                       out.get("code_version", version), campaign_hash, time.time())
