@@ -78,13 +78,17 @@ class ResultStore:
     def __init__(self, root: str | Path):
         self.root = Path(root)
         self.trials_dir = self.root / TRIALS
+        self._meta: dict[bytes, bytes] | None = None
 
     def _metadata(self) -> dict[bytes, bytes]:
-        """Parquet key-value metadata: each file names its campaign on its own (file, text, hash)."""
-        m = self.manifest()
-        return {b"spacearm.campaign_file": m.get("campaign_file", "").encode(),
-                b"spacearm.campaign_hash": m["campaign_hash"].encode(),
-                b"spacearm.campaign_text": m["campaign_text"].encode()}
+        """Parquet key-value metadata: each file names its campaign on its own (file, text, hash).
+        Read once: the campaign of a directory never changes (open_for refuses another)."""
+        if self._meta is None:
+            m = self.manifest()
+            self._meta = {b"spacearm.campaign_file": m.get("campaign_file", "").encode(),
+                          b"spacearm.campaign_hash": m["campaign_hash"].encode(),
+                          b"spacearm.campaign_text": m["campaign_text"].encode()}
+        return self._meta
 
     # --- opening -----------------------------------------------------------------------------
     def open_for(self, campaign: Campaign, resume: bool) -> dict[str, Any]:
