@@ -56,7 +56,9 @@ class NetnsCluster:
     namespaces: list[str] = field(default_factory=list)
     host_veth: str | None = None
     processes: list[subprocess.Popen] = field(default_factory=list)
+    logs: list[Path] = field(default_factory=list)
     subnet: int = 0
+    keep_logs: bool = False          # set when the start failed: the logs say why
 
     @property
     def scheduler_ip(self) -> str:
@@ -76,6 +78,7 @@ class NetnsCluster:
             self._network()
             self._processes(timeout)
         except BaseException:
+            self.keep_logs = True
             self.close()
             raise
         return self
@@ -117,9 +120,11 @@ class NetnsCluster:
             _ip("link", "set", name, "netns", inside)
 
     def _spawn(self, ns: str, *args: str) -> subprocess.Popen:
-        log = open(Path("/tmp") / f"{ns}.log", "wb")
-        proc = subprocess.Popen(["ip", "netns", "exec", ns, DASK, *args], cwd=ROOT, stdout=log,
-                                stderr=subprocess.STDOUT, start_new_session=True)
+        path = Path("/tmp") / f"{ns}.log"
+        self.logs.append(path)
+        with open(path, "wb") as log:
+            proc = subprocess.Popen(["ip", "netns", "exec", ns, DASK, *args], cwd=ROOT, stdout=log,
+                                    stderr=subprocess.STDOUT, start_new_session=True)
         self.processes.append(proc)
         return proc
 
@@ -171,6 +176,9 @@ class NetnsCluster:
         for ns in reversed(self.namespaces):
             _ip("netns", "del", ns, check=False)
         self.namespaces.clear()
+        if not self.keep_logs:
+            for path in self.logs:
+                path.unlink(missing_ok=True)
         if self.host_veth:   # gone with its peer's namespace; delete in case the move failed
             _ip("link", "del", self.host_veth, check=False)
             self.host_veth = None
