@@ -16,7 +16,7 @@ app = typer.Typer(
 # Subcommand modules; each defines register(app). Optional ones may be absent while
 # their issue is in progress, so a missing module is skipped rather than breaking the CLI.
 COMMAND_MODULES = ("config", "kinematics", "demo", "daemon", "operate", "export", "calibrate", "sim", "hub",
-                   "record_sim", "diagnose", "web", "oru", "approach", "arm")
+                   "record_sim", "diagnose", "web", "oru", "approach", "arm", "campaign")
 
 for module_name in COMMAND_MODULES:
     try:

@@ -1,0 +1,161 @@
+"""Campaign runner benchmark: throughput with 1 and 2 Dask workers, scheduler overhead per trial,
+a campaign killed half-way and resumed, and the same seeds giving the same results locally, on
+the network-namespace cluster and replayed alone. Prints one table.
+
+    .venv/bin/python bench/bench_campaign.py [--trials 12] [--cheap-trials 40] [--skip-netns]
+
+Throughput uses the insertion trial of bench_oru (seconds each); the overhead and the
+kill/resume use the cheap EKF calibration trial (~0.05 s), where the scheduler's share shows.
+Overhead per trial = (first submit -> last result written) / trials - mean task time, one worker.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from hil_tests.harness import CpuSteal  # noqa: E402
+from spacearm.offline.campaign.replay import replay  # noqa: E402
+from spacearm.offline.campaign.runner import RunSummary, run_campaign  # noqa: E402
+from spacearm.offline.campaign.schema import load_campaign  # noqa: E402
+from spacearm.offline.campaign.store import ResultStore  # noqa: E402
+
+INSERTION = ROOT / "configs/campaigns/insertion_smoke.toml"
+EKF = ROOT / "configs/campaigns/calibration_ekf.toml"
+Row = tuple[str, str, str, str]      # figure, measured, target, load / steal
+
+
+def with_trials(source: Path, trials: int, out: Path) -> Path:
+    text = source.read_text()
+    lines = [f"trials = {trials}" if line.startswith("trials =") else line for line in text.splitlines()]
+    out.write_text("\n".join(lines) + "\n")
+    return out
+
+
+def conditions(steal: CpuSteal) -> str:
+    return f"load {os.getloadavg()[0]:.1f}, steal {100 * steal.fraction():.1f} %"
+
+
+def deterministic(results: Path) -> dict:
+    return ResultStore(results).outcomes()
+
+
+def task_times(results: Path) -> np.ndarray:
+    return np.array([r["w_task_wall_time"] for r in ResultStore(results).rows()])
+
+
+def throughput(work: Path, trials: int, steal: CpuSteal) -> tuple[list[Row], dict[int, Path]]:
+    campaign = load_campaign(with_trials(INSERTION, trials, work / "insertion.toml"))
+    rows: list[Row] = []
+    per_minute, dirs = {}, {}
+    for workers in (1, 2):
+        steal.fraction()
+        dirs[workers] = work / f"insertion_{workers}w"
+        s: RunSummary = run_campaign(campaign, dirs[workers], workers=workers)
+        per_minute[workers] = 60.0 * s.ran / s.trials_time
+        rows.append((f"insertion trials per minute, {workers} worker(s) ({s.ran} trials, "
+                     f"task {np.median(task_times(dirs[workers])):.2f} s median)",
+                     f"{per_minute[workers]:.1f} /min (cluster start {s.startup_time:.1f} s)", "-", conditions(steal)))
+    eff = per_minute[2] / (2 * per_minute[1])
+    rows.append(("scaling efficiency 2 workers on 2 cores (rate2 / (2 rate1))", f"{100 * eff:.0f} %",
+                 ">= 80 % on an idle machine", conditions(steal)))
+    return rows, dirs
+
+
+def overhead(work: Path, trials: int, steal: CpuSteal) -> list[Row]:
+    campaign = load_campaign(with_trials(EKF, trials, work / "ekf.toml"))
+    steal.fraction()
+    s = run_campaign(campaign, work / "ekf_overhead", workers=1)
+    task = float(np.mean(task_times(work / "ekf_overhead")))
+    per_trial = s.trials_time / s.ran - task
+    return [(f"scheduler overhead per trial (1 worker, {s.ran} EKF trials of {1e3 * task:.0f} ms)",
+             f"{1e3 * per_trial:.1f} ms", "<= 50 ms", conditions(steal))]
+
+
+def kill_and_resume(work: Path, trials: int, steal: CpuSteal) -> list[Row]:
+    """Run `spacearm campaign run` in its own process group, SIGKILL the group at half, resume."""
+    campaign = with_trials(EKF, trials, work / "ekf_kill.toml")
+    results = work / "ekf_kill"
+    cmd = [sys.executable, "-m", "spacearm.console.main", "campaign", "run", str(campaign),
+           "--results", str(results), "--workers", "2", "--json", "--no-report"]
+    steal.fraction()
+    proc = subprocess.Popen(cmd, cwd=ROOT, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 300
+    try:
+        while time.monotonic() < deadline and len(ResultStore(results).done_ids()) < trials // 2:
+            time.sleep(0.02)
+    finally:
+        os.killpg(proc.pid, signal.SIGKILL)      # the process group this benchmark started
+        proc.wait(10)
+    before = {p.name: p.stat().st_mtime_ns for p in (results / "trials").glob("t*.parquet")}
+    out = subprocess.run(cmd + ["--resume"], cwd=ROOT, capture_output=True, text=True, timeout=600)
+    if out.returncode != 0:
+        return [("kill half-way + resume", f"resume failed: {out.stderr.strip()[:80]}", "0 lost, 0 twice", "")]
+    summary = json.loads(out.stdout)
+    after = {p.name: p.stat().st_mtime_ns for p in (results / "trials").glob("t*.parquet")}
+    lost = trials - len(after)
+    twice = sum(after.get(name) != mtime for name, mtime in before.items()) + max(0, summary["ran"] - (trials - len(before)))
+    return [(f"campaign killed (SIGKILL) after {len(before)}/{trials} trials, resumed: lost / run twice",
+             f"{lost} / {twice}", "0 / 0", conditions(steal))]
+
+
+def same_seeds(work: Path, dirs: dict[int, Path], skip_netns: bool, steal: CpuSteal) -> list[Row]:
+    reference = deterministic(dirs[1])
+    rows: list[Row] = [("same seeds: LocalCluster 2 workers == 1 worker (trials equal)",
+                        f"{sum(deterministic(dirs[2]).get(k) == v for k, v in reference.items())}/{len(reference)}",
+                        "all", conditions(steal))]
+    if not skip_netns:
+        from hil_tests.netns_cluster import NetnsCluster, NetnsUnavailable
+        campaign = load_campaign(work / "insertion.toml")
+        try:
+            with NetnsCluster(workers=2) as cluster:
+                run_campaign(campaign, work / "insertion_netns", scheduler=cluster.address)
+            remote = deterministic(work / "insertion_netns")
+            rows.append(("same seeds: namespace cluster (scheduler + 2 workers in netns) == local",
+                         f"{sum(remote.get(k) == v for k, v in reference.items())}/{len(reference)}", "all",
+                         conditions(steal)))
+        except NetnsUnavailable as exc:
+            rows.append(("same seeds: namespace cluster", f"not run: {exc}", "all", ""))
+    ids = sorted(reference)[:3]
+    matched = sum(replay(dirs[2], trial).matches for trial in ids)
+    rows.append((f"same seeds: replayed alone == stored ({', '.join(ids)})", f"{matched}/{len(ids)}", "all",
+                 conditions(steal)))
+    return rows
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=12, help="insertion trials per throughput run")
+    parser.add_argument("--cheap-trials", type=int, default=40, help="EKF trials for overhead and kill/resume")
+    parser.add_argument("--skip-netns", action="store_true", help="leave out the network-namespace cluster")
+    args = parser.parse_args(argv)
+    steal = CpuSteal()
+    with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
+        work = Path(tmp)
+        rows, dirs = throughput(work, args.trials, steal)
+        rows += overhead(work, args.cheap_trials, steal)
+        rows += kill_and_resume(work, args.cheap_trials, steal)
+        rows += same_seeds(work, dirs, args.skip_netns, steal)
+    width = max(len(r[0]) for r in rows)
+    print(f"\nbench_campaign on {platform.node()} ({platform.processor() or platform.machine()}, "
+          f"{os.cpu_count()} cores), Python {platform.python_version()}")
+    print(f"{'figure':<{width}}  {'measured':<44}  {'target':<28}  machine")
+    for name, value, target, machine in rows:
+        print(f"{name:<{width}}  {value:<44}  {target:<28}  {machine}")
+
+
+if __name__ == "__main__":
+    main()
