@@ -4,9 +4,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from rich.console import Group
-from rich.table import Table
-from rich.text import Text
 
 
 def _deg(value: float | None) -> str:
@@ -49,7 +46,11 @@ def render_status(status: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def status_table(status: dict[str, Any]) -> Group:
+def status_table(status: dict[str, Any]):
+    """The live view for `watch` (rich imported here: `status` and `stop` stay light)."""
+    from rich.console import Group
+    from rich.table import Table
+    from rich.text import Text
     table = Table(title=None, expand=False)
     for column in ("joint", "q deg", "target deg", "dq deg/s", "tau N m", "enabled"):
         table.add_column(column, justify="left" if column == "joint" else "right")

@@ -45,7 +45,9 @@ class JogArgs(Args):
 
 
 class MoveJointsArgs(Args):
-    q: list[float] = Field(min_length=1, max_length=12, description="rad")
+    q: list[float] | None = Field(default=None, min_length=1, max_length=12, description="rad")
+    posture: str | None = Field(default=None, min_length=1, max_length=64,
+                                description="a named posture of the arm file ([postures], home)")
     speed: float = Field(default=1.0, gt=0.0, le=1.0)
 
 
@@ -87,6 +89,7 @@ class CommandHandlers:
         self.recorder_control = recorder_control
         self.dof = dof
         self.cycle_timeout = cycle_timeout
+        self.postures: dict[str, list[float]] = {}   # named postures (the daemon fills them from the arm file)
         self._local = threading.local()   # the session of the request this API thread serves
         self.table: dict[str, tuple[type[Args], bool, Callable[[Args], Any]]] = {
             # name: (argument model, needs control lease, action)
@@ -129,7 +132,7 @@ class CommandHandlers:
             raise ApiError("the control cycle did not take the command in time", ErrorCode.CYCLE_TIMEOUT) from None
 
     def _take(self, a: TakeArgs) -> dict:
-        return {"lease": self.lease.take(a.holder)}
+        return {"lease": self.lease.take(a.holder, a.lease), "holder": self.lease.holder}
 
     def _start_motion(self, name: str, description: str, plan_from: Callable[[np.ndarray], Any],
                       keepalive: bool = False) -> Any:
@@ -168,6 +171,14 @@ class CommandHandlers:
                                   keepalive=True)
 
     def _move_joints(self, a: MoveJointsArgs) -> Any:
+        if (a.q is None) == (a.posture is None):
+            raise ApiError("give either q (joint values) or posture (a name)", ErrorCode.BAD_ARGUMENT)
+        if a.posture is not None:
+            if a.posture not in self.postures:
+                raise ApiError(f"posture: unknown posture {a.posture!r}; this arm has "
+                               f"{', '.join(sorted(self.postures)) or 'none'}", ErrorCode.BAD_ARGUMENT)
+            a = a.model_copy(update={"q": list(self.postures[a.posture]), "posture": None})
+        assert a.q is not None
         if len(a.q) != self.dof:
             raise ApiError(f"q: expected {self.dof} joint values, got {len(a.q)}", ErrorCode.BAD_ARGUMENT)
         goal = np.array(a.q)

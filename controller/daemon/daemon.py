@@ -110,6 +110,9 @@ class Daemon:
         self._last_stats_time = -1.0
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
                                         RecordingControl(self), self.model.nq)
+        # Named postures for `move joints NAME`: the arm file's [postures], and "home" from the
+        # joints' home angles unless the file names its own.
+        self.handlers.postures = {"home": [j.home for j in self.arm.joints], **self.arm.postures}
         self.handlers.mode_factories = self.mode_factories   # the same dict: "approach" once a camera is attached
         from spacearm.controller.daemon.oru_commands import install_oru   # here: it imports the daemon's handler types
         self.oru = install_oru(self)                      # "impedance", "oru" modes and oru.* commands
