@@ -47,6 +47,29 @@ def report(message: str, code: str | None, exit_code: int, as_json: bool) -> Sys
     return SystemExit(exit_code)
 
 
+# The daemon's answers that mean "what you typed is wrong" (exit 2 like the console's own checks).
+BAD_INPUT_CODES = {"bad_argument", "bad_request", "bad_input", "bad_usage", "bad_config", "bad_bus"}
+
+# Exceptions of the layers below that mean bad input, by class name (importing them would
+# make every command pay for the whole stack): a configuration, recording, bus spec or unit
+# the operator named.
+BAD_INPUT_TYPES = {"ConfigError": "bad_config", "RecordingError": "bad_recording",
+                   "RecordingFormatError": "bad_recording", "BusSpecError": "bad_bus", "UnitError": "bad_input"}
+
+
+def classify(exc: BaseException) -> tuple[str, str, int] | None:
+    """(message, code, exit code) for an exception the contract knows, else None (a bug)."""
+    if isinstance(exc, CommandFailed):
+        code = str(exc.code) if exc.code is not None else None
+        return str(exc), code, EXIT_USAGE if code in BAD_INPUT_CODES else exc.exit_code
+    for cls in type(exc).__mro__:
+        if cls.__name__ in BAD_INPUT_TYPES:
+            return str(exc), BAD_INPUT_TYPES[cls.__name__], EXIT_USAGE
+    if isinstance(exc, (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError)):
+        return f"{exc.filename or ''}: {exc.strerror or exc}".lstrip(": "), "bad_file", EXIT_USAGE
+    return None
+
+
 def friendly_errors(func: F) -> F:
     """Apply the contract to one command (its `as_json` keyword, when it has one, picks JSON)."""
     @functools.wraps(func)
@@ -54,11 +77,9 @@ def friendly_errors(func: F) -> F:
         as_json = bool(kwargs.get("as_json", False))
         try:
             return func(*args, **kwargs)
-        except CommandFailed as exc:
-            raise report(str(exc), exc.code, exc.exit_code, as_json) from None
         except Exception as exc:
-            from spacearm.base.config.errors import ConfigError   # here: keeps `stop` light
-            if isinstance(exc, ConfigError):
-                raise report(str(exc), "bad_config", EXIT_USAGE, as_json) from None
-            raise
+            known = classify(exc)
+            if known is None:
+                raise
+            raise report(*known, as_json) from None
     return wrapper  # type: ignore[return-value]

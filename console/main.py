@@ -67,7 +67,7 @@ def main(argv: list[str] | None = None) -> None:
     from typer._click.exceptions import UsageError
     from typer.exceptions import Abort, Exit
 
-    from spacearm.console.errors import EXIT_FAILED, EXIT_USAGE, report
+    from spacearm.console.errors import EXIT_FAILED, EXIT_USAGE, classify, report
 
     args = sys.argv[1:] if argv is None else list(argv)
     as_json = "--json" in args
@@ -88,7 +88,10 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(exc.exit_code) from None
     except SystemExit:
         raise
-    except Exception as exc:   # a bug: still one line, the traceback on request
+    except Exception as exc:   # a command without friendly_errors, or a bug: still one line
+        known = classify(exc)
+        if known is not None:
+            raise report(*known, as_json) from None
         if os.environ.get("SPACEARM_TRACEBACK"):
             raise
         raise report(f"{type(exc).__name__}: {exc} (a bug; SPACEARM_TRACEBACK=1 shows the traceback)",
