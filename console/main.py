@@ -1,6 +1,7 @@
 """Entry point of the `spacearm` command: a typer app with one subcommand group per module.
 
-`main()` (the installed script) registers only the module the typed command needs when it is
+`main()` (the installed script) sends the plain `stop`, `status`, `enable`, `disable`, `reset`
+without typer (console/quick.py), and otherwise registers only the module the typed command needs when it is
 one of the light operator commands: `stop`, `status`, `enable`, ... import the API client and
 nothing of the controller stack, so a stop reaches the daemon in tens of milliseconds instead
 of the seconds scipy and the planner take to import (bench/bench_console.py measures it).
@@ -12,9 +13,10 @@ from __future__ import annotations
 import importlib
 import os
 import sys
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
-import typer
+if TYPE_CHECKING:
+    import typer
 
 # Subcommand modules; each defines register(app). Optional ones may be absent while
 # their issue is in progress, so a missing module is skipped rather than breaking the CLI.
@@ -26,7 +28,9 @@ LIGHT_COMMANDS = {name: "operate" for name in ("status", "watch", "enable", "dis
                                                  "jog", "move", "control", "record")}
 
 
-def build_app(modules: Iterable[str] = COMMAND_MODULES) -> typer.Typer:
+def build_app(modules: Iterable[str] = COMMAND_MODULES) -> "typer.Typer":
+    import typer   # here: the quick commands never import it
+
     app = typer.Typer(
         name="spacearm",
         help="Hardware-in-the-loop controller stack for a space-station manipulator (CANopen).",
@@ -50,7 +54,7 @@ def _command_of(args: list[str]) -> str | None:
     return next((a for a in args if not a.startswith("-")), None)
 
 
-_full_app: typer.Typer | None = None
+_full_app: "typer.Typer | None" = None
 
 
 def __getattr__(name: str):
@@ -64,12 +68,19 @@ def __getattr__(name: str):
 
 def main(argv: list[str] | None = None) -> None:
     """Run one command under the error contract (console/errors.py) and exit with its code."""
+    from spacearm.console import quick
+
+    args = sys.argv[1:] if argv is None else list(argv)
+    plain = quick.parse(args)
+    if plain is not None:
+        quick.run(*plain)
+        raise SystemExit(0)
+
     from typer._click.exceptions import UsageError
     from typer.exceptions import Abort, Exit
 
     from spacearm.console.errors import EXIT_FAILED, EXIT_USAGE, classify, report
 
-    args = sys.argv[1:] if argv is None else list(argv)
     as_json = "--json" in args
     command = _command_of(args)
     app = build_app((LIGHT_COMMANDS[command],) if command in LIGHT_COMMANDS else COMMAND_MODULES)

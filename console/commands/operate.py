@@ -8,10 +8,7 @@ frame with --frame tool): x y z, then roll pitch yaw about fixed axes, R = Rz(ya
 """
 from __future__ import annotations
 
-import getpass
 import json
-import os
-import socket
 import sys
 import time
 from typing import Any
@@ -19,6 +16,7 @@ from typing import Any
 import typer
 
 from spacearm.console import lease_store
+from spacearm.console.control import controlled_call as _controlled_call, holder_identity, take as _take  # noqa: F401
 from spacearm.console.client import DEFAULT_API, ApiClient
 from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.controller.daemon.api_errors import ErrorCode
@@ -35,40 +33,6 @@ WAIT_OPTION = typer.Option(True, "--wait/--no-wait", help="Wait until the motion
 
 def _emit(result: Any, as_json: bool, text: str) -> None:
     print(json.dumps(result) if as_json else text)
-
-
-def _controlled_call(client: ApiClient, cmd: str, session: str | None = None, **args: Any) -> Any:
-    """Call a command that needs the control lease, taking the lease if nobody holds it."""
-    key = lease_store.load(client.address)
-    if key is None:
-        key = _take(client, session)
-    try:
-        return client.call(cmd, lease=key, **args)
-    except CommandFailed as exc:
-        if exc.code != ErrorCode.NO_LEASE:
-            raise
-        # Our stored key is stale (daemon restarted): take control again, once.
-        return client.call(cmd, lease=_take(client, session), **args)
-
-
-def holder_identity(session: str | None = None) -> str:
-    """Who takes control, as status shows it: user@host, the terminal (or the web session) and
-    the pid, so an operator can tell their terminals and the browser console apart."""
-    if session is None:
-        try:
-            session = os.ttyname(0)
-        except OSError:
-            session = "no tty"
-    return f"{getpass.getuser()}@{socket.gethostname()} {session} pid {os.getpid()}"
-
-
-def _take(client: ApiClient, session: str | None = None) -> str:
-    """Take control, or keep it: the stored key of this user's consoles is presented, and the
-    daemon hands it back when it is the current one (already holding is not an error)."""
-    answer = client.call("control.take", holder=holder_identity(session),
-                         **({"lease": stored} if (stored := lease_store.load(client.address)) else {}))
-    lease_store.save(client.address, answer["lease"])
-    return answer["lease"]
 
 
 def _wait_for_motion(client: ApiClient, motion: int, as_json: bool) -> dict:
