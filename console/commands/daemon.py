@@ -14,6 +14,7 @@ from spacearm.console.errors import BadInput, CommandFailed, friendly_errors, re
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.cycle_stats import CycleThresholds
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+from spacearm.controller.recording.can_trace import TraceLimit
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
 from spacearm.base.transport import BusSpecError
 from spacearm.drivers.errors import DriverError
@@ -33,6 +34,9 @@ def register(app: typer.Typer) -> None:
                token: str = typer.Option(None, envvar="SPACEARM_TOKEN", help="API token (required with --expose)."),
                record_dir: Path = typer.Option(Path("runs"), help="Where recordings go."),
                record: bool = typer.Option(True, "--record/--no-record", help="Record every cycle from start."),
+               can_trace_max_mb: float = typer.Option(64.0, min=0.0, help="Raw CAN trace: MB per file before it "
+                                                      "rotates (0: no limit); ~320 MB/h at 50 Hz."),
+               can_trace_files: int = typer.Option(4, min=0, help="Raw CAN trace: rotated files kept (.1 newest)."),
                max_cycles: int = typer.Option(0, help="Stop after this many cycles (0: run until signalled)."),
                rt_priority: int = typer.Option(50, min=0, max=99, help="SCHED_FIFO priority of the cycle with "
                                                "--clock realtime (0: normal scheduling); needs root or an "
@@ -47,7 +51,8 @@ def register(app: typer.Typer) -> None:
         options = DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock, period=period,
                                 api=api, expose=expose, token=token,
                                 record_dir=record_dir if record else None,
-                                thresholds=CycleThresholds(), camera=camera, rt_priority=rt_priority)
+                                thresholds=CycleThresholds(), camera=camera, rt_priority=rt_priority,
+                                can_trace_limit=TraceLimit(int(can_trace_max_mb * 1e6), can_trace_files))
         code = 0
         try:
             _serve(options, max_cycles)

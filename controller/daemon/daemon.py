@@ -27,6 +27,7 @@ from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limi
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
+from spacearm.controller.recording.can_trace import TraceLimit
 from spacearm.controller.cycle import Command, Finding, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
@@ -47,6 +48,7 @@ class DaemonOptions:
     token: str | None = None
     record_dir: Path | None = Path("runs")       # None: do not record
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
+    can_trace_limit: TraceLimit = field(default_factory=TraceLimit)   # raw CAN trace: size per file, files kept
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
     # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
     # (drivers/priority.py); None leaves the interpreter's setting alone.
@@ -229,11 +231,19 @@ class Daemon:
         new = RecorderThread(Path(path), {
             "arm": str(self.options.arm), "bus": self.options.bus, "clock": self.options.clock,
             "period": repr(self.options.period), "joints": ",".join(self.model.joint_names)},
-            bus_spec=self.options.bus)
+            bus_spec=self.options.bus, time_origin_ns=self._time_origin_ns(),
+            can_trace_limit=self.options.can_trace_limit)
         old, self.recorder = self.recorder, new
         if old is not None:
             old.close(grace=2 * self.options.period)
         return {"path": str(new.path), "can_log": str(new.can_log)}
+
+    def _time_origin_ns(self) -> int:
+        """UTC wall clock of controller time 0, as of now: the recording's log times are real dates
+        (with the lockstep clock controller time runs faster than the wall clock; the origin
+        is where the recording started)."""
+        now = self.snapshot.tick.time if self.snapshot is not None else 0.0
+        return time.time_ns() - int(round(now * 1e9))
 
     def stop_recording(self) -> dict:
         old, self.recorder = self.recorder, None
