@@ -48,3 +48,33 @@ def take(client: ApiClient, session: str | None = None) -> str:
                          **({"lease": stored} if (stored := lease_store.load(client.address)) else {}))
     lease_store.save(client.address, answer["lease"])
     return answer["lease"]
+
+
+ENABLE_WAIT = 5.0   # s: the daemon's own enable timeout is 2 s of cycles, plus a loaded machine
+
+# Why drives may refuse to enable, for the operator (a stop code -> what to do).
+ENABLE_HINTS = {
+    "enable_timeout": "a drive did not reach 'operation enabled': if a simulator or drive restarted, "
+                      "its node stays pre-operational until the daemon is restarted",
+    "bootup": "a node restarted: restart the daemon to configure it again",
+}
+
+
+def wait_enabled(client: ApiClient, timeout: float = ENABLE_WAIT) -> dict:
+    """Poll status until every drive is enabled; a protective stop instead fails with its reason
+    and a hint. Scripts that want the old fire-and-forget use `enable --no-wait`."""
+    import time
+    deadline = time.monotonic() + timeout
+    while True:
+        status = client.call("status")
+        if status.get("state") == "enabled":
+            return status
+        if status.get("state") == "stopped":
+            stop = status.get("stop") or {}
+            hint = ENABLE_HINTS.get(str(stop.get("code")))
+            raise CommandFailed(f"enable failed: {stop.get('message') or status.get('stop_reason')}"
+                                + (f" ({hint})" if hint else ""), str(stop.get("code") or "protective_stop"))
+        if time.monotonic() > deadline:
+            raise CommandFailed(f"arm still {status.get('state')} {timeout:.0f} s after enable",
+                                ErrorCode.NOT_ENABLED)
+        time.sleep(0.05)

@@ -70,7 +70,7 @@ def test_console_commands_end_to_end(stack):
     status = alice.status()
     assert status["state"] == "disabled" and status["clock"] == "lockstep"
     assert "state disabled" in alice.run("status").stdout          # human-readable view
-    assert alice.run("enable").stdout.strip() == "enable: arm is enabling"
+    assert alice.run("enable").stdout.strip() == "enable: arm is enabled"     # waits for the drives
     for _ in range(100):
         if alice.status()["state"] == "enabled":
             break

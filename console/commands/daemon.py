@@ -29,7 +29,9 @@ def register(app: typer.Typer) -> None:
                clock: str = typer.Option("realtime", help="realtime: SYNC on absolute deadlines; "
                                          "lockstep: next SYNC as soon as every node answered."),
                period: float = typer.Option(0.02, help="Cycle period, s."),
-               api: str = typer.Option("tcp:127.0.0.1:7440", help="Command API address (tcp:HOST:PORT, unix:PATH)."),
+               api: str = typer.Option("tcp:127.0.0.1:7440", envvar="SPACEARM_API",
+                                       help="Command API address (tcp:HOST:PORT, unix:PATH); the consoles "
+                                       "read the same variable."),
                expose: bool = typer.Option(False, "--expose", help="Allow a non-loopback API address (needs --token)."),
                token: str = typer.Option(None, envvar="SPACEARM_TOKEN", help="API token (required with --expose)."),
                record_dir: Path = typer.Option(Path("runs"), help="Where recordings go."),

@@ -20,7 +20,6 @@ from spacearm.console.control import controlled_call as _controlled_call, holder
 from spacearm.console.client import DEFAULT_API, ApiClient
 from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.controller.daemon.api_errors import ErrorCode
-from spacearm.console.status_view import render_status
 from spacearm.console.units import UnitError, parse_angle, parse_length
 
 API_OPTION = typer.Option(DEFAULT_API, "--api", help="Daemon API address (tcp:HOST:PORT or unix:PATH).",
@@ -79,19 +78,25 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def status(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Show the arm's state: mode, joints, forces, cycle statistics, stop reason."""
-        with ApiClient(api, token) as client:
-            result = client.call("status")
-        _emit(result, as_json, render_status(result))
+        from spacearm.console import quick
+        quick.run("status", api, token, as_json)
 
-    for name, helptext in (("enable", "Enable all joint drives (brakes released, holding position)."),
-                           ("disable", "Hold still, then disable drives and apply brakes."),
+    @app.command()
+    @friendly_errors
+    def enable(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+               wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait until every drive is enabled "
+                                         "(fails with the reason and a hint if one does not).")) -> None:
+        """Enable all joint drives (brakes released, holding position)."""
+        from spacearm.console import quick
+        quick.run("enable", api, token, as_json, wait)
+
+    for name, helptext in (("disable", "Hold still, then disable drives and apply brakes."),
                            ("reset", "Clear a protective stop (motion needs enable afterwards).")):
         def make(cmd: str):
             @friendly_errors
             def simple(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
-                with ApiClient(api, token) as client:
-                    result = _controlled_call(client, cmd)
-                _emit({"state": result}, as_json, f"{cmd}: arm is {result}")
+                from spacearm.console import quick
+                quick.run(cmd, api, token, as_json)
             simple.__doc__ = helptext
             return simple
         app.command(name)(make(name))
@@ -100,9 +105,8 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def stop(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Protective stop now (any console may stop the arm, control lease or not)."""
-        with ApiClient(api, token) as client:
-            result = client.call("stop")
-        _emit({"state": result}, as_json, f"stopped: arm is {result}")
+        from spacearm.console import quick
+        quick.run("stop", api, token, as_json)
 
     @app.command(context_settings=NUMERIC_ARGS)
     @friendly_errors
