@@ -28,6 +28,10 @@ def status_lines(status: dict[str, Any]) -> list[str]:
             f"execution p99 {1e3 * stats['execution_p99']:.3f} ms "
             f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']} "
             f"[{stats['level']}]" + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
+    nodes = status.get("nodes") or {}
+    if nodes.get("level") not in (None, "ok"):
+        lines.append(f"WARNING {nodes['message']} (answer p99 {1e3 * nodes['io_wait_p99']:.1f} ms of "
+                     f"{1e3 * nodes['budget']:.1f} ms)")
     wrench = status.get("wrench")
     if wrench:
         lines.append("wrench: F " + " ".join(f"{v:7.2f}" for v in wrench[:3]) + " N   T "

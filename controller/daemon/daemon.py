@@ -25,6 +25,7 @@ from spacearm.controller.daemon.core import ControllerCore, Event
 from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
 from spacearm.controller.daemon.leases import ControlLease
+from spacearm.controller.daemon.node_timing import NodeTiming
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
 from spacearm.controller.recording.can_trace import TraceLimit
@@ -99,6 +100,10 @@ class Daemon:
             raise ValueError(f"bus config {options.bus_config} has {self.hardware.dof} joint drives, "
                              f"arm {options.arm} has {self.model.nq} joints")
         self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
+        # the nodes' answers in time (a starved simulator or hub shows here before it stops the arm);
+        # lockstep waits as long as the nodes take, so only the heartbeats say anything there
+        self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
+        self._reported_level = "ok"
         # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
         # A factory builds a Mode from validated arguments; composite modes (the ORU task
         # flow) build their sub-modes through the same registry.
@@ -191,6 +196,7 @@ class Daemon:
             self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
+        self._watch_nodes(measurement)
         mode = self.core.mode
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
@@ -199,6 +205,17 @@ class Daemon:
         self.snapshot = snapshot
         self._record(snapshot, execution, events)
         return snapshot
+
+    def _watch_nodes(self, m: Measurement) -> None:
+        network = self.hardware.network
+        self.node_timing.add(self.hardware.last_io_wait, not m.missing,
+                             {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
+                              for name, h in network.health.items()})
+        if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
+            summary = self.node_timing.summary()
+            if summary.level != self._reported_level:
+                self._reported_level = summary.level
+                self.core._event(m.time, "nodes", summary.message)
 
     def _record(self, s: Snapshot, execution: float, events: list[Event]) -> None:
         for event in events:
@@ -276,6 +293,7 @@ class Daemon:
             "recording": vars(recorder.info()) if (recorder := self.recorder) else None,
             "events": list(self.event_log),
             "network": self.hardware.statistics(),
+            "nodes": self.node_timing.summary().as_dict(),   # are the simulator/hub/bus answering in time
         }
 
     def _session_closed(self, session: Session) -> None:

@@ -96,6 +96,11 @@ function renderStatus(s) {
   setText($("state"), s.state);
   setText($("mode"), s.mode || "-");
   setText($("control"), s.control && s.control.held ? s.control.holder : "free");
+  const nodes = s.nodes || {}, late = $("nodes-late");   // the simulator/hub/bus answering late
+  if (late) {
+    late.classList.toggle("hidden", !nodes.level || nodes.level === "ok");
+    setText(late, nodes.level && nodes.level !== "ok" ? "NODES LATE: " + nodes.message : "");
+  }
   const banner = $("stopreason");
   if (banner.classList.contains("hidden") === !!s.stop_reason) banner.classList.toggle("hidden", !s.stop_reason);
   setText(banner, s.stop_reason ? "PROTECTIVE STOP: " + s.stop_reason + " (reset, then enable)" : "");
