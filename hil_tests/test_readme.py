@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
@@ -23,7 +22,7 @@ from pathlib import Path
 import pytest
 
 from hil_tests.conftest import ROOT, TIME_SCALE, child_env
-from hil_tests.harness import free_port
+from hil_tests.harness import free_port, stop_group
 
 pytestmark = pytest.mark.hil
 
@@ -99,13 +98,7 @@ class Session:
 
     def close(self) -> None:
         for job in reversed(self.jobs):
-            if job.poll() is None:
-                os.killpg(job.pid, signal.SIGTERM)
-                try:
-                    job.wait(10)
-                except subprocess.TimeoutExpired:
-                    os.killpg(job.pid, signal.SIGKILL)
-                    job.wait(5)
+            stop_group(job)
 
 
 @pytest.mark.slow

@@ -149,11 +149,17 @@ def shot(page, stack, name: str) -> Path:
     return path
 
 
-def test_web_console_presimulates_sends_and_stops(web_stack, browser):
+def open_page(web_stack, browser) -> tuple:
+    """A page of the console, and the list its script errors land in."""
     page = browser.new_page(viewport={"width": 1500, "height": 950})
     errors: list[str] = []
     page.on("pageerror", lambda exc: errors.append(str(exc)))
     page.goto(web_stack["url"])
+    return page, errors
+
+
+def test_web_console_presimulates_sends_and_stops(web_stack, browser):
+    page, errors = open_page(web_stack, browser)
     wait_for(page, "() => spacearm.updates > 25 && spacearm.scene && spacearm.scene.armFrames")
     assert page.text_content("#link") == "live"
     wait_for(page, "() => document.querySelectorAll('#joints tbody tr').length === 6")
@@ -298,10 +304,7 @@ READY = [-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648
 
 
 def test_the_3d_view_redraws_on_resize_while_still_and_the_forms_start_at_ready(web_stack, browser):
-    page = browser.new_page(viewport={"width": 1500, "height": 950})
-    errors: list[str] = []
-    page.on("pageerror", lambda exc: errors.append(str(exc)))
-    page.goto(web_stack["url"])
+    page, errors = open_page(web_stack, browser)
     wait_for(page, "() => spacearm.updates > 10 && spacearm.scene && spacearm.scene.armFrames")
     # A reflow that resizes the view's container alone (no window resize event): the canvas
     # follows and is drawn again at its new size.
