@@ -16,10 +16,9 @@ from typing import Any
 import typer
 
 from spacearm.console import lease_store
-from spacearm.console.control import controlled_call as _controlled_call, holder_identity, take as _take  # noqa: F401
+from spacearm.console.control import controlled_call as _controlled_call, take as _take  # noqa: F401 (web, oru)
 from spacearm.console.client import DEFAULT_API, ApiClient
 from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
-from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.console.units import UnitError, parse_angle, parse_length
 
 API_OPTION = typer.Option(DEFAULT_API, "--api", help="Daemon API address (tcp:HOST:PORT or unix:PATH).",

@@ -7,7 +7,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spacearm.controller.cycle import Measurement
 from tests.oru.test_runner_failures import MODEL, Rig, make_runner
 
 PERIOD = 0.02
@@ -81,16 +80,37 @@ def test_pause_and_resume_stay_within_the_acceleration_limits(kind):
 
 
 def test_pause_and_resume_commands_leave_events():
-    from spacearm.controller.daemon.oru_commands import install_oru   # noqa: F401  (the daemon wires it)
-    runner = make_runner()
-    rig = Rig(runner)
-    run_until(rig, lambda: runner._begun, [])
-    from spacearm.controller.daemon.core import Event
-    events: list[Event] = []
-    # The same calls the daemon makes in the cycle for oru.pause / oru.resume (oru_commands.py).
-    for what, action in (("pause", runner.pause), ("resume", runner.resume)):
-        state = action()
-        rig.core._event(rig.t, "oru", f"{what}: ORU changeout {state}")
-    events = rig.core.drain_events()
-    assert [e.message for e in events if e.kind == "oru"] == ["pause: ORU changeout pausing",
-                                                                "resume: ORU changeout resuming"]
+    """Through the daemon's own oru.* commands on a lockstep daemon over the virtual bus."""
+    import threading
+    import time
+    import uuid
+    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+    from spacearm.firmware_sim.runner import start_simulator
+    bus = f"virtual:pause-{uuid.uuid4().hex[:8]}"
+    sim = start_simulator(bus, plant="configs/oru/plant_cell.toml")
+    daemon = Daemon(DaemonOptions(bus=bus, clock="lockstep", api=None, record_dir=None))
+    try:
+        daemon.start()
+        threading.Thread(target=daemon.run, daemon=True).start()
+        key = daemon.lease.take("test")
+        call = lambda cmd, **args: daemon.handlers.handle(None, cmd, {"lease": key, **args})   # noqa: E731
+        call("enable")
+        deadline = time.monotonic() + 60
+        while daemon.status()["state"] != "enabled":
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        call("oru.run", stages=[1])
+        time.sleep(0.5)
+        assert call("oru.pause") == "pausing"
+        while call("oru.status")["state"] != "paused":
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        assert call("oru.resume") == "resuming"
+        time.sleep(0.2)
+        messages = [e["message"] for e in daemon.status()["events"] if e["kind"] == "oru"]
+        assert messages == ["pause: ORU changeout pausing", "resume: ORU changeout resuming"]
+    finally:
+        daemon.request_stop()
+        time.sleep(0.1)
+        daemon.shutdown()
+        sim.stop()
