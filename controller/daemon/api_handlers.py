@@ -15,7 +15,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from spacearm.base.config.loader import format_location
+from spacearm.base.config.loader import RANGE_ERRORS, describe_range, field_for_location, format_location
 from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.controller.daemon.command_api import ApiError, Session
 from spacearm.controller.daemon.core import CommandRefused, ControllerCore
@@ -73,7 +73,13 @@ def _parse(model: type[Args], args: dict[str, Any]) -> Args:
         return model.model_validate(args)
     except ValidationError as exc:
         item = exc.errors()[0]
-        raise ApiError(f"{format_location(item['loc'])}: {item['msg']}", ErrorCode.BAD_ARGUMENT) from None
+        message = item["msg"]
+        if item["type"] in RANGE_ERRORS:   # the operator's words, not pydantic's ("Input should be ...")
+            field = field_for_location(model, item["loc"])
+            allowed = describe_range(field) if field is not None else None
+            if allowed:
+                message = f"{item.get('input')!r} is out of range: {allowed}"
+        raise ApiError(f"{format_location(item['loc'])}: {message}", ErrorCode.BAD_ARGUMENT) from None
 
 
 class CommandHandlers:

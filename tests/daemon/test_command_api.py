@@ -153,3 +153,11 @@ def test_the_holder_taking_control_again_keeps_it_and_others_are_still_refused()
         lease.take("bob@vm /dev/pts/3 pid 12")
     lease.release(key)
     assert lease.take("bob@vm /dev/pts/3 pid 12", key) != key         # a released key is worth nothing
+
+
+def test_out_of_range_arguments_are_explained_in_the_operators_words():
+    from spacearm.controller.daemon.api_handlers import JogArgs, _parse
+    with pytest.raises(ApiError) as refused:
+        _parse(JogArgs, {"joint": 1, "delta": 2.0})
+    assert str(refused.value) == "delta: 2.0 is out of range: allowed range [-1.5708, 1.5708] rad"
+    assert "Input should be" not in str(refused.value)
