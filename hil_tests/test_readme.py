@@ -45,7 +45,7 @@ BLOCKS = readme_blocks()
 
 
 def test_readme_marks_the_operator_recipes():
-    assert {"separate-processes", "oru", "web-console"} <= set(BLOCKS), sorted(BLOCKS)
+    assert {"separate-processes", "oru", "web-console", "diagnosis"} <= set(BLOCKS), sorted(BLOCKS)
     print(f"README blocks run by test_readme_block_runs_as_written: {len(BLOCKS)} ({', '.join(BLOCKS)})")
 
 
