@@ -17,7 +17,6 @@ import argparse
 import os
 import platform
 import re
-import signal
 import subprocess
 import sys
 import tempfile
@@ -32,7 +31,7 @@ sys.path.insert(0, str(ROOT))
 from spacearm.console.client import ApiClient  # noqa: E402
 from spacearm.controller.recording.mcap_reader import read_recording  # noqa: E402
 from spacearm.base.transport.hub import HubProcess  # noqa: E402
-from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, CpuSteal, free_port  # noqa: E402
+from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, CpuSteal, free_port, stop_group  # noqa: E402
 
 
 def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> tuple[subprocess.Popen, str]:
@@ -52,14 +51,7 @@ def start(args: list[str], ready: str, log: Path, timeout: float = 60.0) -> tupl
     raise SystemExit(f"{args[0]}: not ready within {timeout} s: {log.read_text()[-2000:]}")
 
 
-def stop(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        os.killpg(proc.pid, signal.SIGTERM)
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(5)
+stop = stop_group   # hil_tests/harness.py: SIGTERM to the process group, SIGKILL after 10 s
 
 
 def daemon_time(api: str) -> float:

@@ -4,9 +4,6 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from rich.console import Group
-from rich.table import Table
-from rich.text import Text
 
 
 def _deg(value: float | None) -> str:
@@ -31,6 +28,10 @@ def status_lines(status: dict[str, Any]) -> list[str]:
             f"execution p99 {1e3 * stats['execution_p99']:.3f} ms "
             f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']} "
             f"[{stats['level']}]" + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
+    nodes = status.get("nodes") or {}
+    if nodes.get("level") not in (None, "ok"):
+        lines.append(f"WARNING {nodes['message']} (answer p99 {1e3 * nodes['io_wait_p99']:.1f} ms of "
+                     f"{1e3 * nodes['budget']:.1f} ms)")
     wrench = status.get("wrench")
     if wrench:
         lines.append("wrench: F " + " ".join(f"{v:7.2f}" for v in wrench[:3]) + " N   T "
@@ -53,7 +54,11 @@ def render_status(status: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def status_table(status: dict[str, Any]) -> Group:
+def status_table(status: dict[str, Any]):
+    """The live view for `watch` (rich imported here: `status` and `stop` stay light)."""
+    from rich.console import Group
+    from rich.table import Table
+    from rich.text import Text
     table = Table(title=None, expand=False)
     for column in ("joint", "q deg", "target deg", "dq deg/s", "tau N m", "enabled"):
         table.add_column(column, justify="left" if column == "joint" else "right")

@@ -37,3 +37,18 @@ class CpuSteal:
         d_steal, d_total = steal - self._last[0], total - self._last[1]
         self._last = (steal, total)
         return d_steal / d_total if d_total > 0 else 0.0
+
+
+def stop_group(proc) -> None:
+    """End a process started with start_new_session=True and everything it started: SIGTERM to
+    its group, SIGKILL after 10 s."""
+    import os
+    import signal
+    import subprocess
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(5)

@@ -46,7 +46,7 @@ class Console:
 def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"daemon-{os.getpid()}-{time.monotonic_ns()}")
     launch(["-m", "spacearm.console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml",
-            "--control-node", "126"], bus_spec=bus, ready="nodes ready")
+            "--control-node", "126", "--rt-priority", "50"], bus_spec=bus, ready="nodes ready")   # as the README runs it
     api = f"tcp:127.0.0.1:{free_port()}"
     daemon = launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
                      "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)
@@ -70,7 +70,7 @@ def test_console_commands_end_to_end(stack):
     status = alice.status()
     assert status["state"] == "disabled" and status["clock"] == "lockstep"
     assert "state disabled" in alice.run("status").stdout          # human-readable view
-    assert alice.run("enable").stdout.strip() == "enable: arm is enabling"
+    assert alice.run("enable").stdout.strip() == "enable: arm is enabled"     # waits for the drives
     for _ in range(100):
         if alice.status()["state"] == "enabled":
             break

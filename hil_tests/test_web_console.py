@@ -149,11 +149,17 @@ def shot(page, stack, name: str) -> Path:
     return path
 
 
-def test_web_console_presimulates_sends_and_stops(web_stack, browser):
+def open_page(web_stack, browser) -> tuple:
+    """A page of the console, and the list its script errors land in."""
     page = browser.new_page(viewport={"width": 1500, "height": 950})
     errors: list[str] = []
     page.on("pageerror", lambda exc: errors.append(str(exc)))
     page.goto(web_stack["url"])
+    return page, errors
+
+
+def test_web_console_presimulates_sends_and_stops(web_stack, browser):
+    page, errors = open_page(web_stack, browser)
     wait_for(page, "() => spacearm.updates > 25 && spacearm.scene && spacearm.scene.armFrames")
     assert page.text_content("#link") == "live"
     wait_for(page, "() => document.querySelectorAll('#joints tbody tr').length === 6")
@@ -291,3 +297,31 @@ def test_presimulation_uses_the_daemons_planner_and_checks():
     bad = presim.run("jog", {"joint": "1", "delta": 0.1}, idle)
     assert not bad.accepted and bad.checks[0].name == "arguments"
     assert not presim.run("record.start", {}, idle).accepted
+
+
+READY = [-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648103310305,
+         -0.22888135613941607, 1.2827321288823015]     # configs/arm/oru_testbed_6dof.toml [postures]
+
+
+def test_the_3d_view_redraws_on_resize_while_still_and_the_forms_start_at_ready(web_stack, browser):
+    page, errors = open_page(web_stack, browser)
+    wait_for(page, "() => spacearm.updates > 10 && spacearm.scene && spacearm.scene.armFrames")
+    # A reflow that resizes the view's container alone (no window resize event): the canvas
+    # follows and is drawn again at its new size.
+    drawn = page.evaluate("() => spacearm.scene.frameCount")
+    page.evaluate("() => { spacearm.scene.container.style.width = '420px'; }")
+    wait_for(page, "() => spacearm.scene.renderer.domElement.clientWidth === 420")
+    wait_for(page, f"() => spacearm.scene.frameCount > {drawn}")
+    page.set_viewport_size({"width": 1100, "height": 700})            # and a window resize
+    drawn = page.evaluate("() => spacearm.scene.frameCount")
+    wait_for(page, f"() => spacearm.scene.frameCount > {drawn}")
+    # The point-to-point form starts at the arm file's ready posture (Cartesian work possible),
+    # and each named posture has a preset button.
+    page.check("input[value=move_joints]")
+    values = page.evaluate("() => [...document.querySelectorAll('.q-input')].map(e => parseFloat(e.value))")
+    assert values == pytest.approx([math.degrees(q) for q in READY], abs=1e-3)
+    assert page.locator("button.posture").all_text_contents() == ["home", "ready"]
+    page.click("button.posture[data-posture=home]")
+    values = page.evaluate("() => [...document.querySelectorAll('.q-input')].map(e => parseFloat(e.value))")
+    assert values == pytest.approx([0.0, 90.0, -90.0, 0.0, -90.0, 0.0], abs=1e-3)
+    assert errors == []

@@ -14,11 +14,17 @@ import typer
 
 def register(app: typer.Typer) -> None:
     from spacearm.base.transport.hub import DEFAULT_HOST, DEFAULT_PORT
+    from spacearm.base.transport.loopback import default_hub_address
+
+    try:   # the same address the buses use ($SPACEARM_HUB), so `spacearm hub &` serves them
+        default_host, default_port = default_hub_address()
+    except ValueError:
+        default_host, default_port = DEFAULT_HOST, DEFAULT_PORT
 
     @app.command("hub")
     def hub(
-        host: str = typer.Option(DEFAULT_HOST, "--host", help="address to bind (default loopback only)"),
-        port: int = typer.Option(DEFAULT_PORT, "--port", min=0, max=65535, help="TCP port (0 = any free port)"),
+        host: str = typer.Option(default_host, "--host", help="address to bind (default loopback only)"),
+        port: int = typer.Option(default_port, "--port", min=0, max=65535, help="TCP port (0 = any free port)"),
         idle_exit: float = typer.Option(0.0, "--idle-exit", min=0.0,
                                         help="exit after this many seconds without clients (0 = never)"),
         verbose: bool = typer.Option(False, "--verbose", "-v", help="log every client join/leave at debug level"),

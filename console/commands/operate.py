@@ -8,9 +8,7 @@ frame with --frame tool): x y z, then roll pitch yaw about fixed axes, R = Rz(ya
 """
 from __future__ import annotations
 
-import getpass
 import json
-import socket
 import sys
 import time
 from typing import Any
@@ -18,10 +16,9 @@ from typing import Any
 import typer
 
 from spacearm.console import lease_store
+from spacearm.console.control import controlled_call as _controlled_call, take as _take  # noqa: F401 (web, oru)
 from spacearm.console.client import DEFAULT_API, ApiClient
-from spacearm.console.errors import CommandFailed, friendly_errors
-from spacearm.controller.daemon.api_errors import ErrorCode
-from spacearm.console.status_view import render_status
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.console.units import UnitError, parse_angle, parse_length
 
 API_OPTION = typer.Option(DEFAULT_API, "--api", help="Daemon API address (tcp:HOST:PORT or unix:PATH).",
@@ -34,27 +31,6 @@ WAIT_OPTION = typer.Option(True, "--wait/--no-wait", help="Wait until the motion
 
 def _emit(result: Any, as_json: bool, text: str) -> None:
     print(json.dumps(result) if as_json else text)
-
-
-def _controlled_call(client: ApiClient, cmd: str, **args: Any) -> Any:
-    """Call a command that needs the control lease, taking the lease if nobody holds it."""
-    key = lease_store.load(client.address)
-    if key is None:
-        key = _take(client)
-    try:
-        return client.call(cmd, lease=key, **args)
-    except CommandFailed as exc:
-        if exc.code != ErrorCode.NO_LEASE:
-            raise
-        # Our stored key is stale (daemon restarted): take control again, once.
-        return client.call(cmd, lease=_take(client), **args)
-
-
-def _take(client: ApiClient) -> str:
-    holder = f"{getpass.getuser()}@{socket.gethostname()}"
-    key = client.call("control.take", holder=holder)["lease"]
-    lease_store.save(client.address, key)
-    return key
 
 
 def _wait_for_motion(client: ApiClient, motion: int, as_json: bool) -> dict:
@@ -89,7 +65,7 @@ def _angles(values: list[str]) -> list[float]:
     try:
         return [parse_angle(v) for v in values]
     except UnitError as exc:
-        raise CommandFailed(str(exc)) from None
+        raise BadInput(str(exc)) from None
 
 
 # Let negative numbers through as arguments (click would read "-0.5" as an option).
@@ -101,19 +77,25 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def status(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Show the arm's state: mode, joints, forces, cycle statistics, stop reason."""
-        with ApiClient(api, token) as client:
-            result = client.call("status")
-        _emit(result, as_json, render_status(result))
+        from spacearm.console import quick
+        quick.run("status", api, token, as_json)
 
-    for name, helptext in (("enable", "Enable all joint drives (brakes released, holding position)."),
-                           ("disable", "Hold still, then disable drives and apply brakes."),
+    @app.command()
+    @friendly_errors
+    def enable(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
+               wait: bool = typer.Option(True, "--wait/--no-wait", help="Wait until every drive is enabled "
+                                         "(fails with the reason and a hint if one does not).")) -> None:
+        """Enable all joint drives (brakes released, holding position)."""
+        from spacearm.console import quick
+        quick.run("enable", api, token, as_json, wait)
+
+    for name, helptext in (("disable", "Hold still, then disable drives and apply brakes."),
                            ("reset", "Clear a protective stop (motion needs enable afterwards).")):
         def make(cmd: str):
             @friendly_errors
             def simple(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
-                with ApiClient(api, token) as client:
-                    result = _controlled_call(client, cmd)
-                _emit({"state": result}, as_json, f"{cmd}: arm is {result}")
+                from spacearm.console import quick
+                quick.run(cmd, api, token, as_json)
             simple.__doc__ = helptext
             return simple
         app.command(name)(make(name))
@@ -122,9 +104,8 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def stop(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Protective stop now (any console may stop the arm, control lease or not)."""
-        with ApiClient(api, token) as client:
-            result = client.call("stop")
-        _emit({"state": result}, as_json, f"stopped: arm is {result}")
+        from spacearm.console import quick
+        quick.run("stop", api, token, as_json)
 
     @app.command(context_settings=NUMERIC_ARGS)
     @friendly_errors
@@ -135,7 +116,7 @@ def register(app: typer.Typer) -> None:
             wait: bool = WAIT_OPTION) -> None:
         """Move one joint by DELTA (jerk-limited, within its limits)."""
         if not wait:
-            raise CommandFailed("jog --no-wait: a jog stops when its console disconnects (command "
+            raise BadInput("jog --no-wait: a jog stops when its console disconnects (command "
                                 "watchdog); use `move joints --no-wait` for an unattended motion")
         [angle] = _angles([delta])
         _motion("jog", api, token, as_json, wait, joint=joint, delta=angle, speed=speed)
@@ -144,12 +125,16 @@ def register(app: typer.Typer) -> None:
 
     @move_app.command("joints", context_settings=NUMERIC_ARGS)
     @friendly_errors
-    def move_joints(q: list[str] = typer.Argument(..., help="One angle per joint, e.g. 0 90deg -1.2."),
+    def move_joints(q: list[str] = typer.Argument(..., help="One angle per joint, e.g. 0 90deg -1.2, or a "
+                                                  "named posture of the arm file: ready, home, ..."),
                     speed: float = typer.Option(1.0, help="Fraction of the joint limits, (0, 1]."),
                     api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
                     wait: bool = WAIT_OPTION) -> None:
-        """Move all joints to Q (Ruckig: jerk-limited, all joints finish together)."""
-        _motion("move_joints", api, token, as_json, wait, q=_angles(q), speed=speed)
+        """Move all joints to Q or a named posture (Ruckig: jerk-limited, all joints finish together)."""
+        if len(q) == 1 and q[0][:1].isalpha():
+            _motion("move_joints", api, token, as_json, wait, posture=q[0], speed=speed)
+        else:
+            _motion("move_joints", api, token, as_json, wait, q=_angles(q), speed=speed)
 
     @move_app.command("pose", context_settings=NUMERIC_ARGS)
     @friendly_errors
@@ -163,7 +148,7 @@ def register(app: typer.Typer) -> None:
         try:
             xyz = [parse_length(v) for v in (x, y, z)]
         except UnitError as exc:
-            raise CommandFailed(str(exc)) from None
+            raise BadInput(str(exc)) from None
         _motion("move_pose", api, token, as_json, wait, xyz=xyz, rpy=_angles([roll, pitch, yaw]),
                 frame=frame, speed=speed)
 
@@ -174,20 +159,21 @@ def register(app: typer.Typer) -> None:
 
     @control_app.command("take")
     @friendly_errors
-    def control_take(api: str = API_OPTION, token: str = TOKEN_OPTION) -> None:
-        """Take control; refused while another console holds it."""
+    def control_take(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
+        """Take control (or keep it, when this user's consoles hold it); refused while another holds it."""
         with ApiClient(api, token) as client:
             _take(client)
-        print("control taken")
+            holder = (client.call("status").get("control") or {}).get("holder")
+        _emit({"control": "taken", "holder": holder}, as_json, f"control held by {holder}")
 
     @control_app.command("release")
     @friendly_errors
-    def control_release(api: str = API_OPTION, token: str = TOKEN_OPTION) -> None:
+    def control_release(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Release control so another console can take it."""
         with ApiClient(api, token) as client:
             client.call("control.release", lease=lease_store.load(client.address))
         lease_store.forget(api)
-        print("control released")
+        _emit({"control": "released"}, as_json, "control released")
 
     app.add_typer(control_app, name="control")
 

@@ -52,7 +52,7 @@ def follow(client: ApiClient, as_json: bool) -> dict:
             print(f"\r{100 * status['progress']:5.1f} %  stage {status['stage']} subtask {status['subtask']:2d}: "
                   f"{status['title']:<42}", end="", file=sys.stderr)
             last = key
-        if status["state"] not in ("running", "paused"):
+        if status["state"] not in ("running", "paused", "pausing", "resuming"):
             if not as_json:
                 print(file=sys.stderr)
             return status

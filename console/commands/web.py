@@ -44,7 +44,8 @@ def register(app: typer.Typer) -> None:
             # The page carries the operator's control lease; it is not for other machines.
             raise CommandFailed(f"--host {host}: the web console listens on loopback only "
                                 "(use an SSH tunnel to reach it from elsewhere)")
-        model = KinematicModel.from_config(load_arm_config(arm))
+        arm_config = load_arm_config(arm)
+        model = KinematicModel.from_config(arm_config)
         with ApiClient(connect, token) as client:
             status = client.call("status")
         if status.get("arm") not in (None, model.name):
@@ -58,7 +59,10 @@ def register(app: typer.Typer) -> None:
             except (OSError, ValueError, TimeoutError) as exc:
                 raise CommandFailed(f"camera ring {camera!r}: {exc}") from None
         options = WebOptions(api=connect, token=token, model=model,
-                             scene=load_scene_description(scene, model),
+                             scene={**load_scene_description(scene, model),
+                                    # the postures `move joints NAME` knows, for the page's presets
+                                    "postures": {"home": [j.home for j in arm_config.joints],
+                                                 **arm_config.postures}},
                              period=float(status.get("period") or 0.02), host=host, port=port,
                              camera=camera_feed)
         try:

@@ -236,13 +236,13 @@ class WebConsole:
         args = {k: v for k, v in args.items() if k != "lease"}   # the page never supplies a lease
         client = self._client(page)
         if COMMANDS[cmd]:
-            return _controlled_call(client, cmd, **args)
+            return _controlled_call(client, cmd, session=self._session_name(page), **args)
         return client.call(cmd, **args)
 
     def _control(self, page: Page, cmd: str) -> dict[str, Any]:
         client = self._client(page)
         if cmd == "control.take":
-            _take(client)
+            _take(client, session=self._session_name(page))
             return {"control": "taken"}
         key = lease_store.load(client.address)
         if key is None:
@@ -250,6 +250,9 @@ class WebConsole:
         client.call("control.release", lease=key)
         lease_store.forget(client.address)
         return {"control": "released"}
+
+    def _session_name(self, page: Page) -> str:
+        return f"web console :{self.options.port} page {id(page):x}"
 
     def _client(self, page: Page) -> ApiClient:
         if page.client is None:

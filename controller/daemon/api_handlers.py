@@ -15,7 +15,7 @@ from typing import Any, Callable, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from spacearm.base.config.loader import format_location
+from spacearm.base.config.loader import RANGE_ERRORS, describe_range, field_for_location, format_location
 from spacearm.controller.daemon.api_errors import ErrorCode
 from spacearm.controller.daemon.command_api import ApiError, Session
 from spacearm.controller.daemon.core import CommandRefused, ControllerCore
@@ -45,7 +45,9 @@ class JogArgs(Args):
 
 
 class MoveJointsArgs(Args):
-    q: list[float] = Field(min_length=1, max_length=12, description="rad")
+    q: list[float] | None = Field(default=None, min_length=1, max_length=12, description="rad")
+    posture: str | None = Field(default=None, min_length=1, max_length=64,
+                                description="a named posture of the arm file ([postures], home)")
     speed: float = Field(default=1.0, gt=0.0, le=1.0)
 
 
@@ -71,7 +73,13 @@ def _parse(model: type[Args], args: dict[str, Any]) -> Args:
         return model.model_validate(args)
     except ValidationError as exc:
         item = exc.errors()[0]
-        raise ApiError(f"{format_location(item['loc'])}: {item['msg']}", ErrorCode.BAD_ARGUMENT) from None
+        message = item["msg"]
+        if item["type"] in RANGE_ERRORS:   # the operator's words, not pydantic's ("Input should be ...")
+            field = field_for_location(model, item["loc"])
+            allowed = describe_range(field) if field is not None else None
+            if allowed:
+                message = f"{item.get('input')!r} is out of range: {allowed}"
+        raise ApiError(f"{format_location(item['loc'])}: {message}", ErrorCode.BAD_ARGUMENT) from None
 
 
 class CommandHandlers:
@@ -87,6 +95,7 @@ class CommandHandlers:
         self.recorder_control = recorder_control
         self.dof = dof
         self.cycle_timeout = cycle_timeout
+        self.postures: dict[str, list[float]] = {}   # named postures (the daemon fills them from the arm file)
         self._local = threading.local()   # the session of the request this API thread serves
         self.table: dict[str, tuple[type[Args], bool, Callable[[Args], Any]]] = {
             # name: (argument model, needs control lease, action)
@@ -129,7 +138,7 @@ class CommandHandlers:
             raise ApiError("the control cycle did not take the command in time", ErrorCode.CYCLE_TIMEOUT) from None
 
     def _take(self, a: TakeArgs) -> dict:
-        return {"lease": self.lease.take(a.holder)}
+        return {"lease": self.lease.take(a.holder, a.lease), "holder": self.lease.holder}
 
     def _start_motion(self, name: str, description: str, plan_from: Callable[[np.ndarray], Any],
                       keepalive: bool = False) -> Any:
@@ -168,6 +177,14 @@ class CommandHandlers:
                                   keepalive=True)
 
     def _move_joints(self, a: MoveJointsArgs) -> Any:
+        if (a.q is None) == (a.posture is None):
+            raise ApiError("give either q (joint values) or posture (a name)", ErrorCode.BAD_ARGUMENT)
+        if a.posture is not None:
+            if a.posture not in self.postures:
+                raise ApiError(f"posture: unknown posture {a.posture!r}; this arm has "
+                               f"{', '.join(sorted(self.postures)) or 'none'}", ErrorCode.BAD_ARGUMENT)
+            a = a.model_copy(update={"q": list(self.postures[a.posture]), "posture": None})
+        assert a.q is not None
         if len(a.q) != self.dof:
             raise ApiError(f"q: expected {self.dof} joint values, got {len(a.q)}", ErrorCode.BAD_ARGUMENT)
         goal = np.array(a.q)

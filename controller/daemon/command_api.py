@@ -101,7 +101,9 @@ class CommandServer:
         self.requests = 0
         self.rejected = 0
         self._server = self._make_server()
-        self._thread = threading.Thread(target=self._server.serve_forever,
+        # A short poll interval: shutdown() waits for serve_forever's next poll, and a signalled
+        # daemon must be down within a second (the default 0.5 s would eat half of it).
+        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.05},
                                         name="command-api", daemon=True)
 
     def _make_server(self) -> socketserver.BaseServer:
@@ -136,7 +138,10 @@ class CommandServer:
         self._thread.start()
 
     def stop(self) -> None:
-        self._server.shutdown()
+        # shutdown() waits for serve_forever to notice: never call it when the server was never
+        # started (a daemon whose bring-up failed would hang here for ever).
+        if self._thread.is_alive():
+            self._server.shutdown()
         self._server.server_close()
         if self.address.kind == "unix":
             Path(self.address.path).unlink(missing_ok=True)

@@ -25,8 +25,10 @@ from spacearm.controller.daemon.core import ControllerCore, Event
 from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
 from spacearm.controller.daemon.leases import ControlLease
+from spacearm.controller.daemon.node_timing import NodeTiming
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
+from spacearm.controller.recording.can_trace import TraceLimit
 from spacearm.controller.cycle import Command, Finding, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
@@ -47,6 +49,7 @@ class DaemonOptions:
     token: str | None = None
     record_dir: Path | None = Path("runs")       # None: do not record
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
+    can_trace_limit: TraceLimit = field(default_factory=TraceLimit)   # raw CAN trace: size per file, files kept
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
     # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
     # (drivers/priority.py); None leaves the interpreter's setting alone.
@@ -98,6 +101,10 @@ class Daemon:
             raise ValueError(f"bus config {options.bus_config} has {self.hardware.dof} joint drives, "
                              f"arm {options.arm} has {self.model.nq} joints")
         self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
+        # the nodes' answers in time (a starved simulator or hub shows here before it stops the arm);
+        # lockstep waits as long as the nodes take, so only the heartbeats say anything there
+        self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
+        self._reported_level = "ok"
         # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
         # A factory builds a Mode from validated arguments; composite modes (the ORU task
         # flow) build their sub-modes through the same registry.
@@ -111,6 +118,9 @@ class Daemon:
         self._last_stats_time = -1.0
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
                                         RecordingControl(self), self.model.nq)
+        # Named postures for `move joints NAME`: the arm file's [postures], and "home" from the
+        # joints' home angles unless the file names its own.
+        self.handlers.postures = {"home": [j.home for j in self.arm.joints], **self.arm.postures}
         self.handlers.mode_factories = self.mode_factories   # the same dict: "approach" once a camera is attached
         from spacearm.controller.daemon.oru_commands import install_oru   # here: it imports the daemon's handler types
         self.oru = install_oru(self)                      # "impedance", "oru" modes and oru.* commands
@@ -187,6 +197,7 @@ class Daemon:
             self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
+        self._watch_nodes(measurement)
         mode = self.core.mode
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
@@ -195,6 +206,17 @@ class Daemon:
         self.snapshot = snapshot
         self._record(snapshot, execution, events)
         return snapshot
+
+    def _watch_nodes(self, m: Measurement) -> None:
+        network = self.hardware.network
+        self.node_timing.add(self.hardware.last_io_wait, not m.missing,
+                             {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
+                              for name, h in network.health.items()})
+        if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
+            summary = self.node_timing.summary()
+            if summary.level != self._reported_level:
+                self._reported_level = summary.level
+                self.core._event(m.time, "nodes", summary.message)
 
     def _record(self, s: Snapshot, execution: float, events: list[Event]) -> None:
         for event in events:
@@ -227,11 +249,19 @@ class Daemon:
         new = RecorderThread(Path(path), {
             "arm": str(self.options.arm), "bus": self.options.bus, "clock": self.options.clock,
             "period": repr(self.options.period), "joints": ",".join(self.model.joint_names)},
-            bus_spec=self.options.bus)
+            bus_spec=self.options.bus, time_origin_ns=self._time_origin_ns(),
+            can_trace_limit=self.options.can_trace_limit)
         old, self.recorder = self.recorder, new
         if old is not None:
             old.close(grace=2 * self.options.period)
         return {"path": str(new.path), "can_log": str(new.can_log)}
+
+    def _time_origin_ns(self) -> int:
+        """UTC wall clock of controller time 0, as of now: the recording's log times are real dates
+        (with the lockstep clock controller time runs faster than the wall clock; the origin
+        is where the recording started)."""
+        now = self.snapshot.tick.time if self.snapshot is not None else 0.0
+        return time.time_ns() - int(round(now * 1e9))
 
     def stop_recording(self) -> dict:
         old, self.recorder = self.recorder, None
@@ -266,6 +296,7 @@ class Daemon:
             "network": self.hardware.statistics(),
             # per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded
             "bringup": self.hardware.bringup_report(),
+            "nodes": self.node_timing.summary().as_dict(),   # are the simulator/hub/bus answering in time
         }
 
     def _session_closed(self, session: Session) -> None:

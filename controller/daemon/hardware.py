@@ -63,6 +63,10 @@ class CanopenHardware:
     def node_count(self) -> int:
         return len(self.network.drivers)
 
+    @property
+    def boot_timeout(self) -> float:
+        return self.network.config.bus.boot_timeout
+
     def start(self, boot_timeout: float | None = None) -> None:
         self.network.boot(boot_timeout)
 

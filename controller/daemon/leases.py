@@ -5,6 +5,8 @@ A console keeps its key between invocations (see console/lease_store.py), so sep
 `spacearm move ...` calls from one operator share control while a second operator is
 refused until the first releases. There is deliberately no forced takeover over the
 API: taking control from a moving console is done at the arm (stop + reset), not remotely.
+The holder names who took it (user@host, terminal or web session, pid; console/operate.py), so
+`status` tells the operator's terminals and the browser console apart.
 """
 from __future__ import annotations
 
@@ -28,8 +30,12 @@ class ControlLease:
         self.holder = ""
         self.taken_at = 0.0
 
-    def take(self, holder: str) -> str:
+    def take(self, holder: str, key: str | None = None) -> str:
+        """A new key for `holder`; a console that already holds control (it presents the current
+        key) gets the same key back: taking what you hold is not an error."""
         with self._lock:
+            if self._key is not None and isinstance(key, str) and hmac.compare_digest(key, self._key):
+                return self._key
             if self._key is not None:
                 raise LeaseError(f"control is held by {self.holder!r}; watch only until it is released")
             self._key = secrets.token_hex(16)

@@ -82,12 +82,18 @@ def install_oru(daemon) -> OruSetup:
             return answer
         return handlers._in_cycle(start)
 
+    def _logged(t: float, what: str, action) -> str:
+        """Pause/resume as events (status, recording): what was asked and the runner's answer."""
+        state = action()
+        core._event(t, "oru", f"{what}: ORU changeout {state}")
+        return state
+
     def status(t: float, m) -> dict:
         runner = setup.last
         if runner is None:
             return {"state": "idle"}
         out = runner.status()
-        if core.mode is not runner and out["state"] in ("running", "paused"):
+        if core.mode is not runner and out["state"] in ("running", "paused", "pausing", "resuming"):
             # The core stopped it (supervision finding, operator stop, disable).
             out["state"] = "interrupted"
             out["failure"] = core.stop_reason.message if core.stop_reason else f"arm {core.state}"
@@ -95,8 +101,8 @@ def install_oru(daemon) -> OruSetup:
 
     handlers.table.update({
         "oru.run": (OruRunArgs, True, run),
-        "oru.pause": (NoArgs, True, lambda a: handlers._in_cycle(lambda t, m: runner_now().pause())),
-        "oru.resume": (NoArgs, True, lambda a: handlers._in_cycle(lambda t, m: runner_now().resume())),
+        "oru.pause": (NoArgs, True, lambda a: handlers._in_cycle(lambda t, m: _logged(t, "pause", runner_now().pause))),
+        "oru.resume": (NoArgs, True, lambda a: handlers._in_cycle(lambda t, m: _logged(t, "resume", runner_now().resume))),
         "oru.abort": (NoArgs, False, lambda a: handlers._in_cycle(lambda t, m: runner_now().abort())),
         "oru.status": (NoArgs, False, lambda a: handlers._in_cycle(status)),
     })

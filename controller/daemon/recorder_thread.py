@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from spacearm.controller.recording.can_trace import CanTrace
+from spacearm.controller.recording.can_trace import CanTrace, TraceLimit
 from spacearm.controller.recording.channels import CHANNELS
 from spacearm.controller.recording.mcap_recorder import McapRecorder
 
@@ -27,10 +27,13 @@ class RecordingInfo:
 
 
 class RecorderThread:
-    def __init__(self, path: Path, metadata: dict[str, str], bus_spec: str | None):
+    def __init__(self, path: Path, metadata: dict[str, str], bus_spec: str | None,
+                 time_origin_ns: int = 0, can_trace_limit: TraceLimit = TraceLimit()):
+        """`time_origin_ns`: UTC wall clock of controller time 0 (the MCAP log times);
+        `can_trace_limit`: size per raw CAN trace file and how many rotated files to keep."""
         self.path = Path(path)
         self.can_log = self.path.with_suffix(".can.log")
-        self._recorder = McapRecorder(self.path, metadata=metadata)
+        self._recorder = McapRecorder(self.path, metadata=metadata, time_origin_ns=time_origin_ns)
         for topic, schema in CHANNELS.items():
             self._recorder.add_channel(topic, schema)
         self._queue: "queue.Queue[tuple[str, float, dict[str, Any]] | None]" = queue.Queue(QUEUE_LIMIT)
@@ -41,7 +44,7 @@ class RecorderThread:
         self._can_trace: CanTrace | None = None
         if bus_spec is not None:
             try:
-                self._can_trace = CanTrace(bus_spec, self.can_log)
+                self._can_trace = CanTrace(bus_spec, self.can_log, limit=can_trace_limit)
             except Exception as exc:  # a trace is a bonus; the MCAP recording must not depend on it
                 self.put("/events", 0.0, {"t": 0.0, "kind": "recording",
                                           "message": f"no raw CAN trace: {exc}"})

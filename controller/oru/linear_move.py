@@ -37,9 +37,14 @@ class LinearToolMove(ModeBase):
         self.duration = max(1.875 * float(np.linalg.norm(self.dp)) / linear_velocity,
                             1.875 * float(np.linalg.norm(self.rotvec)) / angular_velocity, 4 * period)
         self.elapsed = 0.0
+        self._last_t: float | None = None
 
     def _next_setpoint(self, t: float, m: Measurement) -> JointSetpoint:
-        self.elapsed = min(self.duration, self.elapsed + self.period)
+        # Advance by the caller's clock (one period per call when it runs at full rate), so a
+        # runner that slows its clock to pause or resume slows this move along its path too.
+        step = self.period if self._last_t is None else max(0.0, t - self._last_t)
+        self._last_t = t
+        self.elapsed = min(self.duration, self.elapsed + step)
         s = quintic(self.elapsed / self.duration)[0]
         Xd = np.eye(4)
         Xd[:3, :3] = rotvec_to_matrix(s * self.rotvec) @ self.X0[:3, :3]
@@ -48,7 +53,7 @@ class LinearToolMove(ModeBase):
         for _ in range(2):
             T, J = fk_jacobian(self.model, self.data, q)
             q = q + J.T @ np.linalg.solve(J @ J.T + IK_DAMPING ** 2 * np.eye(6), twist_error(Xd, T))
-        dq = (q - self.q_cmd) / self.period
+        dq = (q - self.q_cmd) / self.period      # per cycle of the daemon, whatever the clock did
         self.q_cmd = q
         return JointSetpoint(q.copy(), dq, np.zeros_like(q))
 

@@ -1,8 +1,13 @@
 """The ORU changeout task runner: itself a daemon Mode that drives the Table 1 steps.
 
-State: running -> (paused <-> running) -> done | aborted | failed. The runner keeps its own
-clock, which stops while paused, so a paused free motion or contact resumes where it was; a
-paused runner holds the last joint target. Any step failure (force limit, capture not
+State: running -> (pausing -> paused -> resuming -> running) -> done | aborted | failed. The
+runner keeps its own clock, which stops while paused, so a paused free motion, approach or
+contact resumes where it was; a paused runner holds the last joint target. Pause and resume
+never step the clock's rate: it ramps 1 -> 0 and 0 -> 1 along a quintic (zero rate change and
+zero curvature at both ends), over a time set from the joint limits and the path's speed
+(PauseRamp), so the commanded velocity leaves and rejoins the path within the acceleration
+limits and with bounded jerk, whichever step is running (path-time scaling, as an industrial
+controller's speed override does). Any step failure (force limit, capture not
 confirmed, end-effector fault or timeout, jammed insertion, planning refused, lost marker in
 the approach) is reported in the runner's output, and the daemon core makes a protective stop
 (quick stop, brakes) and keeps the reason. Abort ends the flow holding the current target.
@@ -34,6 +39,33 @@ class StepRecord:
     notes: list[str] = field(default_factory=list)
 
 
+def _quintic(x: float) -> float:
+    """0 -> 1 with zero first and second derivative at both ends (peak slope 1.875)."""
+    x = min(max(x, 0.0), 1.0)
+    return x * x * x * (10.0 - 15.0 * x + 6.0 * x * x)
+
+
+@dataclass
+class PauseRamp:
+    """The clock rate's ramp: rate(t) from `start` to `end` over `duration` s."""
+    start: float
+    end: float
+    began: float        # runner-independent elapsed time (cycles x period) when it began
+    duration: float
+
+    def rate(self, elapsed: float) -> float:
+        return self.start + (self.end - self.start) * _quintic((elapsed - self.began) / self.duration)
+
+    def done(self, elapsed: float) -> bool:
+        return elapsed - self.began >= self.duration
+
+
+# The ramp's added acceleration is |path speed| x peak rate slope (1.875 / duration): with the
+# duration RAMP_MARGIN x (speed / acceleration limit) it stays below half the limit.
+RAMP_MARGIN = 4.0
+RAMP_MIN = 0.2   # s
+
+
 class OruTaskRunner(ModeBase):
     moving = True
 
@@ -55,33 +87,61 @@ class OruTaskRunner(ModeBase):
         self._failure: Finding | None = None
         self._begun = False
         self._step_progress = 0.0
+        self.rate = 1.0                              # the runner clock's rate (pause/resume ramps)
+        self._ramp: PauseRamp | None = None
+        self._elapsed = 0.0                          # cycles x period, never paused
+        self._path_speed = np.zeros(len(ctx.q_initial))   # |dq/dclock| of the last running cycle
+        self._last_dt = 0.0
+        self.a_max = np.asarray(ctx.model.a_max, float)
+        self.v_max = np.asarray(ctx.model.v_max, float)
 
     # ---- operator commands (run inside the cycle) ------------------------------------
     def pause(self) -> str:
-        if self.state == "running":
-            self.state = "paused"
+        """Slow the flow to rest along its path; 'paused' once the clock has stopped."""
+        if self.state in ("running", "resuming"):
+            self.state = "pausing"
+            self._ramp = PauseRamp(self.rate, 0.0, self._elapsed, self._ramp_time())
         return self.state
 
     def resume(self) -> str:
-        if self.state == "paused":
-            self.state = "running"
+        """Bring the flow from rest back up to speed along its path."""
+        if self.state in ("paused", "pausing"):
+            self.state = "resuming"
+            self._ramp = PauseRamp(self.rate, 1.0, self._elapsed, self._ramp_time())
         return self.state
 
+    def _ramp_time(self) -> float:
+        return float(max(RAMP_MIN, RAMP_MARGIN * np.max(self._path_speed / self.a_max)))
+
+    def _advance_rate(self) -> None:
+        """This cycle's clock rate; finishes a ramp (pausing -> paused, resuming -> running)."""
+        ramp = self._ramp
+        if ramp is None:
+            return
+        self.rate = ramp.rate(self._elapsed)
+        if ramp.done(self._elapsed):
+            self.rate = ramp.end
+            self._ramp = None
+            self.state = "paused" if ramp.end == 0.0 else "running"
+
     def abort(self) -> str:
-        if self.state in ("running", "paused"):
+        if self.state in ("running", "paused", "pausing", "resuming"):
             self.state = "aborted"
         return self.state
 
     # ---- Mode ------------------------------------------------------------------------
     def update(self, t: float, m: Measurement) -> ModeOutput:
         """One cycle of the flow on the runner's own clock (which stops while paused)."""
+        self._elapsed += self.ctx.impedance.period
+        self._advance_rate()
         out = self._advance(m)
         return ModeOutput(out.setpoint, out.end_effector, self._failure, self.state in ("done", "aborted"),
                           self.progress())
 
     def _advance(self, m: Measurement) -> ModeOutput:
-        period = self.ctx.impedance.period
-        if self.state != "running" or self._failure is not None:
+        period = self.ctx.impedance.period * self.rate
+        if self.state not in ("running", "pausing", "resuming") or self._failure is not None or period <= 0.0:
+            self._last_dt = 0.0
             return ModeOutput(hold(self.q_last))
         if self.index >= len(self.steps):
             self.state = "done"
@@ -95,6 +155,10 @@ class OruTaskRunner(ModeBase):
             self._begun = True
         out = step.update(self.clock, m)
         self._step_progress = out.progress
+        if self._last_dt > 0.05 * self.ctx.impedance.period:   # path speed per clock second, for the next ramp
+            # at most the velocity limits (a path is planned within them; a step change of
+            # target, e.g. between steps, is no speed)
+            self._path_speed = np.minimum(np.abs(out.setpoint.q - self.q_last) / self._last_dt, self.v_max)
         self.q_last = out.setpoint.q.copy()
         if out.failure is not None:
             self._failure = out.failure
@@ -104,6 +168,7 @@ class OruTaskRunner(ModeBase):
         if out.finished:
             self._complete(step)
         self.clock += period
+        self._last_dt = period        # the clock step between this setpoint and the next
         return out
 
     def _complete(self, step: Step) -> None:

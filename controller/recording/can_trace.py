@@ -7,10 +7,13 @@ daemon, 6 ms without), so on a bus another process can open (loopback hub, Socke
 tap runs as a low-priority child process. python-can's virtual bus exists
 only inside one process, so there the tap stays a thread.
 
-    python -m spacearm.controller.recording.can_trace BUS OUT.log    # what the daemon starts
+    python -m spacearm.controller.recording.can_trace BUS OUT.log [MAX_BYTES KEEP]   # what the daemon starts
 
 The child flushes the log once per second (a kill loses at most the last second) and ends
-when told (SIGTERM) or when its parent disappears.
+when told (SIGTERM) or when its parent disappears. The trace grows ~320 MB/h at 50 Hz, so it is
+rotated like logging's RotatingFileHandler: past `max_bytes` the file becomes `.1` (older ones
+shift to `.2`, ...), and only `keep` rotated files stay (TraceLimit; `spacearm daemon
+--can-trace-max-mb/--can-trace-files`).
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ import signal
 import subprocess
 import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -30,20 +34,75 @@ from spacearm.base.transport import open_bus, parse_bus_spec
 READY = "can_trace: ready"
 FLUSH_INTERVAL = 1.0   # s
 CHILD_NICENESS = 10    # the trace must never take CPU from the cycle
+SIZE_CHECK_FRAMES = 256   # look at the file size every this many frames (cheap, bounded overshoot)
+
+
+@dataclass(frozen=True)
+class TraceLimit:
+    max_bytes: int = 64 * 1024 * 1024   # per file; 0: no limit (one file, never rotated)
+    keep: int = 4                       # rotated files kept beside the current one
+
+    def __post_init__(self) -> None:
+        if self.max_bytes < 0 or self.keep < 0:
+            raise ValueError(f"CAN trace limit must be >= 0, got {self.max_bytes} bytes, {self.keep} files")
+
+
+class RotatingTraceWriter(can.Listener):
+    """candump .log writer that rotates at `limit.max_bytes` and keeps `limit.keep` old files."""
+
+    def __init__(self, path: Path, limit: TraceLimit):
+        self.path, self.limit = Path(path), limit
+        self._lock = threading.Lock()
+        self._frames = 0
+        self.rotations = 0
+        self._writer = can.CanutilsLogWriter(str(self.path), channel="can0", append=False)
+
+    @property
+    def file(self):
+        return self._writer.file
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self._writer.on_message_received(msg)
+            self._frames += 1
+            if self.limit.max_bytes and self._frames % SIZE_CHECK_FRAMES == 0 \
+                    and self._writer.file.tell() >= self.limit.max_bytes:
+                self._rotate()
+
+    def _rotate(self) -> None:
+        self._writer.stop()
+        rotated = [self.path.with_name(f"{self.path.name}.{i}") for i in range(1, self.limit.keep + 1)]
+        if rotated:
+            rotated[-1].unlink(missing_ok=True)
+            for older, newer in zip(reversed(rotated[1:]), reversed(rotated[:-1])):
+                if newer.exists():
+                    newer.rename(older)
+            self.path.rename(rotated[0])
+        self._writer = can.CanutilsLogWriter(str(self.path), channel="can0", append=False)
+        self.rotations += 1
+
+    def flush(self) -> None:
+        with self._lock:
+            self._writer.file.flush()
+
+    def stop(self) -> None:
+        with self._lock:
+            self._writer.stop()
 
 
 class CanTrace:
     """A running tap writing `path`; stop() finishes the file."""
 
-    def __init__(self, bus_spec: str, path: Path, start_timeout: float = 10.0):
+    def __init__(self, bus_spec: str, path: Path, start_timeout: float = 10.0, limit: TraceLimit = TraceLimit()):
         self.path = Path(path)
         self._proc: subprocess.Popen | None = None
-        self._in_process: tuple[can.BusABC, can.Notifier, can.CanutilsLogWriter] | None = None
+        self._in_process: tuple[can.BusABC, can.Notifier, RotatingTraceWriter] | None = None
         if parse_bus_spec(bus_spec)[0] == "virtual":
-            self._in_process = _open_tap(bus_spec, self.path)
+            self._in_process = _open_tap(bus_spec, self.path, limit)
             return
         self._proc = subprocess.Popen(
-            [sys.executable, "-m", "spacearm.controller.recording.can_trace", bus_spec, str(self.path)],
+            [sys.executable, "-m", "spacearm.controller.recording.can_trace", bus_spec, str(self.path),
+             str(limit.max_bytes), str(limit.keep)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=module_env(),
             preexec_fn=_below_the_cycle)
         # Wait for the tap to be on the bus so the trace covers the recording from its start.
@@ -72,33 +131,35 @@ def _below_the_cycle() -> None:
     os.nice(CHILD_NICENESS)
 
 
-def _open_tap(bus_spec: str, path: Path) -> tuple[can.BusABC, can.Notifier, can.CanutilsLogWriter]:
+def _open_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC, can.Notifier, RotatingTraceWriter]:
     tap = open_bus(bus_spec)
-    writer = can.CanutilsLogWriter(str(path), channel="can0", append=False)
+    writer = RotatingTraceWriter(path, limit)
     return tap, can.Notifier(tap, [writer], timeout=0.1), writer
 
 
-def _close_tap(tap: can.BusABC, notifier: can.Notifier, writer: can.CanutilsLogWriter) -> None:
+def _close_tap(tap: can.BusABC, notifier: can.Notifier, writer: RotatingTraceWriter) -> None:
     notifier.stop()
     tap.shutdown()
     writer.stop()
 
 
 def main(argv: list[str] | None = None) -> int:
-    bus_spec, path = argv if argv is not None else sys.argv[1:3]
+    args = argv if argv is not None else sys.argv[1:]
+    bus_spec, path = args[:2]
+    limit = TraceLimit(*(int(v) for v in args[2:4]))
     parent = os.getppid()
     done = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: done.set())
     signal.signal(signal.SIGINT, lambda *_: done.set())
     try:
-        tap, notifier, writer = _open_tap(bus_spec, Path(path))
+        tap, notifier, writer = _open_tap(bus_spec, Path(path), limit)
     except Exception as exc:
         print(f"can_trace: cannot open {bus_spec}: {exc}", flush=True)
         return 1
     print(READY, flush=True)
     try:
         while not done.wait(FLUSH_INTERVAL) and os.getppid() == parent:
-            writer.file.flush()
+            writer.flush()
     finally:
         _close_tap(tap, notifier, writer)
     return 0

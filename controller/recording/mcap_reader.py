@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, Message, Schema
+from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 
 
@@ -47,6 +47,7 @@ def read_recording(path: str | Path, topics: set[str] | None = None) -> Recordin
         handle = open(path, "rb")
     except OSError as exc:
         raise RecordingError(f"{path}: cannot open: {exc.strerror}") from None
+    origin_ns = 0
     with handle:
         head = handle.read(8)
         if head[:5] != b"\x89MCAP":
@@ -61,12 +62,15 @@ def read_recording(path: str | Path, topics: set[str] | None = None) -> Recordin
                     if channel is None or topics is not None and channel.topic not in topics:
                         continue
                     recording.messages.append(RecordedMessage(
-                        channel.topic, record.log_time / 1e9, record.sequence,
+                        channel.topic, (record.log_time - origin_ns) / 1e9, record.sequence,
                         json.loads(record.data)))
                 elif isinstance(record, Footer):
                     recording.complete = True
                 elif isinstance(record, Schema):
                     pass
+                elif isinstance(record, Metadata) and record.name == "run":
+                    # log times are UTC wall clock (mcap_recorder.py); give back controller time
+                    origin_ns = int(record.metadata.get("log_time_origin_ns", "0") or 0)
         except (McapError, EOFError, ValueError, json.JSONDecodeError) as exc:
             recording.problem = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
         except Exception as exc:  # truncated chunks surface as struct/zstd errors

@@ -18,14 +18,17 @@ PROFILE = "spacearm"
 
 class McapRecorder:
     def __init__(self, path: str | Path, flush_interval: float = 1.0,
-                 metadata: dict[str, str] | None = None):
+                 metadata: dict[str, str] | None = None, time_origin_ns: int = 0):
+        """`time_origin_ns`: UTC wall-clock time (ns since the epoch) of message time 0, added to
+        every log/publish time so Foxglove and the mcap CLI show the real date; kept in the
+        metadata ("run": "log_time_origin_ns") so readers give back the controller's time."""
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "wb")
         self._writer = Writer(self._file, compression=CompressionType.ZSTD)
         self._writer.start(profile=PROFILE, library="spacearm")
-        if metadata:
-            self._writer.add_metadata("run", dict(metadata))
+        self._origin_ns = int(time_origin_ns)
+        self._writer.add_metadata("run", {**(metadata or {}), "log_time_origin_ns": str(self._origin_ns)})
         self._channels: dict[str, int] = {}
         self._sequence: dict[str, int] = {}
         self._flush_interval_ns = int(flush_interval * 1e9)
@@ -50,7 +53,8 @@ class McapRecorder:
         channel_id = self._channels[topic]
         time_ns = int(round(time_s * 1e9))
         self._sequence[topic] += 1
-        self._writer.add_message(channel_id=channel_id, log_time=time_ns, publish_time=time_ns,
+        self._writer.add_message(channel_id=channel_id, log_time=self._origin_ns + time_ns,
+                                 publish_time=self._origin_ns + time_ns,
                                  sequence=self._sequence[topic],
                                  data=json.dumps(message, separators=(",", ":")).encode())
         self.messages_written += 1

@@ -90,4 +90,4 @@ def test_cli_reports_bad_file_in_one_line_without_traceback(tmp_path):
                             capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
-    assert result.stderr.strip() == f"error: {path}: joints[3].a: out of range: allowed range [-30, 30] m (got 560)"
+    assert result.stderr.strip() == f"error[bad_config]: {path}: joints[3].a: out of range: allowed range [-30, 30] m (got 560)"

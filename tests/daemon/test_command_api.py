@@ -140,3 +140,24 @@ def test_one_console_holds_control_at_a_time():
     lease.release(key)
     assert not lease.held
     lease.require(lease.take("bob@console"))
+
+
+def test_the_holder_taking_control_again_keeps_it_and_others_are_still_refused():
+    lease = ControlLease()
+    key = lease.take("alice@vm /dev/pts/1 pid 10")
+    assert lease.take("alice@vm /dev/pts/2 pid 11", key) == key      # the same operator, another terminal
+    assert lease.holder == "alice@vm /dev/pts/1 pid 10"
+    with pytest.raises(LeaseError, match="held by 'alice@vm /dev/pts/1 pid 10'"):
+        lease.take("bob@vm web console :8740 page 1", "a-guessed-key")
+    with pytest.raises(LeaseError):
+        lease.take("bob@vm /dev/pts/3 pid 12")
+    lease.release(key)
+    assert lease.take("bob@vm /dev/pts/3 pid 12", key) != key         # a released key is worth nothing
+
+
+def test_out_of_range_arguments_are_explained_in_the_operators_words():
+    from spacearm.controller.daemon.api_handlers import JogArgs, _parse
+    with pytest.raises(ApiError) as refused:
+        _parse(JogArgs, {"joint": 1, "delta": 2.0})
+    assert str(refused.value) == "delta: 2.0 is out of range: allowed range [-1.5708, 1.5708] rad"
+    assert "Input should be" not in str(refused.value)

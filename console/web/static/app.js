@@ -90,9 +90,17 @@ function scheduleRender() {
 
 function renderStatus(s) {
   if (!s) return;
+  const key = `${s.state}|${s.mode}|${(s.stop || {}).code}`;
+  if (key !== spacearm.lastStateKey && spacearm.scene) spacearm.scene.requestRender();   // any state change redraws
+  spacearm.lastStateKey = key;
   setText($("state"), s.state);
   setText($("mode"), s.mode || "-");
   setText($("control"), s.control && s.control.held ? s.control.holder : "free");
+  const nodes = s.nodes || {}, late = $("nodes-late");   // the simulator/hub/bus answering late
+  if (late) {
+    late.classList.toggle("hidden", !nodes.level || nodes.level === "ok");
+    setText(late, nodes.level && nodes.level !== "ok" ? "NODES LATE: " + nodes.message : "");
+  }
   const banner = $("stopreason");
   if (banner.classList.contains("hidden") === !!s.stop_reason) banner.classList.toggle("hidden", !s.stop_reason);
   setText(banner, s.stop_reason ? "PROTECTIVE STOP: " + s.stop_reason + " (reset, then enable)" : "");
@@ -251,8 +259,19 @@ function invalidatePresim() {           // edited values: the old presimulation 
 
 function setupForms(desc) {
   const n = desc.arm.nq;
+  // The point-to-point form starts at the arm file's "ready" posture (where Cartesian work is
+  // possible), with one preset button per named posture (`move joints NAME` at the terminal).
+  const postures = desc.postures || {};
+  const start = postures.ready || postures.home || desc.arm.joint_names.map(() => 0);
   $("joint-inputs").innerHTML = desc.arm.joint_names.map((name, i) =>
-    `<input class="q-input" type="number" step="1" value="0" title="${esc(name)}">`).join(" ");
+    `<input class="q-input" type="number" step="1" value="${(start[i] / DEG).toFixed(3)}" title="${esc(name)}">`).join(" ");
+  $("posture-buttons").innerHTML = Object.keys(postures).map(p =>
+    `<button class="small posture" data-posture="${esc(p)}" title="Fill in the ${esc(p)} posture">${esc(p)}</button>`).join(" ");
+  document.querySelectorAll("button.posture").forEach(b => b.onclick = () => {
+    const q = postures[b.dataset.posture];
+    document.querySelectorAll(".q-input").forEach((el, i) => { el.value = (q[i] / DEG).toFixed(3); });
+    invalidatePresim();
+  });
   $("jog-joint").max = n;
   document.querySelectorAll("input[name=kind]").forEach(el => el.addEventListener("change", () => {
     for (const k of ["jog", "move_joints", "move_pose"]) $("form-" + k).classList.toggle("hidden", k !== kind());

@@ -102,7 +102,13 @@ class CellScene {
     this.ghost.visible = false;
     this.ghostPath = null;
     this.frameCount = 0;
+    // Redraw on every size change of the view, not only the window's (a panel reflow resizes
+    // the container alone), and whenever the page or the GL context comes back: a resize
+    // clears the canvas, and an arm standing still asks for no frame of its own.
     window.addEventListener("resize", () => this.resize());
+    if (window.ResizeObserver) new ResizeObserver(() => this.resize()).observe(this.container);
+    document.addEventListener("visibilitychange", () => { if (!document.hidden) this.requestRender(); });
+    this.renderer.domElement.addEventListener("webglcontextrestored", () => this.requestRender());
     this.resize();
     this.framePending = false;
     this.requestRender();
@@ -177,6 +183,7 @@ class CellScene {
 
   resize() {
     const w = this.container.clientWidth, h = this.container.clientHeight;
+    if (w === 0 || h === 0) return;           // hidden or collapsed: keep the last size, redraw when it returns
     this.renderer.setSize(w, h);
     this.camera.aspect = w / Math.max(h, 1);
     this.camera.updateProjectionMatrix();

@@ -1,0 +1,147 @@
+"""Command-to-daemon latency of the console: `spacearm stop`, `status`, `enable`, `disable`,
+`reset` as the operator types them (a new process each), idle and with a 2-process CPU load.
+
+The console talks to the daemon through a forwarding proxy in this process that notes when each
+connection's first request line arrives: command-to-daemon = that moment - the moment the
+process was spawned (what the operator waits for before the daemon can act). Round trip =
+spawn to exit. Stack: `spacearm sim` (SCHED_FIFO 50, standing in for hardware) and
+`spacearm daemon` (real-time clock) on a loopback hub.
+
+    .venv/bin/python bench/bench_console.py [--rounds 20]
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from bench.bench_web import start, stop  # noqa: E402
+from hil_tests.harness import CpuSteal, free_port  # noqa: E402
+
+COMMANDS = ("reset", "enable", "status", "disable", "stop")
+TARGETS = {"stop": (0.150, 0.500)}      # s: idle, loaded (issue 21)
+SPACEARM = str(Path(sys.executable).parent / "spacearm")
+
+
+class ArrivalProxy:
+    """127.0.0.1 proxy in front of the daemon API: forwards both ways, notes first-request times."""
+
+    def __init__(self, upstream_port: int):
+        self.upstream = upstream_port
+        self.server = socket.create_server(("127.0.0.1", 0))
+        self.port = self.server.getsockname()[1]
+        self.arrivals: list[float] = []
+        threading.Thread(target=self._accept, daemon=True).start()
+
+    def _accept(self) -> None:
+        while True:
+            try:
+                client, _ = self.server.accept()
+            except OSError:
+                return
+            threading.Thread(target=self._serve, args=(client,), daemon=True).start()
+
+    def _serve(self, client: socket.socket) -> None:
+        first = True
+        with client, socket.create_connection(("127.0.0.1", self.upstream)) as upstream:
+            threading.Thread(target=self._pipe, args=(upstream, client), daemon=True).start()
+            while data := client.recv(65536):
+                if first and b"\n" in data:
+                    self.arrivals.append(time.monotonic())
+                    first = False
+                upstream.sendall(data)
+
+    @staticmethod
+    def _pipe(source: socket.socket, sink: socket.socket) -> None:
+        try:
+            while data := source.recv(65536):
+                sink.sendall(data)
+        except OSError:
+            pass
+
+
+def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list[float], list[float]]]:
+    results: dict[str, tuple[list[float], list[float]]] = {c: ([], []) for c in COMMANDS}
+    for _ in range(rounds):
+        for command in COMMANDS:
+            before = len(proxy.arrivals)
+            spawned = time.monotonic()
+            subprocess.run([SPACEARM, command, "--api", f"tcp:127.0.0.1:{proxy.port}"], env=env,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
+            ended = time.monotonic()
+            if len(proxy.arrivals) > before:
+                results[command][0].append(proxy.arrivals[before] - spawned)
+            results[command][1].append(ended - spawned)
+            if command == "reset":
+                time.sleep(0.3)       # let the drives clear their faults before enable
+    return results
+
+
+def cpu_load(processes: int) -> list[subprocess.Popen]:
+    return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(processes)]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=20, help="repetitions of each command per phase")
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="bench_console_"))
+    bus = f"loopback:bench-console-{os.getpid()}"
+    api_port = free_port()
+    env = {**os.environ, "SPACEARM_LEASE_DIR": str(work / "lease")}
+    procs = []
+    try:
+        sim, _ = start(["sim", "--bus", bus, "--plant", "configs/plant/oru_testbed_nominal.toml",
+                        "--rt-priority", "50"], "nodes ready", work / "sim.log")
+        procs.append(sim)
+        daemon, _ = start(["daemon", "--bus", bus, "--api", f"tcp:127.0.0.1:{api_port}", "--no-record"],
+                          "spacearm daemon:", work / "daemon.log")
+        procs.append(daemon)
+        proxy = ArrivalProxy(api_port)
+        measure(proxy, 1, env)                        # warm the page cache and the lease
+        rows = []
+        for phase, burners in (("idle", 0), ("loaded", 2)):
+            load = cpu_load(burners)
+            try:
+                steal = CpuSteal()
+                time.sleep(1.0 if burners else 0.0)
+                results = measure(proxy, args.rounds, env)
+                rows.append((phase, results, os.getloadavg()[0], steal.fraction()))
+            finally:
+                for p in load:
+                    p.kill()
+                    p.wait()
+    finally:
+        for proc in reversed(procs):
+            stop(proc)
+    print(f"\nconsole command-to-daemon latency ({args.rounds} runs per command and phase; "
+          f"{platform.node()}, {os.cpu_count()} CPUs, Python {platform.python_version()})")
+    print(f"{'phase':<7} {'command':<8} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
+          f"{'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
+    for phase, results, load, steal in rows:
+        for command, (arrive, total) in results.items():
+            target = TARGETS.get(command)
+            limit = None if target is None else target[0 if phase == "idle" else 1]
+            med, p99 = (1e3 * np.median(arrive), 1e3 * np.percentile(arrive, 99)) if arrive else (float("nan"),) * 2
+            verdict = "-" if limit is None else (f"<= {1e3 * limit:.0f}: median " + ("ok" if med <= 1e3 * limit else "MISSED")
+                                                 + ", p99 " + ("ok" if p99 <= 1e3 * limit else "MISSED"))
+            print(f"{phase:<7} {command:<8} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
+                  f"{1e3 * np.percentile(total, 99):5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
+    print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
+          "idle = no load of ours (the load column includes other users of the machine); loaded = 2 CPU-bound "
+          "processes added")
+
+
+if __name__ == "__main__":
+    main()
