@@ -1,16 +1,20 @@
 """`spacearm diagnose`: where a recording departs from the nominal simulation, and why."""
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
+import time
 from pathlib import Path
 
+import numpy as np
 import typer
 
 from spacearm.console.errors import EXIT_USAGE, friendly_errors
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
-from spacearm.offline.diagnosis.direct_sim import SimTraces
-from spacearm.offline.diagnosis.recording_io import RecordingFormatError, parse_column_map, read_table
+from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged
+from spacearm.offline.diagnosis.column_spec import parse_columns
+from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_recording
 from spacearm.offline.diagnosis.report import write_report
 from spacearm.firmware_sim.plant import load_plant_config
 
@@ -26,16 +30,44 @@ def register(app: typer.Typer) -> None:
                  nominal: Path = typer.Option(DEFAULT_NOMINAL, help="Nominal plant file the simulator uses."),
                  report: Path = typer.Option(Path("diagnosis"), help="Directory for report.md, PNGs, JSON, "
                                                                      "plant_fitted.toml."),
-                 columns: str = typer.Option(None, help="Column map for other files: OURS=THEIRS,... "
-                                                       "(e.g. q_1=pos1,tau_1=torque1)."),
+                 columns: str = typer.Option(None, help="Column map for other files: OURS=EXPR,... with EXPR a "
+                                                       "column name or number and an optional scale and offset "
+                                                       "(e.g. tau_3=#14*0.125, q_1=pos1*deg, q_1..7=#2..8)."),
+                 command: str = typer.Option("recorded", help="recorded: the file's q_cmd columns; measured: the "
+                                                              "recording has no command, replay the measured q."),
+                 rate: float = typer.Option(None, help="Resample onto this rate, Hz (default: the recording's own)."),
+                 dry_run: bool = typer.Option(False, "--dry-run", help="Print how each column was read and stop."),
+                 urdf: Path = typer.Option(None, help="The recorded arm's URDF: compare the recorded torques with its "
+                                                      "rigid-body model on the measured motion (any arm, N joints)."),
+                 heldout_from: float = typer.Option(None, help="Held-out rows from this time on, s (default: the "
+                                                               "last 40 %)."),
+                 experiment: Path = typer.Option(None, help="When findings are ambiguous or joints did not move, "
+                                                            "write the trajectory that separates them here (CSV)."),
+                 experiment_plant: Path = typer.Option(None, help="Run the designed experiment through record-sim "
+                                                                  "with this plant (standing in for the arm) and "
+                                                                  "diagnose it."),
+                 arm: Path = typer.Option(Path("configs/arm/oru_testbed_6dof.toml"),
+                                          help="Arm file whose limits bound the designed experiment."),
                  as_json: bool = typer.Option(False, "--json", help="Print the JSON summary.")) -> None:
         """Locate, name and fit the physics the nominal simulator leaves out; show the fit improve."""
         nominal_config = load_plant_config(nominal)
         try:
-            table = read_table(real, parse_column_map(columns))
+            if rate is not None and not (0.0 < rate <= 1e5):
+                raise RecordingFormatError(f"--rate {rate}: expected a rate in Hz between 0 and 100000")
+            specs = parse_columns(columns)
+            period = 1.0 / rate if rate else None
+            read_started = time.perf_counter()
+            table, lines = read_recording(real, specs, command, period)
+            read_s = time.perf_counter() - read_started
+            if dry_run:
+                print("\n".join(lines))
+                return
+            if urdf is not None:
+                _diagnose_arm(table, urdf, heldout_from, report, real.name, as_json, experiment)
+                return
             traces = None
             if sim is not None:
-                s = read_table(sim, parse_column_map(columns))
+                s, _ = read_recording(sim, specs, command, period)
                 if s.q.shape != table.q.shape:
                     raise RecordingFormatError(f"{sim}: {s.q.shape[0]} rows x {s.q.shape[1]} joints, the recording "
                                                f"has {table.q.shape[0]} x {table.q.shape[1]}")
@@ -43,8 +75,18 @@ def register(app: typer.Typer) -> None:
         except RecordingFormatError as exc:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
-        result = run_diagnosis(table, nominal_config, traces)
+        try:
+            with _progress_bar() as progress:
+                result = run_diagnosis(table, nominal_config, traces, progress)
+        except SimulationDiverged as exc:
+            print(f"error: nominal replay of {real.name}: {exc}; check the nominal plant file {nominal}",
+                  file=sys.stderr)
+            raise SystemExit(1) from None
+        result.timings["read_s"] = read_s
         data = write_report(result, report, real.name, nominal_config)
+        if experiment is not None or experiment_plant is not None:
+            data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
+                                             experiment_plant, report)
         if as_json:
             print(json.dumps(data, indent=2))
             return
@@ -55,3 +97,85 @@ def register(app: typer.Typer) -> None:
                       f"({100 * (1 - c.rms_after / c.rms_before):.0f} % lower; noise {c.noise:.3g})")
         print(f"report: {report / 'report.md'}; fitted plant: {report / 'plant_fitted.toml'}; "
               f"{result.timings['total_s']:.1f} s")
+        for line in data.get("experiment", {}).get("lines", []):
+            print(line)
+
+
+@contextlib.contextmanager
+def _progress_bar():
+    """A rich progress bar on stderr for the stages of a long diagnosis (terminals only)."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    from rich.console import Console
+    from rich.progress import Progress
+    with Progress(console=Console(stderr=True), transient=True) as bar:
+        task = bar.add_task("diagnosis", total=1.0)
+        yield lambda stage, done: bar.update(task, completed=done, description=stage)
+
+
+def _experiment(result, table, nominal_config, arm: Path, out: Path, plant: Path | None, report: Path) -> dict:
+    """Design (and, with a stand-in plant, run and diagnose) the experiment that settles the
+    ambiguous findings (spacearm.offline.diagnosis.experiment)."""
+    from spacearm.offline.diagnosis.experiment import design_experiment, joints_to_excite, limits_from_arm
+    from spacearm.offline.diagnosis.honesty import MIN_TRAVEL
+    from spacearm.offline.diagnosis.record import record_direct
+    from spacearm.offline.diagnosis.trajectory import save_trajectory
+    joints = joints_to_excite(result, table.q, MIN_TRAVEL)
+    if not joints:
+        return {"joints": [], "lines": ["experiment: nothing ambiguous or unexcited, none needed"]}
+    traj = design_experiment(joints, table.q[-1], limits_from_arm(arm, table.n_joints), table.dt)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    save_trajectory(out, traj.t, traj.q)
+    lines = [f"experiment: joints {[j + 1 for j in joints]}, {traj.duration:.0f} s, three speeds both ways with "
+             f"dwells, within {arm.name}'s limits: {out}"]
+    info = {"joints": [j + 1 for j in joints], "trajectory": str(out), "duration_s": traj.duration}
+    if plant is None:
+        lines.append(f"  run it: spacearm record-sim --plant PLANT --trajectory {out} --out exp.csv, "
+                     "then spacearm diagnose exp.csv")
+    else:
+        second = run_diagnosis(record_direct(load_plant_config(plant), traj, None), nominal_config)
+        write_report(second, report / "experiment", out.name, nominal_config)
+        lines.append(f"  after the experiment ({plant.name}): {second.verdict}")
+        info["verdict_after"] = second.verdict
+    info["lines"] = lines
+    return info
+
+
+def _diagnose_arm(table, urdf: Path, heldout_from: float | None, report: Path, source: str, as_json: bool,
+                  experiment: Path | None = None) -> None:
+    """The recorded torques against the URDF's rigid-body model (spacearm.offline.diagnosis.arm_torque)."""
+    from spacearm.offline.diagnosis.arm_torque import arm_summary, diagnose_arm
+    from spacearm.offline.diagnosis.rigid_body import load_arm
+    arm = load_arm(urdf, table.n_joints)
+    if not np.any(table.tau):
+        raise RecordingFormatError(f"{source}: no torque columns (tau_i): nothing to compare with {urdf.name}")
+    try:
+        result = diagnose_arm(table, arm, heldout_from)
+    except ValueError as exc:
+        raise RecordingFormatError(f"{source}: {exc}") from None
+    data = arm_summary(result)
+    if experiment is not None and result.to_excite:
+        from spacearm.offline.diagnosis.experiment import design_experiment, limits_from_urdf
+        from spacearm.offline.diagnosis.trajectory import save_trajectory
+        traj = design_experiment(result.to_excite, table.q[-1], limits_from_urdf(arm), table.dt)
+        experiment.parent.mkdir(parents=True, exist_ok=True)
+        save_trajectory(experiment, traj.t, traj.q)
+        data["experiment"] = {"joints": [j + 1 for j in result.to_excite], "trajectory": str(experiment),
+                              "duration_s": traj.duration, "lines": [
+                                  f"experiment for joints {[j + 1 for j in result.to_excite]} within {urdf.name}'s "
+                                  f"limits, {traj.duration:.0f} s: {experiment} (run it on the arm, record, diagnose)"]}
+    report.mkdir(parents=True, exist_ok=True)
+    (report / "summary.json").write_text(json.dumps(data, indent=2))
+    if as_json:
+        print(json.dumps(data, indent=2))
+        return
+    print(result.verdict)
+    for w in result.not_reported:
+        print(f"  not reported: {w}")
+    print(f"  held-out from t = {result.heldout_start:.3g} s; torque RMS per joint, rigid-body model -> with findings:")
+    for j in result.joints:
+        print(f"  tau_{j.joint + 1}: {j.rms_nominal:.3g} -> {j.rms_fitted:.3g} N m" + ("" if j.moved else " (did not move)"))
+    print(f"report: {report / 'summary.json'}; {result.timings['total_s']:.1f} s")
+    for line in data.get("experiment", {}).get("lines", []):
+        print(line)

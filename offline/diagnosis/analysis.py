@@ -22,14 +22,18 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
 from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
                                             by_name)
-from spacearm.offline.diagnosis.direct_sim import SimTraces, simulate
+from spacearm.offline.diagnosis.direct_sim import SimTraces, joint_settings, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
+from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
+from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, uncertain
+from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.sim_refit import refine_size
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
@@ -46,6 +50,7 @@ class Finding:
     stderr: dict[str, float]
     text: str
     onset: float | None = None   # first change point of the channel's residual, s
+    alternatives: list[str] = field(default_factory=list)   # laws that explain the data as well
 
 
 @dataclass
@@ -58,6 +63,7 @@ class ChannelResult:
     excess_before: float = 0.0   # whole-recording mismatch statistic vs nominal (see mismatch_statistic)
     excess_after: float = 0.0    # the same vs the fitted simulation
     metric: str = "rms"          # "envelope": hunting/ringing, compared by its 0.5 s RMS envelope
+    onset: float | None = None   # where the fitted simulation's residual first changes, s (unexplained only)
 
     @property
     def unexplained(self) -> bool:
@@ -74,6 +80,8 @@ class Diagnosis:
     residual_before: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     residual_after: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
     t: np.ndarray | None = field(default=None, repr=False)
+    not_reported: list[str] = field(default_factory=list)   # fits left out, and why
+    sensor_findings: list[SensorFinding] = field(default_factory=list)
 
     @property
     def unexplained(self) -> list[ChannelResult]:
@@ -81,12 +89,13 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        if not self.findings and not self.unexplained:
+        if not self.findings and not self.unexplained and not self.sensor_findings:
             return "no significant mismatch between the recording and the nominal simulation"
-        words = [f.text for f in self.findings]
+        words = [s.text for s in self.sensor_findings] + [f.text + "".join(f" -- or equally well: {a}" for a in f.alternatives) for f in self.findings]
         if self.unexplained:
             words.append("mismatch no catalogue effect explains on " + ", ".join(
-                f"{c.name} ({c.excess_after:.1f}x the significance threshold)" for c in self.unexplained))
+                f"{c.name} ({c.excess_after:.1f}x the significance threshold"
+                + (f", from t = {c.onset:.1f} s" if c.onset is not None else "") + ")" for c in self.unexplained))
         return "; ".join(words)
 
 
@@ -181,7 +190,11 @@ def _torque_fits(table: RecordingTable, sim: SimTraces, quiet: SimTraces, j: int
     fit_rows = train & (np.abs(s.dq) > VELOCITY_DEADBAND)
     if fit_rows.sum() < 0.2 * train.sum():
         fit_rows = train
-    held = ~train
+    # judged on the same kind of rows: at rest a sticking joint holds whatever torque it
+    # stopped with, which no candidate predicts and which would hide a stiction bump
+    held = ~train & (np.abs(s.dq) > VELOCITY_DEADBAND)
+    if held.sum() < 0.2 * (~train).sum():
+        held = ~train
     fits = {c.effect: fit_candidate(c, s, y, fit_rows, j, held) for c in JOINT_CANDIDATES if c.channel == "tau"}
     ranked = _ranked(list(fits.values()))
     if not ranked:
@@ -246,10 +259,14 @@ def _onset(t: np.ndarray, residual: np.ndarray, noise: float) -> float | None:
     return float(t[min(points[0] * step, len(t) - 1)]) if points else None
 
 
-def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None = None) -> Diagnosis:
+def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None = None,
+             progress: Callable[[str, float], None] | None = None) -> Diagnosis:
+    """`progress(stage, fraction done)` is called between stages (the console's progress bar)."""
     timings = {}
     started = time.perf_counter()
+    report = progress or (lambda stage, done: None)
     n_rows, n = table.q.shape
+    report("nominal replay", 0.0)
     if sim is None:
         sim = replay(table, nominal)
     timings["replay_s"] = time.perf_counter() - started
@@ -262,9 +279,23 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     # nominal replay's own quantisation chatter would "explain" the chatter in the residual.
     quiet = replay(table, ideal_sensors(nominal))
     tau_noise = float(np.median([noise_level(table.tau[:, j] - sim.tau[:, j]) for j in range(n)]))
-    for j in range(n):
-        fit = next((f for f in _torque_fits(table, sim, quiet, j, train) if _simulates(table, nominal, f)), None)
+    # a joint that did not move excited nothing: no finding there (its fits are noise)
+    active = [j for j in range(n) if moved(table.q[:, j], quiet.dq[:, j])]
+    alternatives: dict[int, list[ChannelFit]] = {}
+    settings = joint_settings(n=n)
+    quanta = ([(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
+               for j in range(n)], [settings[j].rated_joint_torque / 1000.0 for j in range(n)])   # 6077h: per mille
+    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active)
+    coarse_torque = {f.joint for f in sensors if f.effect == "torque_quantisation"}
+    for j in active:
+        report(f"fitting joint {j + 1}", 0.1 + 0.6 * j / n)
+        ranked = _torque_fits(table, sim, quiet, j, train)
+        if j in coarse_torque:
+            # a coarse torque quantum clips small torques to zero: that is no drive saturation
+            ranked = [f for f in ranked if f.effects != ("torque_saturation",)]
+        fit = next((f for f in ranked if _simulates(table, nominal, f)), None)
         if fit is not None:
+            alternatives[j] = equally_good(fit, ranked, quiet.dq[:, j])
             fit = refine_size(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j],
                               train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits)
         residual = table.tau[:, j] - sim.tau[:, j]
@@ -279,6 +310,8 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                         fit, residual, tau_noise, ~train)):
                     fit = gear
         if fit is not None:
+            if fit.by_envelope:
+                alternatives.pop(j, None)
             fits.append(fit)
     for axis in range(6):
         fit = _ft_fit(table, sim, axis, train)
@@ -286,8 +319,9 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             fits.append(fit)
     timings["fit_s"] = time.perf_counter() - started - timings["replay_s"]
 
+    report("re-simulating with the fits", 0.7)
     updated, refit = _stable_refit(table, nominal, fits, sim)
-    for j in range(n):
+    for j in active:
         fit = _latency_fit(table, refit, j, train)
         if fit is not None:
             fits.append(fit)
@@ -295,6 +329,35 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
         updated, refit = _stable_refit(table, nominal, fits, sim)
     timings["refit_s"] = time.perf_counter() - started - timings["replay_s"] - timings["fit_s"]
 
+    not_reported: list[str] = []
+    report("held-out comparison", 0.85)
+    while True:
+        channels, before, after = _channel_results(table, nominal, sim, refit, train, tau_noise)
+        findings, rejected = _findings(fits, channels, before, quiet, t, alternatives)
+        if not rejected:
+            break
+        # an effect the held-out re-simulation does not confirm, or whose size is not known,
+        # is no improvement to report: drop it and judge the others without it
+        for fit, why in rejected:
+            fits.remove(fit)
+            not_reported.append(why)
+        updated, refit = _stable_refit(table, nominal, fits, sim)
+    for c in channels:
+        if c.unexplained:
+            c.onset = _onset(t, after[c.name], c.noise)
+    findings.sort(key=lambda f: -f.score)
+    timings["judge_s"] = time.perf_counter() - started - timings["replay_s"] - timings["fit_s"] - timings["refit_s"]
+    timings["total_s"] = time.perf_counter() - started
+    report("done", 1.0)
+    return Diagnosis(findings, channels, updated, float(t[int(TRAIN_FRACTION * n_rows)]), timings, before, after, t,
+                     not_reported, sensors)
+
+
+def _channel_results(table: RecordingTable, nominal: PlantConfig, sim: SimTraces, refit: SimTraces,
+                     train: np.ndarray, tau_noise: float):
+    """Per channel: noise, held-out RMS against the nominal and the fitted simulation, and the
+    mismatch statistics (see mismatch_statistic)."""
+    n = table.q.shape[1]
     held = ~train
     channels, before, after = [], {}, {}
     quantum = [(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
@@ -313,23 +376,50 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                                                          null_smooth=null_smooth),
                                       mismatch_statistic(r1, floor, reference_noise=ref.get(name[:2]),
                                                          null_smooth=null_smooth)))
-    findings = []
+    return channels, before, after
+
+
+def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dict[str, np.ndarray],
+              quiet: SimTraces, t: np.ndarray, alternatives: dict[int, list[ChannelFit]]):
+    """Findings in words, and the fits that may not be reported (with the reason)."""
+    findings, rejected = [], []
     for fit in fits:
         name = _channel_name(fit)
         ch = next(c for c in channels if c.name == name)
+        params, errs = plant_parameters(fit)
+        reversals = _reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
+        text = describe(fit, params, errs, reversals)
+        if not fit.by_envelope and uncertain(params, errs):
+            rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
+            continue
+        if not fit.by_envelope and not confirmed(ch.rms_before, ch.rms_after):
+            rejected.append((fit, f"{text} (the re-simulation with it does not lower the held-out {name} RMS: "
+                                  f"{ch.rms_before:.3g} -> {ch.rms_after:.3g}; not reported)"))
+            continue
         ch.significant = True
         if fit.by_envelope:
             # the ripple's phase is not reproducible row by row: judge the fit by its envelope
             ch.metric, ch.rms_before, ch.rms_after, ch.excess_after = \
                 "envelope", fit.rms_heldout_before, fit.rms_heldout_after, 0.0
         explained = max(fit.rms_heldout_before ** 2 - fit.rms_heldout_after ** 2, 0.0)
-        params, errs = plant_parameters(fit)
-        reversals = _reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
-        findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, describe(fit, params, errs, reversals),
-                                _onset(t, before[name], ch.noise)))
-    findings.sort(key=lambda f: -f.score)
-    timings["total_s"] = time.perf_counter() - started
-    return Diagnosis(findings, channels, updated, float(t[int(TRAIN_FRACTION * n_rows)]), timings, before, after, t)
+        alts = []
+        if fit.channel == "tau":
+            for alt in alternatives.get(fit.index, []):
+                p, e = plant_parameters(alt)
+                alts.append(describe(alt, p, e, reversals).split(": ", 1)[1] + _why_alike(quiet.dq[:, fit.index]))
+        findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
+                                alts))
+    return findings, rejected
+
+
+def _why_alike(dq: np.ndarray) -> str:
+    from spacearm.offline.diagnosis.honesty import one_way, single_speed
+    speed = single_speed(dq)
+    if speed is not None:
+        return f" (the joint moved at one speed, about {speed:.3g} rad/s: these laws differ only between speeds)"
+    if one_way(dq):
+        return " (the joint moved one way only: the laws differ at reversals and starts from rest)"
+    return " (the recording gives no strong evidence between them: BIC within 6)"
 
 
 def ideal_sensors(config: PlantConfig) -> PlantConfig:
@@ -367,106 +457,3 @@ def _channels(table: RecordingTable, nom: SimTraces, fitted: SimTraces):
         yield f"tau_{j + 1}", table.tau[:, j], nom.tau[:, j], fitted.tau[:, j]
     for i, name in enumerate(WRENCH_COLUMNS):
         yield name, table.wrench[:, i], nom.wrench[:, i], fitted.wrench[:, i]
-
-
-# ---------------------------------------------------------------- parameters and words
-def plant_parameters(fit: ChannelFit) -> tuple[dict[str, float], dict[str, float]]:
-    """Fitted coefficients as plant-file parameters (SI) with standard errors."""
-    p, e = {}, {}
-    coef = dict(zip(fit.columns, fit.coef))
-    err = dict(zip(fit.columns, fit.stderr))
-    for effect, shape in zip(fit.effects, fit.shape):
-        if effect in ("coulomb", "viscous"):
-            key = f"{effect}_friction"
-            p[key], e[key] = float(coef[key]), float(err[key])
-        elif effect == "stribeck":
-            p["stribeck_friction"], e["stribeck_friction"] = float(coef["stribeck_friction"]), \
-                float(err["stribeck_friction"])
-            p["stribeck_velocity"] = float(shape)
-        elif effect == "gravity_load":
-            c, s = coef["load_cos"], coef["load_sin"]
-            amp = float(math.hypot(c, s))
-            p["gravity_torque"], p["gravity_angle"] = amp, float(math.atan2(s, c))
-            e["gravity_torque"] = float(math.hypot(err["load_cos"], err["load_sin"]) / math.sqrt(2))
-        elif effect == "torque_saturation":
-            p["torque_limit_joint"] = float(shape)
-        elif effect == "latency":
-            p["feedback_latency_cycles"] = int(shape)
-        elif effect in GEAR_EFFECTS:
-            key = GEAR_EFFECTS[effect][0]
-            p[key], e[key] = float(fit.coef[0]), float(fit.stderr[0])
-        elif effect == "ft_bias":
-            p["bias"], e["bias"] = float(coef["bias"]), float(err["bias"])
-        elif effect == "ft_drift":
-            p["bias"], e["bias"] = float(coef["bias"]), float(err["bias"])
-            p["drift"], e["drift"] = float(coef["drift"]), float(err["drift"])
-    return p, e
-
-
-def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversals: int | None = None) -> str:
-    """The finding in a test engineer's words. `reversals`: velocity sign changes of the
-    joint in the recording; without any, friction laws cannot be told apart (each is a
-    constant drag at constant speed) and the text says so."""
-    where = f"joint {fit.index + 1}" if fit.channel != "wrench" else f"F/T {WRENCH_COLUMNS[fit.index]}"
-    unit = "N" if fit.index < 3 else "N m"
-    parts = []
-    pm = lambda k: f" +- {e[k]:.2g}" if k in e and np.isfinite(e[k]) else ""
-    for effect in fit.effects:
-        if effect == "coulomb":
-            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} N m, " + (
-                "a constant drag (no velocity reversal in this recording: Coulomb, Stribeck and viscous friction "
-                "look alike here)" if reversals == 0 else "visible at every velocity reversal"))
-        elif effect == "viscous":
-            parts.append(f"viscous friction about {p['viscous_friction']:.3g}{pm('viscous_friction')} N m s/rad, "
-                         "growing with speed")
-        elif effect == "stribeck":
-            parts.append(f"stiction (Stribeck) {p['stribeck_friction']:.3g}{pm('stribeck_friction')} N m above "
-                         f"running friction, fading above about {p['stribeck_velocity']:.3g} rad/s: visible when "
-                         "the joint starts from rest")
-        elif effect == "gravity_load":
-            parts.append(f"unmodelled load torque (gravity / payload mass) {p['gravity_torque']:.3g}"
-                         f"{pm('gravity_torque')} N m, depending on position, peak at q = "
-                         f"{math.degrees(-p['gravity_angle']):.0f} deg")
-        elif effect == "torque_saturation":
-            parts.append(f"drive torque saturates at about {p['torque_limit_joint']:.3g} N m (joint side) in the "
-                         "fastest accelerations")
-        elif effect == "latency":
-            n = p["feedback_latency_cycles"]
-            parts.append(f"position feedback arrives {n} cycle{'s' if n > 1 else ''} late ({20 * n} ms at 50 Hz)")
-        elif effect == "backlash":
-            err = e.get("backlash", float("nan"))
-            unc = f" +- {1e3 * err:.1g}" if np.isfinite(err) else ""
-            parts.append(f"backlash (play in the gear) about {1e3 * p['backlash']:.2g}{unc} mrad: the drive hunts, "
-                         "torque ripple the nominal model lacks")
-        elif effect == "elasticity":
-            parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} N m/rad: "
-                         "the drive rings, torque ripple the nominal model lacks")
-        elif effect == "ft_bias":
-            parts.append(f"constant offset {p['bias']:.3g}{pm('bias')} {unit}")
-        elif effect == "ft_drift":
-            parts.append(f"offset drifting by {60 * p['drift']:.3g} {unit} per minute (from {p['bias']:.3g} {unit})")
-    return f"{where}: " + " and ".join(parts)
-
-
-def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
-    """A copy of the nominal plant with the fitted effects switched on."""
-    n = max([len(nominal.joints)] + [f.index + 1 for f in fits if f.channel != "wrench"])
-    joints = [nominal.joints[i] if i < len(nominal.joints) else nominal.joint for i in range(n)]
-    bias, drift = list(nominal.ft.bias), list(nominal.ft.drift)
-    for fit in fits:
-        p, _ = plant_parameters(fit)
-        if fit.channel == "wrench":
-            bias[fit.index] += p.get("bias", 0.0)
-            drift[fit.index] += p.get("drift", 0.0)
-            continue
-        update = {}
-        for key, value in p.items():
-            if key == "torque_limit_joint":
-                update["torque_limit"] = value / joints[fit.index].gear_ratio
-            elif key in ("coulomb_friction", "viscous_friction", "stribeck_friction", "gravity_torque"):
-                update[key] = max(0.0, value)
-            else:
-                update[key] = value
-        joints[fit.index] = joints[fit.index].model_copy(update=update)
-    return nominal.model_copy(update={"joints": joints,
-                                      "ft": nominal.ft.model_copy(update={"bias": tuple(bias), "drift": tuple(drift)})})

@@ -26,6 +26,11 @@ FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
 FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
 
 
+class SimulationDiverged(ValueError):
+    """The plant could not be integrated over the recording (a joint too light or too stiff for
+    the explicit step, or an effect so strong that the servo goes unstable)."""
+
+
 @dataclass
 class SimTraces:
     """What the controller would have recorded, one row per cycle (SI)."""
@@ -38,9 +43,12 @@ class SimTraces:
     following_error_max: float = 0.0
 
 
-def joint_settings(bus_config: BusConfig | str | None = None) -> list[JointSettings]:
+def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = None) -> list[JointSettings]:
+    """Drive settings per joint from the bus configuration; for an arm with more joints than
+    the configuration has drives, the last drive's settings stand in for the extra ones."""
     config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config or DEFAULT_BUS_CONFIG)
-    return [node.joint or JointSettings() for node in config.joints]
+    settings = [node.joint or JointSettings() for node in config.joints] or [JointSettings()]
+    return settings + [settings[-1]] * max(0, (n or 0) - len(settings))
 
 
 class _CspDrive:
@@ -91,7 +99,9 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
     rows, n = q_cmd.shape
     index = list(range(n)) if joints is None else list(joints)
-    settings = settings or joint_settings()
+    settings = settings or joint_settings(n=n)
+    if len(settings) < n:
+        settings = list(settings) + [settings[-1]] * (n - len(settings))
     params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
     start = q_cmd[0] if q0 is None else np.asarray(q0, float)
     params = [p.model_copy(update={"initial_position": float(start[i])}) for i, p in zip(index, params)]
@@ -111,9 +121,13 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     for r in range(rows):
         for c, drive in enumerate(drives):
             drive.latch(previous[c], previous_v[c])
-        plant.step(dt)
-        for c, drive in enumerate(drives):
-            q[r, c], dq[r, c], tau[r, c] = drive.report()
+        try:
+            plant.step(dt)
+            for c, drive in enumerate(drives):
+                q[r, c], dq[r, c], tau[r, c] = drive.report()
+        except (OverflowError, ValueError) as exc:     # round() of an infinite or NaN state
+            raise SimulationDiverged(f"the simulated plant diverges at t = {t0 + dt * (r + 1):.3g} s "
+                                     f"({type(exc).__name__})") from None
             fe = max(fe, abs(drive.q_ref - drive.joint.q_measured))
         w = plant.ft_reading()
         wrench[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM

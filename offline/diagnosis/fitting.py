@@ -112,10 +112,30 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
     except np.linalg.LinAlgError:
         stderr = np.full(X.shape[1], np.nan)
+    if not fixed_gain and np.isfinite(sse):
+        stderr = np.maximum(stderr, split_half_spread(X, y, train))
     before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
     return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
                       block, pred, n, k)
+
+
+def split_half_spread(X: np.ndarray, y: np.ndarray, train: np.ndarray) -> np.ndarray:
+    """Half the difference between the fits on the first and second half of the training rows:
+    a standard error that also holds when the law does not quite fit (the estimate then moves
+    with the part of the recording it sees), where the residual-based one is too narrow. Zero
+    where a half does not excite a column (no evidence either way)."""
+    rows = np.flatnonzero(train)
+    half = len(rows) // 2
+    if half < 10 * X.shape[1]:
+        return np.zeros(X.shape[1])
+    parts = rows[:half], rows[half:]
+    scale = np.sqrt(np.mean(X[rows] ** 2, axis=0))
+    if any(np.any(np.sqrt(np.mean(X[r] ** 2, axis=0)) < 0.3 * scale) for r in parts):
+        return np.zeros(X.shape[1])
+    a, _ = _lstsq(X[parts[0]], y[parts[0]])
+    b, _ = _lstsq(X[parts[1]], y[parts[1]])
+    return np.abs(a - b) / 2.0
 
 
 def common_block(fits: list[ChannelFit]) -> int:

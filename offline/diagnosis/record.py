@@ -39,14 +39,14 @@ def starting_at(config: PlantConfig, q0: np.ndarray) -> PlantConfig:
 
 
 def record_can(config: PlantConfig, trajectory: Trajectory, out: Path, arm: Path = DEFAULT_ARM,
-               bus_config: Path = DEFAULT_BUS_CONFIG, timeout: float = 3600.0) -> Path:
+               bus_config: Path = DEFAULT_BUS_CONFIG, timeout: float = 3600.0, clock: str = "lockstep") -> Path:
     """Record over CAN; writes MCAP (out.mcap) or the wide CSV (out.csv). Returns out."""
     out = Path(out)
     bus = f"virtual:record-sim-{uuid.uuid4().hex[:8]}"
     workdir = tempfile.TemporaryDirectory()
     bus_config = _patient_heartbeats(Path(bus_config), Path(workdir.name))
     simulator = start_simulator(bus, bus_config, starting_at(config, trajectory.q[0]))
-    daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock="lockstep", api=None,
+    daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock, api=None,
                                   record_dir=None))
     thread = None
     mcap = out if out.suffix == ".mcap" else Path(workdir.name) / "run.mcap"

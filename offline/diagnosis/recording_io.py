@@ -2,7 +2,6 @@
 column map), into one table of per-cycle arrays; and write the wide CSV."""
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -38,71 +37,52 @@ class RecordingTable:
                               {k: v[sl] for k, v in self.extra.items()})
 
 
-def parse_column_map(text: str | None) -> dict[str, str]:
-    """'q_1=pos_a,tau_1=trq_a' -> {'q_1': 'pos_a', ...} (our name = their column)."""
-    if not text:
-        return {}
-    out = {}
-    for item in text.split(","):
-        if "=" not in item:
-            raise RecordingFormatError(f"column map entry {item!r}: expected OURS=THEIRS")
-        ours, theirs = (s.strip() for s in item.split("=", 1))
-        out[ours] = theirs
-    return out
-
-
 def read_table(path: str | Path, column_map: dict[str, str] | None = None) -> RecordingTable:
+    """The recording as a table (our MCAP, our CSV, or anyone's CSV with `column_map`
+    OURS -> THEIR COLUMN NAME). `read_recording` takes the full `--columns` expressions."""
+    from spacearm.offline.diagnosis.column_spec import ColumnSpec
+    specs = [ColumnSpec(ours, theirs, text=f"{ours}={theirs}") for ours, theirs in (column_map or {}).items()]
+    return read_recording(path, specs)[0]
+
+
+def read_recording(path: str | Path, specs=None, command: str = "recorded", period: float | None = None):
+    """(table, report lines): MCAP from the daemon, or any CSV (see csv_reader)."""
     path = Path(path)
-    if not path.exists():
+    if not path.is_file():
         raise RecordingFormatError(f"{path}: no such file")
     if path.suffix == ".mcap":
-        return _from_mcap(path)
-    return _from_csv(path, column_map or {})
+        table = _from_mcap(path)
+        lines = [f"{path}: MCAP recording, {len(table.t)} cycles, {table.n_joints} joints"]
+        if command == "measured":
+            table.q_cmd = table.q.copy()
+            lines.append("commanded position: the measured position (--command measured)")
+        return table, lines
+    from spacearm.offline.diagnosis.csv_reader import read_any_csv
+    table, report = read_any_csv(path, specs, command, period)
+    return table, report.lines()
 
 
 def _from_mcap(path: Path) -> RecordingTable:
-    from spacearm.controller.recording.mcap_reader import read_recording
-    cycles = read_recording(path).topic("/cycle")
-    if not cycles:
+    from spacearm.controller.recording.mcap_reader import read_recording as read_mcap
+    try:
+        cycles = read_mcap(path).topic("/cycle")
+        d = [m.data for m in cycles]
+        arr = lambda key: np.array([row[key] for row in d], dtype=float)
+        table = RecordingTable(arr("t"), arr("q_cmd"), arr("q"), arr("dq"), arr("tau"), arr("wrench")) if d else None
+        if table is not None and all("sync" in row for row in d):
+            # one row per SYNC: the simulated plant did not advance in the cycles the daemon skipped
+            from spacearm.offline.diagnosis.time_base import sync_time_base
+            from spacearm.controller.recording.csv_export import SYNC_COUNTER_MAX
+            by_sync = sync_time_base(table.t, arr("sync"), SYNC_COUNTER_MAX)
+            table.t = table.t if by_sync is None else by_sync
+    except Exception as exc:   # any library error on a damaged file: one line, not its traceback
+        raise RecordingFormatError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: "
+                                   f"{str(exc)[:120]})") from None
+    if table is None:
         raise RecordingFormatError(f"{path}: no /cycle messages")
-    d = [m.data for m in cycles]
-    arr = lambda key: np.array([row[key] for row in d], dtype=float)
-    return RecordingTable(arr("t"), arr("q_cmd"), arr("q"), arr("dq"), arr("tau"), arr("wrench"))
-
-
-def _from_csv(path: Path, column_map: dict[str, str]) -> RecordingTable:
-    with open(path, newline="") as handle:
-        reader = csv.reader(handle)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise RecordingFormatError(f"{path}: empty file") from None
-        rows = [r for r in reader if r]
-    index = {name: i for i, name in enumerate(header)}
-    for ours, theirs in column_map.items():
-        if theirs not in index:
-            raise RecordingFormatError(f"{path}: column map names {theirs!r}, not a column of the file")
-        index[ours] = index[theirs]
-    n = sum(1 for name in index if name.startswith("q_cmd_"))
-    if "t" not in index or n == 0:
-        raise RecordingFormatError(f"{path}: need columns t and q_cmd_1..n (use --columns OURS=THEIRS to map)")
-
-    def col(name: str, required: bool = True) -> np.ndarray:
-        if name not in index:
-            if required:
-                raise RecordingFormatError(f"{path}: missing column {name!r} (use --columns {name}=THEIRS)")
-            return np.zeros(len(rows))
-        try:
-            return np.array([float(r[index[name]]) if r[index[name]] != "" else np.nan for r in rows])
-        except (ValueError, IndexError) as exc:
-            raise RecordingFormatError(f"{path}: column {name!r}: {exc}") from None
-
-    joints = lambda prefix, req=True: np.column_stack([col(f"{prefix}_{i}", req) for i in range(1, n + 1)])
-    extra = {name: col(name) for name in index if name.startswith("temp") or name in ("dist",)}
-    table = RecordingTable(col("t"), joints("q_cmd"), joints("q"), joints("dq", False), joints("tau", False),
-                           np.column_stack([col(c, False) for c in WRENCH_COLUMNS]), extra)
-    if len(table.t) < 10 or np.any(np.diff(table.t) <= 0):
-        raise RecordingFormatError(f"{path}: need at least 10 rows with increasing t")
+    if table.q.ndim != 2 or len(table.t) < 10 or np.any(np.diff(table.t) <= 0) or not all(
+            np.all(np.isfinite(x)) for x in (table.t, table.q, table.q_cmd)):
+        raise RecordingFormatError(f"{path}: need at least 10 cycles with increasing t and finite positions")
     return table
 
 

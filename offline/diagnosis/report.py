@@ -14,19 +14,23 @@ from spacearm.firmware_sim.plant import PlantConfig
 def summary(d: Diagnosis) -> dict:
     return {
         "verdict": d.verdict,
-        "significant": bool(d.findings or d.unexplained),
+        "significant": bool(d.findings or d.unexplained or d.sensor_findings),
         "unexplained_channels": [c.name for c in d.unexplained],
         "heldout_from_s": d.heldout_start,
+        "not_reported": d.not_reported,
+        "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
+                             "text": f.text} for f in d.sensor_findings],
         "findings": [{
             "rank": i + 1, "effects": list(f.fit.effects), "channel": f.fit.channel,
             "joint": f.fit.index + 1 if f.fit.channel != "wrench" else None,
             "axis": f.fit.index if f.fit.channel == "wrench" else None,
             "parameters": f.params, "stderr": f.stderr, "text": f.text, "score": f.score,
             "p_value": f.fit.p_value, "heldout_rms_reduction_residual_model": f.fit.heldout_reduction,
-            "change_point_s": f.onset} for i, f in enumerate(d.findings)],
+            "change_point_s": f.onset, "equally_good": f.alternatives} for i, f in enumerate(d.findings)],
         "channels": [{"name": c.name, "noise": c.noise, "heldout_rms_before": c.rms_before,
                       "heldout_rms_after": c.rms_after, "significant": c.significant, "metric": c.metric,
-                      "mismatch_before": c.excess_before, "mismatch_after": c.excess_after} for c in d.channels],
+                      "mismatch_before": c.excess_before, "mismatch_after": c.excess_after,
+                      "unexplained_from_s": c.onset} for c in d.channels],
         "timings_s": d.timings,
     }
 
@@ -54,8 +58,14 @@ def write_report(d: Diagnosis, out: Path, source: str, nominal: PlantConfig) -> 
                   "| --- | --- | --- | --- | --- |"]
         for i, f in enumerate(d.findings):
             onset = f"{f.onset:.1f}" if f.onset is not None else "-"
-            lines.append(f"| {i + 1} | {f.text} | {f.fit.p_value:.1e} | {f.score:.1f} | {onset} |")
+            alts = "".join(f"; or equally well: {a}" for a in f.alternatives)
+            lines.append(f"| {i + 1} | {f.text}{alts} | {f.fit.p_value:.1e} | {f.score:.1f} | {onset} |")
         lines += ["", "Updated plant file: `plant_fitted.toml`.", ""]
+    if d.sensor_findings:
+        lines += ["Sensor effects (read from the recording, not part of the re-simulation):", ""] + \
+            [f"- {f.text}" for f in d.sensor_findings] + [""]
+    if d.not_reported:
+        lines += ["Fitted but not reported:", ""] + [f"- {w}" for w in d.not_reported] + [""]
     lines += ["Mismatch statistic: residual vs noise as a multiple of the significance limit (> 1: significant).",
               "", "| channel | noise | held-out RMS before | after | reduction | mismatch before | after |",
               "| --- | --- | --- | --- | --- | --- | --- |"]

@@ -1,0 +1,117 @@
+"""A fit as plant-file parameters (SI, with standard errors), in a test engineer's words, and
+the nominal plant with the fitted effects switched on."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from spacearm.offline.diagnosis.fitting import ChannelFit
+from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS
+from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
+from spacearm.firmware_sim.plant import PlantConfig
+
+CI95 = 1.96
+
+
+def plant_parameters(fit: ChannelFit) -> tuple[dict[str, float], dict[str, float]]:
+    """Fitted coefficients as plant-file parameters (SI) with standard errors."""
+    p, e = {}, {}
+    coef = dict(zip(fit.columns, fit.coef))
+    err = dict(zip(fit.columns, fit.stderr))
+    for effect, shape in zip(fit.effects, fit.shape):
+        if effect in ("coulomb", "viscous"):
+            key = f"{effect}_friction"
+            p[key], e[key] = float(coef[key]), float(err[key])
+        elif effect == "stribeck":
+            p["stribeck_friction"], e["stribeck_friction"] = float(coef["stribeck_friction"]), \
+                float(err["stribeck_friction"])
+            p["stribeck_velocity"] = float(shape)
+        elif effect == "gravity_load":
+            c, s = coef["load_cos"], coef["load_sin"]
+            amp = float(math.hypot(c, s))
+            p["gravity_torque"], p["gravity_angle"] = amp, float(math.atan2(s, c))
+            e["gravity_torque"] = float(math.hypot(err["load_cos"], err["load_sin"]) / math.sqrt(2))
+        elif effect == "torque_saturation":
+            p["torque_limit_joint"] = float(shape)
+        elif effect == "latency":
+            p["feedback_latency_cycles"] = int(shape)
+        elif effect in GEAR_EFFECTS:
+            key = GEAR_EFFECTS[effect][0]
+            p[key], e[key] = float(fit.coef[0]), float(fit.stderr[0])
+        elif effect == "ft_bias":
+            p["bias"], e["bias"] = float(coef["bias"]), float(err["bias"])
+        elif effect == "ft_drift":
+            p["bias"], e["bias"] = float(coef["bias"]), float(err["bias"])
+            p["drift"], e["drift"] = float(coef["drift"]), float(err["drift"])
+    return p, e
+
+
+def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversals: int | None = None) -> str:
+    """The finding in a test engineer's words. `reversals`: velocity sign changes of the
+    joint in the recording; without any, friction laws cannot be told apart (each is a
+    constant drag at constant speed) and the text says so."""
+    where = f"joint {fit.index + 1}" if fit.channel != "wrench" else f"F/T {WRENCH_COLUMNS[fit.index]}"
+    unit = "N" if fit.index < 3 else "N m"
+    parts = []
+    # +- is the 95 % interval (1.96 standard errors; the benchmark checks how often it holds)
+    pm = lambda k: f" +- {CI95 * e[k]:.2g}" if k in e and np.isfinite(e[k]) else ""
+    for effect in fit.effects:
+        if effect == "coulomb":
+            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} N m, " + (
+                "a constant drag (no velocity reversal in this recording: Coulomb, Stribeck and viscous friction "
+                "look alike here)" if reversals == 0 else "visible at every velocity reversal"))
+        elif effect == "viscous":
+            parts.append(f"viscous friction about {p['viscous_friction']:.3g}{pm('viscous_friction')} N m s/rad, "
+                         "growing with speed")
+        elif effect == "stribeck":
+            parts.append(f"stiction (Stribeck) {p['stribeck_friction']:.3g}{pm('stribeck_friction')} N m above "
+                         f"running friction, fading above about {p['stribeck_velocity']:.3g} rad/s: visible when "
+                         "the joint starts from rest")
+        elif effect == "gravity_load":
+            parts.append(f"unmodelled load torque (gravity / payload mass) {p['gravity_torque']:.3g}"
+                         f"{pm('gravity_torque')} N m, depending on position, peak at q = "
+                         f"{math.degrees(-p['gravity_angle']):.0f} deg")
+        elif effect == "torque_saturation":
+            parts.append(f"drive torque saturates at about {p['torque_limit_joint']:.3g} N m (joint side) in the "
+                         "fastest accelerations")
+        elif effect == "latency":
+            n = p["feedback_latency_cycles"]
+            parts.append(f"position feedback arrives {n} cycle{'s' if n > 1 else ''} late ({20 * n} ms at 50 Hz)")
+        elif effect == "backlash":
+            err = e.get("backlash", float("nan"))
+            unc = f" +- {1e3 * CI95 * err:.1g}" if np.isfinite(err) else ""
+            parts.append(f"backlash (play in the gear) about {1e3 * p['backlash']:.2g}{unc} mrad: the drive hunts, "
+                         "torque ripple the nominal model lacks")
+        elif effect == "elasticity":
+            parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} N m/rad: "
+                         "the drive rings, torque ripple the nominal model lacks")
+        elif effect == "ft_bias":
+            parts.append(f"constant offset {p['bias']:.3g}{pm('bias')} {unit}")
+        elif effect == "ft_drift":
+            parts.append(f"offset drifting by {60 * p['drift']:.3g} {unit} per minute (from {p['bias']:.3g} {unit})")
+    return f"{where}: " + " and ".join(parts) + (" (+- : 95 % interval)" if e else "")
+
+
+def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
+    """A copy of the nominal plant with the fitted effects switched on."""
+    n = max([len(nominal.joints)] + [f.index + 1 for f in fits if f.channel != "wrench"])
+    joints = [nominal.joints[i] if i < len(nominal.joints) else nominal.joint for i in range(n)]
+    bias, drift = list(nominal.ft.bias), list(nominal.ft.drift)
+    for fit in fits:
+        p, _ = plant_parameters(fit)
+        if fit.channel == "wrench":
+            bias[fit.index] += p.get("bias", 0.0)
+            drift[fit.index] += p.get("drift", 0.0)
+            continue
+        update = {}
+        for key, value in p.items():
+            if key == "torque_limit_joint":
+                update["torque_limit"] = value / joints[fit.index].gear_ratio
+            elif key in ("coulomb_friction", "viscous_friction", "stribeck_friction", "gravity_torque"):
+                update[key] = max(0.0, value)
+            else:
+                update[key] = value
+        joints[fit.index] = joints[fit.index].model_copy(update=update)
+    return nominal.model_copy(update={"joints": joints,
+                                      "ft": nominal.ft.model_copy(update={"bias": tuple(bias), "drift": tuple(drift)})})

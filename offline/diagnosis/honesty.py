@@ -1,0 +1,66 @@
+"""What the diagnosis may claim: only joints that moved, only effects whose size is known
+better than its own value, only fits the held-out re-simulation confirms, and every law
+that explains the data as well as the chosen one named beside it."""
+from __future__ import annotations
+
+import numpy as np
+
+from spacearm.offline.diagnosis.candidates import VELOCITY_DEADBAND
+from spacearm.offline.diagnosis.fitting import ChannelFit, common_block
+
+MIN_TRAVEL = 0.005           # rad: a joint that moved less never excited friction or load
+MIN_MOVING_FRACTION = 0.05   # of the rows
+EQUAL_EVIDENCE = 6.0         # BIC within this of the best (below "strong" evidence): explains the data as well
+ONE_SPEED_BAND = 0.15        # |v| within +-15 % of the median speed ...
+ONE_SPEED_FRACTION = 0.8     # ... on this share of the moving rows: one speed only
+MIN_CONFIRMED_REDUCTION = 0.05   # held-out re-simulation must lower the channel's RMS at least this much
+FRICTION = ("coulomb", "viscous", "stribeck")
+
+
+def moved(q: np.ndarray, dq: np.ndarray) -> bool:
+    """Whether a joint moved enough in the recording (measured q) and its nominal replay (dq)."""
+    return bool(np.ptp(q) > MIN_TRAVEL and np.mean(np.abs(dq) > VELOCITY_DEADBAND) > MIN_MOVING_FRACTION)
+
+
+def single_speed(dq: np.ndarray) -> float | None:
+    """The speed if the joint moved at essentially one speed (a constant-speed ramp), else None."""
+    v = np.abs(dq[np.abs(dq) > VELOCITY_DEADBAND])
+    if len(v) < 10:
+        return None
+    median = float(np.median(v))
+    return median if np.mean(np.abs(v - median) <= ONE_SPEED_BAND * median) >= ONE_SPEED_FRACTION else None
+
+
+def one_way(dq: np.ndarray) -> bool:
+    v = dq[np.abs(dq) > VELOCITY_DEADBAND]
+    return len(v) > 0 and bool(np.all(v > 0) or np.all(v < 0))
+
+
+def equally_good(best: ChannelFit, ranked: list[ChannelFit], dq: np.ndarray) -> list[ChannelFit]:
+    """Other explanations of the same channel that the recording cannot tell from the best:
+    BIC within EQUAL_EVIDENCE of it (at one block length), or, at one speed, the other friction law (Coulomb
+    and viscous friction are both a constant drag there), or, one way only, Coulomb for
+    Stribeck and back (the stiction bump needs starts from rest in both directions to show)."""
+    out: list[ChannelFit] = []
+    block = common_block([best] + ranked)
+    friction_only = set(best.effects) <= set(FRICTION)
+    for f in ranked:
+        if f is best or set(f.effects) == set(best.effects) or f.channel != best.channel:
+            continue
+        close = f.bic_at(block) - best.bic_at(block) < EQUAL_EVIDENCE
+        same_family = friction_only and set(f.effects) <= set(FRICTION) and len(f.effects) == 1
+        if close or (same_family and (single_speed(dq) is not None or one_way(dq))):
+            if all(set(f.effects) != set(o.effects) for o in out):
+                out.append(f)
+    return out[:2]
+
+
+def uncertain(values: dict[str, float], errors: dict[str, float]) -> bool:
+    """Whether no size of the effect is known to be there: every parameter's standard error
+    is more than half its value (a drift with a zero offset is still a drift)."""
+    known = [k for k, e in errors.items() if k in values and np.isfinite(e)]
+    return bool(known) and all(abs(values[k]) < 2.0 * errors[k] for k in known)
+
+
+def confirmed(rms_before: float, rms_after: float) -> bool:
+    return rms_after <= (1.0 - MIN_CONFIRMED_REDUCTION) * rms_before

@@ -1,0 +1,93 @@
+"""Sensor effects read from the recording itself, against the nominal replay's sensors:
+position (resolver/encoder) and torque-sensor quantisation, and a velocity channel that lags
+the position channel.
+
+Quantisation: the row-to-row changes of a quantised signal are whole multiples of one step.
+Velocity lag: the recorded dq against the velocity the recorded q shows, shifted by 0..6
+cycles; the nominal replay gives the shift that belongs to how the drive reports velocity,
+and only the excess is a finding. Neither is a plant parameter, so these do not enter the
+re-simulation; they explain a channel's mismatch and change how much of it to trust (a
+coarse torque quantum is no "saturation at 0 N m").
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MIN_CHANGES = 30             # nonzero row-to-row changes needed to read a step
+ON_GRID = 0.95               # share of changes that must be whole multiples of the step
+GRID_TOLERANCE = 0.03        # of a step
+COARSER = 1.5                # recorded step / nominal step to call it a finding
+MAX_LAG = 6
+LAG_GAIN = 0.5               # the best shift must halve the misfit of the nominal shift
+
+
+@dataclass
+class SensorFinding:
+    effect: str                  # "position_quantisation", "torque_quantisation", "velocity_latency"
+    channel: str                 # "q_3", "tau_1", "dq_2"
+    joint: int                   # 0-based
+    params: dict[str, float]
+    text: str
+
+
+def quantum(x: np.ndarray) -> float | None:
+    """The step a signal moves in, if it moves only in whole multiples of one step."""
+    d = np.abs(np.diff(x))
+    d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(x))))]
+    if len(d) < MIN_CHANGES:
+        return None
+    step = float(np.min(d[d >= np.percentile(d, 2)]))
+    k = d / step
+    on_grid = np.mean(np.abs(k - np.round(k)) < GRID_TOLERANCE)
+    return step if on_grid >= ON_GRID else None
+
+
+def velocity_lag(q: np.ndarray, dq: np.ndarray, dt: float) -> tuple[int, float] | None:
+    """(shift in cycles that best matches dq to q's velocity, its gain over no shift)."""
+    v = np.gradient(q, dt)
+    if float(np.std(v)) < 1e-9 or float(np.std(dq)) < 1e-9 or len(q) < 4 * MAX_LAG:
+        return None
+    err = [float(np.sqrt(np.mean((dq[k:] - v[: len(v) - k]) ** 2))) for k in range(MAX_LAG + 1)]
+    best = int(np.argmin(err))
+    return best, 1.0 - err[best] / max(err[0], 1e-300)
+
+
+def sensor_findings(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, dt: float,
+                    nominal: tuple[np.ndarray, np.ndarray] | None, quanta: tuple[list[float], list[float]] | None,
+                    active: list[int]) -> list[SensorFinding]:
+    """Findings for the joints in `active` (0-based). `nominal`: (q, dq) of the nominal
+    replay, whose own velocity shift is the reference; `quanta`: the nominal sensors' steps
+    (position, torque) per joint. Without them (another arm), only a velocity shift of 2
+    cycles or more and torque steps of 1 mN m or more are named."""
+    out: list[SensorFinding] = []
+    for j in active:
+        for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, "rad"),
+                                              ("torque_quantisation", "tau", tau, 1, "N m")):
+            step = quantum(real[:, j])
+            if step is None:
+                continue
+            nominal_step = quanta[ref][j] if quanta is not None else None
+            if nominal_step is not None and step < COARSER * nominal_step:
+                continue
+            if nominal_step is None and effect == "torque_quantisation" and step < 1e-3:
+                continue
+            was = f" (the nominal sensor: {nominal_step:.3g} {unit})" if nominal_step else ""
+            what = "resolver/encoder" if name == "q" else "torque sensor"
+            out.append(SensorFinding(effect, f"{name}_{j + 1}", j, {"quantum": step},
+                                     f"joint {j + 1}: {what} quantised in steps of {step:.3g} {unit}{was}"))
+        if not np.any(dq[:, j]):
+            continue
+        lag = velocity_lag(q[:, j], dq[:, j], dt)
+        if lag is None:
+            continue
+        reference = velocity_lag(nominal[0][:, j], nominal[1][:, j], dt) if nominal is not None else (0, 0.0)
+        base = reference[0] if reference is not None else 0
+        extra = lag[0] - base
+        if extra >= (1 if nominal is not None else 2) and lag[1] >= LAG_GAIN:
+            out.append(SensorFinding("velocity_latency", f"dq_{j + 1}", j, {"velocity_latency_cycles": float(extra),
+                                                                           "velocity_latency_s": extra * dt},
+                                     f"joint {j + 1}: velocity channel lags the position channel by {extra} "
+                                     f"cycle{'s' if extra > 1 else ''} ({1e3 * extra * dt:.3g} ms)"))
+    return out
