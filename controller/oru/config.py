@@ -41,9 +41,17 @@ class ContactConfig(Strict):
     seat_tolerance: float = Field(default=0.006, gt=0.0, le=0.05, description="m")
 
 
+class VisionRetryConfig(Strict):
+    """What the flow does when the closed-loop approach loses its camera (marker lost, camera
+    stopped, stale frames): hold, retry a bounded number of times, then pause with the reason."""
+    approach_retries: int = Field(default=2, ge=0, le=20, description="new approach attempts before pausing")
+    retry_hold: float = Field(default=1.0, ge=0.0, le=60.0, description="s held still before each retry")
+
+
 class ChangeoutConfig(Strict):
     stages: list[StageConfig] = Field(min_length=2, max_length=8)
     motion: MotionConfig = MotionConfig()
+    vision: VisionRetryConfig = VisionRetryConfig()
     end_effector: EndEffectorConfig = EndEffectorConfig()
     contact: ContactConfig = ContactConfig()
 

@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 
 from spacearm.base.config.scene import SceneConfig
-from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, Mode
+from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, FindingCode, Mode
 from spacearm.controller.modes import PlannedMode
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.gravity import GravityModel
@@ -40,6 +40,8 @@ TABLE_1 = {
     13: ("backs to the initial pose", "open loop path planning"),
 }
 STEP_AXES = ("impedance", "impedance", "step", "impedance", "impedance", "impedance")
+# the camera's failures in the closed-loop approach: retried, then the flow pauses (runner.py)
+VISION_CODES = frozenset({FindingCode.VISION_LOST, FindingCode.CAMERA_STOPPED, FindingCode.FRAME_STALE})
 
 
 @dataclass
@@ -109,7 +111,7 @@ def _approach_step(ctx: FlowContext, stage: int, number: int, store: str, placin
     dz = ctx.contact_height(placing)
     factory = ctx.factories.get("approach")
     if factory is not None:
-        return ModeStep(stage, number, title, algorithm,
+        return ModeStep(stage, number, title, algorithm, retry_codes=VISION_CODES,
                         make=lambda q0: factory(target=store, dz=dz, holding=ctx.holding))
     target = ctx.above(store, dz)
     limits = ctx.planner.cartesian

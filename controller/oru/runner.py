@@ -3,9 +3,12 @@
 State: running -> (paused <-> running) -> done | aborted | failed. The runner keeps its own
 clock, which stops while paused, so a paused free motion or contact resumes where it was; a
 paused runner holds the last joint target. Any step failure (force limit, capture not
-confirmed, end-effector fault or timeout, jammed insertion, planning refused, lost marker in
-the approach) is reported in the runner's output, and the daemon core makes a protective stop
-(quick stop, brakes) and keeps the reason. Abort ends the flow holding the current target.
+confirmed, end-effector fault or timeout, jammed insertion, planning refused) is reported in
+the runner's output, and the daemon core makes a protective stop (quick stop, brakes) and
+keeps the reason. The closed-loop approach's camera failures (vision_lost, camera_stopped,
+frame_stale) are not stops: the runner holds `retry_hold` s and starts the approach again, up
+to `approach_retries` times, then pauses with the code and message (`pause` in status);
+resume starts the approach afresh. Abort ends the flow holding the current target.
 """
 from __future__ import annotations
 
@@ -32,6 +35,9 @@ class StepRecord:
     peak_torque: float = 0.0
     peak_insert_force: float = 0.0
     notes: list[str] = field(default_factory=list)
+    outcome: str = "done"            # done | failed | retried | paused (the attempt's end)
+    q_end: list[float] | None = None  # measured joints when the step ended (handover to contact)
+    vision: dict | None = None       # the closed-loop approach's report() (frames, detection, latency)
 
 
 class OruTaskRunner(ModeBase):
@@ -55,6 +61,9 @@ class OruTaskRunner(ModeBase):
         self._failure: Finding | None = None
         self._begun = False
         self._step_progress = 0.0
+        self.pause_reason: Finding | None = None    # why the flow paused itself (vision retries used up)
+        self._retries = 0                           # of the current approach step
+        self._hold_until = 0.0                      # runner clock: hold still before a retry
 
     # ---- operator commands (run inside the cycle) ------------------------------------
     def pause(self) -> str:
@@ -65,6 +74,8 @@ class OruTaskRunner(ModeBase):
     def resume(self) -> str:
         if self.state == "paused":
             self.state = "running"
+            self.pause_reason = None
+            self._retries = 0
         return self.state
 
     def abort(self) -> str:
@@ -93,21 +104,46 @@ class OruTaskRunner(ModeBase):
                                            notes=list(step.notes)))
             self.ctx.notes += [f"stage {step.stage + 1} subtask {step.number}: {n}" for n in step.notes]
             self._begun = True
+        if self.clock < self._hold_until:
+            self.clock += period
+            return ModeOutput(hold(self.q_last))
         out = step.update(self.clock, m)
         self._step_progress = out.progress
         self.q_last = out.setpoint.q.copy()
+        if out.failure is not None and out.failure.code in getattr(step, "retry_codes", ()):
+            self._vision_failure(step, out.failure, m)
+            return ModeOutput(hold(self.q_last))
         if out.failure is not None:
             self._failure = out.failure
             self.state = "failed"
-            self._record(step)
+            self._record(step, m, "failed")
             return out
         if out.finished:
-            self._complete(step)
+            self._complete(step, m)
         self.clock += period
         return out
 
-    def _complete(self, step: Step) -> None:
-        self._record(step)
+    def _vision_failure(self, step, failure: Finding, m: Measurement) -> None:
+        """Hold, then retry the approach, or pause the flow once the retries are used up."""
+        cfg = self.ctx.config.vision
+        self._retries += 1
+        retry = self._retries <= cfg.approach_retries
+        self._record(step, m, "retried" if retry else "paused")
+        step.reset()
+        self._begun = False
+        if retry:
+            self._hold_until = self.clock + cfg.retry_hold
+            self.ctx.notes.append(f"{failure.message}: holding {cfg.retry_hold:.1f} s, approach attempt "
+                                  f"{self._retries + 1} of {cfg.approach_retries + 1}")
+        else:
+            self.state = "paused"
+            self.pause_reason = Finding(failure.code, f"{failure.message} (after {cfg.approach_retries} "
+                                        f"retries): flow paused, resume to try again or abort")
+            self.ctx.notes.append(self.pause_reason.message)
+
+    def _complete(self, step: Step, m: Measurement) -> None:
+        self._retries = 0
+        self._record(step, m)
         store = self.ctx.config.stages[step.stage].store
         if isinstance(step, ContactStep) and step.mode.task.tare_cycles > 0:
             self.ctx.ft_bias = step.mode.bias.copy()
@@ -120,9 +156,14 @@ class OruTaskRunner(ModeBase):
         if self.index >= len(self.steps):
             self.state = "done"
 
-    def _record(self, step: Step) -> None:
+    def _record(self, step: Step, m: Measurement, outcome: str = "done") -> None:
         rec = self.records[-1]
         rec.duration = self.clock - rec.started
+        rec.outcome = outcome
+        rec.q_end = [float(v) for v in m.q]
+        report = getattr(getattr(step, "mode", None), "report", None)
+        if callable(report):
+            rec.vision = report()
         if isinstance(step, ContactStep):
             pk = step.mode.peaks
             rec.peak_force, rec.peak_torque = pk.force, pk.torque
@@ -150,6 +191,8 @@ class OruTaskRunner(ModeBase):
             "algorithm": None if step is None else step.algorithm,
             "holding": self.ctx.holding,
             "failure": None if self._failure is None else self._failure.message,
+            "pause": None if self.pause_reason is None else {"code": str(self.pause_reason.code),
+                                                             "message": self.pause_reason.message},
             "notes": list(self.ctx.notes),
             "records": [vars(r) | {"notes": list(r.notes)} for r in self.records],
         }
