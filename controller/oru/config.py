@@ -22,6 +22,7 @@ class StageConfig(Strict):
 class MotionConfig(Strict):
     view_height: float = Field(default=0.15, gt=0.0, le=1.0, description="m")
     contact_gap: float = Field(default=0.010, gt=0.0, le=0.1, description="m")
+    approach_gap: float = Field(default=0.075, gt=0.0, le=0.3, description="m, gap at the end of the closed-loop approach")
     extract_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
     withdraw_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
     speed: float = Field(default=1.0, gt=0.0, le=1.0)

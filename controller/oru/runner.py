@@ -35,8 +35,9 @@ class StepRecord:
     peak_torque: float = 0.0
     peak_insert_force: float = 0.0
     notes: list[str] = field(default_factory=list)
-    outcome: str = "done"            # done | failed | retried | paused (the attempt's end)
+    outcome: str = "running"         # running, then done | failed | retried | paused (how the attempt ended)
     q_end: list[float] | None = None  # measured joints when the step ended (handover to contact)
+    sync_end: int | None = None       # SYNC of that measurement
     vision: dict | None = None       # the closed-loop approach's report() (frames, detection, latency)
 
 
@@ -161,6 +162,7 @@ class OruTaskRunner(ModeBase):
         rec.duration = self.clock - rec.started
         rec.outcome = outcome
         rec.q_end = [float(v) for v in m.q]
+        rec.sync_end = int(m.sync_counter)
         report = getattr(getattr(step, "mode", None), "report", None)
         if callable(report):
             rec.vision = report()
