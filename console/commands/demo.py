@@ -26,7 +26,7 @@ from spacearm.console.errors import CommandFailed, friendly_errors
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
 from spacearm.controller.recording.csv_export import export_csv
-from spacearm.offline.scenarios.changeout import ChangeoutFailed, run_changeout
+from spacearm.offline.scenarios.changeout import ChangeoutFailed, run_changeout, start_camera
 from spacearm.offline.scenarios.checkout import CheckoutFailed, run_checkout
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
 from spacearm.drivers.errors import DriverError
@@ -67,7 +67,7 @@ def register(app: typer.Typer) -> None:
         try:
             camera = None
             if job == "changeout" and vision:
-                ring, camera = _start_camera(simulator)
+                ring, camera = start_camera(simulator)
                 console.print(f"camera: {simulator.camera.period * 1e3:.0f} ms exposures rendered into shared memory "
                               f"[cyan]{camera}[/] (spacearm console-web --camera {camera} shows them)")
             daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock,
@@ -119,18 +119,6 @@ CHANGEOUT_PLANT = "configs/plant/oru_cell_errors.toml"
 # The camera renders (50-200 ms a frame) in this process beside the nodes and the daemon: on a
 # loaded 2-core machine the standard 0.1 s heartbeats were lost (0.25 s silences) in lockstep.
 CHANGEOUT_BUS = Path("configs/oru/bus_shared_machine.toml")
-
-
-def _start_camera(simulator):
-    """The eye-in-hand camera of the simulated plant, rendering into a new shared-memory ring."""
-    import os
-    from spacearm.base.vision.config import load_camera
-    from spacearm.base.vision.frames import ShmFrameRing
-    cam = load_camera()
-    name = f"spacearm-demo-{os.getpid()}-{time.monotonic_ns() % 100000}"
-    ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height, name=name)
-    simulator.attach_camera(ring)
-    return ring, name
 
 
 def _changeout_summary(console: Console, result) -> None:

@@ -53,6 +53,19 @@ class ChangeoutResult:
     arm_time: float = 0.0
 
 
+def start_camera(simulator):
+    """The simulated plant's eye-in-hand camera rendering into a new shared-memory frame ring;
+    returns (ring, name): give the daemon `camera=name`, close the ring after the run."""
+    import os
+    from spacearm.base.vision.config import load_camera
+    from spacearm.base.vision.frames import ShmFrameRing
+    cam = load_camera()
+    name = f"spacearm-{os.getpid()}-{time.monotonic_ns() % 1000000}"
+    ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height, name=name)
+    simulator.attach_camera(ring)
+    return ring, name
+
+
 class _Truth:
     """The plant's true tool pose error against the true pre-contact goal of a store."""
 
