@@ -8,27 +8,19 @@ from __future__ import annotations
 
 import json
 import time
-import uuid
 
 import pytest
 
 from spacearm.base.config.arm import load_arm_config
-from hil_tests.test_daemon_console import Console, free_port
+from hil_tests.camera_stack import launch_camera_stack
+from hil_tests.test_daemon_console import Console
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess, pytest.mark.slow]
 PLANT = "configs/plant/oru_cell_errors.toml"
-# slower heartbeats: the simulator renders frames (~0.1 s each) in the nodes' process
-BUS_CONFIG = "configs/oru/bus_shared_machine.toml"
 
 
 def test_oru_run_flies_the_changeout_with_the_closed_loop_approach(loopback_hub, launch, tmp_path, time_scale):
-    bus = loopback_hub.spec(f"oru-cam-{uuid.uuid4().hex[:8]}")
-    camera = f"spacearm-cam-{uuid.uuid4().hex[:8]}"
-    launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--camera", camera,
-            "--bus-config", BUS_CONFIG], bus_spec=bus, ready="nodes ready")
-    api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--no-record",
-            "--camera", camera, "--bus-config", BUS_CONFIG], bus_spec=bus, ready="spacearm daemon:", timeout=30)
+    api, _ = launch_camera_stack(loopback_hub, launch, PLANT, "oru-cam")
     op = Console(api, tmp_path / "operator")
     op.run("enable")
     op.run("move", "joints", *map(str, load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]))
@@ -49,3 +41,4 @@ def test_oru_run_flies_the_changeout_with_the_closed_loop_approach(loopback_hub,
     assert all(2.5 < r["peak_insert_force"] < 40.0 for r in inserts)
     text = op.run("oru", "status").stdout
     assert "closed-loop approach done" in text
+

@@ -94,7 +94,8 @@ class ApproachMode(ModeBase):
     _err_min: float = np.inf
     _stale_frames: int = 0
     frames_used: int = 0                   # results with a pose that steered the arm
-    frames_seen: int = 0                   # results of frames exposed while this mode ran
+    frames_seen: int = 0                   # fresh results of frames exposed while this mode ran
+    frames_stale: int = 0                  # results too old to steer by (not in frames_seen)
     _latency: list = field(default_factory=list)     # cycles from exposure to use
     _processing: list = field(default_factory=list)  # s per frame in the vision worker
 
@@ -148,7 +149,7 @@ class ApproachMode(ModeBase):
         """Vision figures of this approach (frames, detection rate, latency) and its last measured error."""
         lat = np.array(self._latency, float) * self.period
         return {
-            "frames": self.frames_seen, "detected": self.frames_used,
+            "frames": self.frames_seen, "detected": self.frames_used, "stale": self.frames_stale,
             "detection_rate": self.frames_used / self.frames_seen if self.frames_seen else 0.0,
             "latency_median": float(np.median(lat)) if len(lat) else None,
             "latency_max": float(lat.max()) if len(lat) else None,
@@ -175,14 +176,15 @@ class ApproachMode(ModeBase):
                 self._stale(f"frame exposed {sync_now - sync} cycles ago, before the approach's history")
             return
         self._last_frame_time = t
-        self.frames_seen += 1
         self._latency.append(sync_now - sync)
         self._processing.append(getattr(result, "processing_time", 0.0))
         age = (sync_now - sync) * self.period
         if age > self.tuning.stale_after:
+            self.frames_stale += 1
             self._stale(f"frame exposed {age:.1f} s before use (> {self.tuning.stale_after:.1f} s)")
             return
         self._stale_frames = 0
+        self.frames_seen += 1
         if not result.ok:
             self._bad_frames += 1
             self._last_failure = f"{result.reason}: {result.message}"

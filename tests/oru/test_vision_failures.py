@@ -65,7 +65,7 @@ class Cell:
         ctx = FlowContext(MODEL, MotionPlanner(MODEL, PERIOD, ARM.cartesian), load_scene(), load_changeout(),
                           load_impedance(), {"approach": factory}, READY.copy())
         self.runner = OruTaskRunner(ctx, stages=[0])
-        self.camera.marker_T_goal = marker_T_goal(ctx.scene, np.eye(4), ctx.contact_height(False), None)
+        self.camera.marker_T_goal = marker_T_goal(ctx.scene, np.eye(4), ctx.gap(), None)   # as the flow asks (capture)
         self.runner.index = 1
         assert self.runner.steps[1].number == 2
         self.core = ControllerCore(Supervisor(SupervisionLimits(np.array(MODEL.q_min), np.array(MODEL.q_max),
