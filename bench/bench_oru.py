@@ -1,12 +1,17 @@
-"""ORU changeout benchmark: the paper's stiffness experiment, randomised insertions, and the
-full changeout (lockstep wall time, real-time cycle statistics). Prints one table.
+"""ORU changeout benchmark: the paper's stiffness experiment, randomised insertions, the full
+changeout on the demo plant with hidden errors (open loop vs the closed-loop approach on the
+camera, lockstep and real time), randomised approaches open vs closed loop on the same draws,
+and the vision time per frame. Prints one table.
 
-    .venv/bin/python bench/bench_oru.py [--trials 200] [--seed 1] [--skip-realtime]
+    .venv/bin/python bench/bench_oru.py [--trials 200] [--approaches 200] [--seed 1] [--skip-realtime]
 
 The stiffness experiment and the insertions run the plant and the controller's own contact
 code (spacearm.controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
-loop without the CAN transport (firmware_sim/contact/direct_loop.py) for speed; the full
-changeout runs the daemon and the simulated nodes over the embedded virtual CAN bus.
+loop without the CAN transport (offline/contact/direct_loop.py) for speed; the full changeout
+runs the daemon, the simulated nodes and the simulated camera (shared-memory ring, the
+daemon's vision worker) over the embedded virtual CAN bus; the randomised approaches run the
+approach mode, the camera renderer and the vision pipeline in one loop
+(offline/scenarios/approach_trials.py: ~10 s per closed-loop trial here, so 200 take ~40 min).
 """
 from __future__ import annotations
 
@@ -25,9 +30,30 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from spacearm.offline.scenarios.changeout import run_changeout  # noqa: E402
-from spacearm.base.config.bus import DEFAULT_BUS_CONFIG  # noqa: E402
 from spacearm.offline.contact.trials import PLANT, ContactTrials, run_stiffness_direct  # noqa: E402
 from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
+from spacearm.controller.impedance.config import load_impedance  # noqa: E402
+from spacearm.offline.scenarios.approach_trials import ApproachTrials, trial_plan  # noqa: E402
+from spacearm.offline.scenarios.changeout import ChangeoutFailed, start_camera  # noqa: E402
+from hil_tests.harness import CpuSteal  # noqa: E402
+
+IMPEDANCE = load_impedance()
+
+
+def vision_timing(seed: int, frames: int = 30) -> list[tuple[str, str, str]]:
+    """bench_vision's timing on rendered frames (full frame and tracking, accuracy beside)."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from bench_vision import timing
+    from spacearm.controller.vision.pipeline import VisionPipeline
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    pipe = VisionPipeline.from_configs()
+    rows = timing(pipe, CameraSimulator.from_configs(scene_seed=0, noise_seed=seed), frames,
+                  np.random.default_rng(seed))[:2]          # OpenCV on the configured thread count
+    out = []
+    for r in rows:
+        name, measured, target, _, accuracy = (p.strip() for p in r.split("|"))
+        out.append((name.replace("time per 1360x1024 frame, ", ""), f"{measured}; {accuracy}", target))
+    return out
 
 
 def insertions(trials: ContactTrials, n: int, seed: int) -> dict:
@@ -56,35 +82,99 @@ def insertions(trials: ContactTrials, n: int, seed: int) -> dict:
     }
 
 
-def changeout(clock: str, bus_config: str) -> tuple[float, float, dict]:
+DEMO_PLANT = "configs/plant/oru_cell_errors.toml"
+CHANGEOUT_BUS = "configs/oru/bus_shared_machine.toml"
+
+
+def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT):
+    """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)."""
     bus = f"virtual:bench-oru-{time.monotonic_ns()}"
-    sim = start_simulator(bus, bus_config, PLANT)
-    daemon = Daemon(DaemonOptions(bus=bus, bus_config=bus_config, clock=clock, api=None, record_dir=None))
+    sim = start_simulator(bus, bus_config, plant)
+    ring = camera = None
+    if vision:
+        ring, camera = start_camera(sim)
+    daemon = Daemon(DaemonOptions(bus=bus, bus_config=bus_config, clock=clock, api=None, record_dir=None,
+                                  camera=camera))
+    started = time.monotonic()
     try:
         daemon.start()
         thread = threading.Thread(target=daemon.run, daemon=True)
         thread.start()
-        started = time.monotonic()
-        result = run_changeout(daemon, lambda name, f: None, sim.plant.environment)
-        wall = time.monotonic() - started
+        try:
+            result, failure = run_changeout(daemon, lambda name, f: None, plant=sim.plant), None
+        except ChangeoutFailed as exc:
+            result, failure = None, str(exc)
         daemon.request_stop()
         thread.join(5)
-        return wall, result.arm_time, result.stats
+        times = list(daemon.vision.processing_times) if daemon.vision is not None else []
+        return time.monotonic() - started, result, failure, times
     finally:
         daemon.request_stop()
         daemon.shutdown()
         sim.stop()
+        if ring is not None:
+            ring.close()
+
+
+def changeout_rows(label: str, wall: float, result, failure: str | None) -> list[tuple[str, str, str]]:
+    if result is None:
+        return [(f"full changeout, {label}", f"FAILED after {wall:.0f} s: {failure}"[:200], "success")]
+    rows = [(f"full changeout, {label}: success, wall time", f"done, {wall:.1f} s wall ({result.arm_time:.1f} s arm)",
+             "success" + ("; <= 120 s wall" if label.startswith("lockstep") else ""))]
+    for s in result.stages:
+        err = "-" if s.approach_error is None else \
+            f"{1e3 * s.approach_error[0]:.2f} mm / {math.degrees(s.approach_error[1]):.3f} deg"
+        met = s.approach_error is not None and s.approach_error[0] <= 1e-3 and s.approach_error[1] <= math.radians(0.3)
+        cam = f", {s.detected}/{s.frames} frames" if s.frames else ""
+        rows.append((f"  stage {s.number}: arm time; approach error at handover ({s.approach}{cam})",
+                     f"{s.arm_time:.1f} s; {err}", f"<= 1 mm / 0.3 deg: {'met' if met else 'MISSED'}"))
+        rows.append((f"  stage {s.number}: peak contact force / torque / insertion force",
+                     f"{s.peak_force:.1f} N / {s.peak_torque:.2f} N m / {s.peak_insert_force:.1f} N",
+                     f"<= {IMPEDANCE.force_limit:.0f} N / {IMPEDANCE.torque_limit:.0f} N m (stop limits)"))
+    return rows
+
+
+def approaches(n: int, seed: int) -> list[tuple[str, str, str]]:
+    trials = ApproachTrials(seed=seed)
+    rows_open, rows_closed = [], []
+    for i, (store, placing, placement) in enumerate(trial_plan(n, seed)):
+        rows_open.append(trials.open_loop(store, placing, placement))
+        rows_closed.append(trials.closed_loop(store, placing, placement))
+        print(f"\r  approach {i + 1}/{n}: open {'ok' if rows_open[-1].success else 'FAILED'}, "
+              f"closed {'ok' if rows_closed[-1].success else 'FAILED'}", end="", file=sys.stderr, flush=True)
+    print(file=sys.stderr)
+    out = []
+    for name, rows, target in (("closed loop (vision)", rows_closed, ">= 99 %"), ("open loop, same draws", rows_open, "report")):
+        ok = sum(r.success for r in rows)
+        err = np.array([r.handover for r in rows if r.handover is not None]).reshape(-1, 2)
+        peak = [r.contact.peak_insert_force for r in rows if r.contact is not None]
+        reasons = sorted({(r.failure or (r.contact.failure if r.contact else "") or "not seated")[:60]
+                          for r in rows if not r.success})
+        out.append((f"randomised approaches ({n}), {name}: success", f"{100 * ok / n:.1f} % ({ok}/{n})", target))
+        if len(err):
+            out.append(("  handover error median / max",
+                        f"{1e3 * np.median(err[:, 0]):.2f} / {1e3 * err[:, 0].max():.2f} mm, "
+                        f"{math.degrees(np.median(err[:, 1])):.3f} / {math.degrees(err[:, 1].max()):.3f} deg", "-"))
+        if peak:
+            out.append(("  peak insertion force median / max", f"{np.median(peak):.1f} / {max(peak):.1f} N", "-"))
+        for reason in reasons[:3]:
+            out.append(("  failure", reason, ""))
+    wall = np.median([r.wall_time for r in rows_closed])
+    out.append(("  wall time per closed-loop trial median", f"{wall:.1f} s", "-"))
+    return out
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--skip-realtime", action="store_true", help="leave out the real-time changeout (3 min)")
-    parser.add_argument("--bus-config", default=str(DEFAULT_BUS_CONFIG),
+    parser.add_argument("--approaches", type=int, default=200, help="randomised approaches, open vs closed loop")
+    parser.add_argument("--skip-realtime", action="store_true", help="leave out the real-time changeout (4 min)")
+    parser.add_argument("--bus-config", default=CHANGEOUT_BUS,
                         help="bus file of the changeout runs (configs/oru/bus_shared_machine.toml: slower "
                              "heartbeats for an overloaded machine)")
     args = parser.parse_args()
+    t_start, steal = time.monotonic(), CpuSteal()
     trials = ContactTrials()
     rows: list[tuple[str, str, str]] = []
 
@@ -105,20 +195,33 @@ def main() -> None:
     rows.append(("  time to insert median / max (arm time)", f"{np.median(ins['time']):.2f} / {np.max(ins['time']):.2f} s", "-"))
     rows.append(("  wall time per trial median", f"{np.median(ins['wall']):.2f} s", "-"))
 
-    wall, arm, _ = changeout("lockstep", args.bus_config)
-    rows.append(("full changeout, lockstep: wall time", f"{wall:.1f} s ({arm:.1f} s arm time)", "<= 60 s"))
+    wall, result, failure, vision_times = changeout("lockstep", args.bus_config)
+    rows += changeout_rows("lockstep, closed-loop approach (demo plant)", wall, result, failure)
+    wall, result, failure, _ = changeout("lockstep", args.bus_config, vision=False)
+    rows += changeout_rows("lockstep, open-loop approach (demo plant, no camera)", wall, result, failure)
+    if vision_times:
+        t = np.array(vision_times) * 1e3
+        rows.append(("vision per frame in the changeout (worker, tracking mostly): median / p99",
+                     f"{np.median(t):.1f} / {np.percentile(t, 99):.1f} ms ({len(t)} frames)", "median <= 15 ms"))
+    rows += [(f"vision per frame, {r[0]}", r[1], r[2]) for r in vision_timing(args.seed)]
     if not args.skip_realtime:
-        wall, arm, stats = changeout("realtime", args.bus_config)
-        rows.append(("full changeout, real time: period error median / p99 / max",
-                     f"{1e3 * stats['period_error_median']:.3f} / {1e3 * stats['period_error_p99']:.3f} / "
-                     f"{1e3 * stats['period_error_max']:.3f} ms", "-"))
-        rows.append(("  execution p99 / max; overruns",
-                     f"{1e3 * stats['execution_p99']:.3f} / {1e3 * stats.get('execution_max', math.nan):.3f} ms; "
-                     f"{stats['overruns']}", "< 20 ms; 0"))
+        wall, result, failure, _ = changeout("realtime", args.bus_config)
+        rows += changeout_rows("real time, closed-loop approach", wall, result, failure)
+        if result is not None:
+            stats = result.stats
+            rows.append(("  real time: period error median / p99 / max",
+                         f"{1e3 * stats['period_error_median']:.3f} / {1e3 * stats['period_error_p99']:.3f} / "
+                         f"{1e3 * stats['period_error_max']:.3f} ms", "-"))
+            rows.append(("  execution p99 / max; overruns",
+                         f"{1e3 * stats['execution_p99']:.3f} / {1e3 * stats.get('execution_max', math.nan):.3f} ms; "
+                         f"{stats['overruns']}", "< 20 ms; 0"))
+    if args.approaches > 0:
+        rows += approaches(args.approaches, args.seed)
 
     width = max(len(r[0]) for r in rows)
     print(f"\nbench_oru on {platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"load {os.getloadavg()[0]:.1f}), Python {platform.python_version()}")
+          f"load {os.getloadavg()[0]:.1f}, CPU steal {100 * steal.fraction():.1f} %), Python {platform.python_version()}, "
+          f"{time.monotonic() - t_start:.0f} s")
     print(f"{'figure':<{width}}  {'measured':<34}  target")
     for name, value, target in rows:
         print(f"{name:<{width}}  {value:<34}  {target}")

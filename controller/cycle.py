@@ -80,7 +80,9 @@ class FindingCode(str, Enum):
     CONTACT_FORCE_LIMIT = "contact_force_limit"
     CONTACT_MISSING = "contact_missing"
     JAMMED = "jammed"
-    VISION_LOST = "vision_lost"
+    VISION_LOST = "vision_lost"            # frames arrive, the marker is not measured in them
+    CAMERA_STOPPED = "camera_stopped"      # no new frame at all
+    FRAME_STALE = "frame_stale"            # results arrive, but from exposures too old to steer by
     TOO_FAR = "too_far"
     ERROR_GROWS = "error_grows"
     END_EFFECTOR_FAULT = "end_effector_fault"

@@ -125,7 +125,9 @@ class Simulator:
         process, LocalFrameSource in-process); renders on its own thread."""
         from spacearm.firmware_sim.camera.service import CameraService
         from spacearm.base.config.scene import DEFAULT_SCENE
-        self.camera = CameraService.from_files(self.plant, sink, scene or DEFAULT_SCENE, frame_rate).start()
+        # the camera sees the cell the contact world is built from (the plant's store errors included)
+        scene = scene or getattr(self.plant.environment, "scene", None) or DEFAULT_SCENE
+        self.camera = CameraService.from_files(self.plant, sink, scene, frame_rate).start()
         return self.camera
 
     def stop(self) -> None:

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import json
 import time
-import uuid
 
 import numpy as np
 import pytest
@@ -20,13 +19,12 @@ from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.spatial import inv_transform, matrix_to_rotvec, xyz_rpy_to_transform
 from spacearm.base.vision.config import load_marker, load_mount
 from spacearm.base.vision.frames import ShmFrameRing
-from hil_tests.test_daemon_console import Console, free_port
+from hil_tests.camera_stack import launch_camera_stack
+from hil_tests.test_daemon_console import Console
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
 TARGET, DZ = "exposed", 0.10
 PLANT = "configs/plant/oru_testbed_errors.toml"
-# slower heartbeats: the simulator renders frames (~0.1 s each) in the nodes' process
-BUS_CONFIG = "configs/oru/bus_shared_machine.toml"
 
 
 def start_joints(offset_xyz, offset_rpy) -> list[float]:
@@ -56,13 +54,7 @@ def true_error_from_ring(ring: ShmFrameRing, after_seq: int, timeout: float = 60
 
 
 def test_approach_command_converges_to_the_true_pre_contact_pose(loopback_hub, launch, tmp_path, time_scale):
-    bus = loopback_hub.spec(f"approach-{uuid.uuid4().hex[:8]}")
-    camera = f"spacearm-cam-{uuid.uuid4().hex[:8]}"
-    launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--camera", camera,
-            "--bus-config", BUS_CONFIG], bus_spec=bus, ready="nodes ready")
-    api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--no-record",
-            "--camera", camera, "--bus-config", BUS_CONFIG], bus_spec=bus, ready="spacearm daemon:", timeout=30)
+    api, camera = launch_camera_stack(loopback_hub, launch, PLANT, "approach")
     op = Console(api, tmp_path / "operator")
     ring = ShmFrameRing.attach(camera)
     try:

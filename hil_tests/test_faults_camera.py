@@ -1,9 +1,11 @@
 """Camera faults mid-approach (controller/daemon/approach_mode.py), at the controller core:
 the closed-loop approach runs inside ControllerCore with a vision source that first sees the
-marker and then loses it (bad frames) or stops delivering frames. Expected: protective stop
-`vision_lost` after `lost_frames` bad frames (6 cycles at one frame per cycle) or after
-`no_frame_timeout` (10 s) without frames, no new setpoints afterwards, motion refused until
-reset. Core level (no bus): the camera is not yet a process of the HIL stack."""
+marker and then loses it (bad frames), stops delivering frames, or delivers results of old
+exposures. Expected: the arm holds still meanwhile, then a protective stop `vision_lost` after
+`lost_frames` bad frames (6 cycles at one frame per cycle), `camera_stopped` after
+`no_frame_timeout` (10 s) without frames, `frame_stale` after `lost_frames` results older than
+`stale_after`; no new setpoints afterwards, motion refused until reset. (Inside the ORU flow the
+runner retries the approach and then pauses instead: tests/oru/test_vision_failures.py.) Core level (no bus): the camera is not yet a process of the HIL stack."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -20,12 +22,17 @@ class FakeVision:
     """latest() -> (result, sync) like the VisionWorker; the test sets what it sees."""
 
     def __init__(self):
-        self.mode = "marker"      # "marker" | "lost" | "stopped"
+        self.mode = "marker"      # "marker" | "lost" | "stopped" | "stale"
         self.sync = None
         self._latest = None
+        self.lag = 0              # "stale": results of frames exposed this many SYNCs earlier
 
     def expose(self, sync: int) -> None:
-        if self.mode == "marker":
+        if self.mode == "stale":
+            T = np.eye(4)
+            T[2, 3] = 0.10
+            self._latest = (SimpleNamespace(ok=True, camera_T_marker=T), sync - self.lag)
+        elif self.mode == "marker":
             T = np.eye(4)
             T[2, 3] = 0.10                         # goal 100 mm ahead along the camera axis
             self._latest = (SimpleNamespace(ok=True, camera_T_marker=T), sync)
@@ -112,5 +119,25 @@ def test_camera_stopping_mid_approach_stops_after_the_frame_timeout(cell):
     timeout_cycles = round(cell.mode.tuning.no_frame_timeout / PERIOD)
     cycles = run_until_stopped(cell, timeout_cycles + 10)
     assert timeout_cycles - 2 <= cycles <= timeout_cycles + 3
-    assert cell.core.stop_reason.code == "vision_lost" and "no camera frame" in cell.core.stop_reason.message
+    assert cell.core.stop_reason.code == "camera_stopped" and "no new camera frame" in cell.core.stop_reason.message
+    assert_nothing_moves_until_reset(cell)
+
+
+def test_stale_results_mid_approach_hold_the_arm_then_stop(cell):
+    for _ in range(25):
+        cell.cycle()
+    cell.vision.mode = "stale"
+    cell.vision.lag = round(1.5 * cell.mode.tuning.stale_after / PERIOD)   # a worker 4.5 s behind
+    speeds = [np.linalg.norm(cell.mode._v[:3])]
+    for _ in range(cell.mode.tuning.lost_frames - 2):
+        cell.cycle()
+        speeds.append(np.linalg.norm(cell.mode._v[:3]))
+    # it decelerates towards rest (at the Cartesian acceleration limit) instead of steering by old frames
+    decel = cell.mode.limits.linear_acceleration * PERIOD
+    assert cell.core.state == "enabled" and speeds[0] > 0
+    # (the first cycle still uses the last good frame, exposed before the switch)
+    assert all(b <= max(a - 0.9 * decel, 0.0) + 1e-12 for a, b in zip(speeds[1:], speeds[2:])), speeds
+    cycles = run_until_stopped(cell, 20)
+    assert cycles <= 4
+    assert cell.core.stop_reason.code == "frame_stale"
     assert_nothing_moves_until_reset(cell)

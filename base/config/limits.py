@@ -37,6 +37,11 @@ class ApproachConfig(StrictModel):
     still_speed: float = Field(0.0005, gt=0.0, le=0.1, description="m/s: the arm counts as still below this")
     lost_frames: int = Field(6, ge=1, le=1000, description="consecutive frames without a pose -> vision_lost")
     no_frame_timeout: float = Field(10.0, gt=0.0, le=600.0, description="s of controller time without any frame")
+    # A result whose exposure is this old (controller time) when it arrives is stale: the camera
+    # or the vision worker fell behind. Lockstep runs see up to ~1 s (the renderer's wall time
+    # in fast cycles); the goal from an old frame is still right for a static target, so the
+    # bound is generous and the approach holds still meanwhile.
+    stale_after: float = Field(3.0, gt=0.0, le=600.0, description="s of controller time between exposure and use")
     max_start_distance: float = Field(0.6, gt=0.0, le=10.0, description="m")
     grow_margin: float = Field(0.01, gt=0.0, le=1.0, description="m above the smallest measured error -> error_grows")
     damping: float = Field(0.02, gt=0.0, le=1.0, description="DLS damping of the Jacobian pseudo-inverse")

@@ -115,6 +115,15 @@ class SceneConfig(StrictModel):
         raise KeyError(f"no store {name!r} in scene {self.name} (known: {[s.name for s in self.stores]})")
 
 
+    def with_true_offsets(self, offsets: dict[str, "ScenePose"]) -> "SceneConfig":
+        """A copy whose named stores sit at these true offsets (a plant file's hidden placement
+        errors replacing the cell file's); unknown names raise KeyError."""
+        for name in offsets:
+            self.store(name)
+        stores = [s.model_copy(update={"true_offset": offsets[s.name]}) if s.name in offsets else s
+                  for s in self.stores]
+        return self.model_copy(update={"stores": stores})
+
     def oru(self, name: str) -> Oru:
         for o in self.orus:
             if o.name == name:

@@ -144,6 +144,10 @@ class PipelineConfig(Strict):
     refine_lm: bool
     ellipse_centre_correction: bool
     track_roi: bool
+    opencv_threads: int = Field(default=1, ge=0, le=16, description="cv2.setNumThreads for the process "
+                                "(0 = OpenCV's default); bench_vision measures 1 vs 2")
+    check_px: float = Field(default=0.5, gt=0.0, le=20.0, description="px rms: a refined pose worse than this "
+                            "is solved again with the second solver (sqpnp <-> ap3p)")
 
     @model_validator(mode="after")
     def _order(self) -> "PipelineConfig":

@@ -39,6 +39,14 @@ def describe(status: dict[str, Any]) -> str:
         lines.append(f"holding {status['holding']}")
     if status.get("failure"):
         lines.append(f"failure: {status['failure']}")
+    if status.get("pause"):
+        lines.append(f"paused [{status['pause']['code']}]: {status['pause']['message']}")
+    for r in status.get("records", []):
+        v = r.get("vision")
+        if v and r.get("outcome") != "running":
+            latency = "-" if v["latency_median"] is None else f"{1e3 * v['latency_median']:.0f} ms"
+            lines.append(f"stage {r['stage'] + 1} subtask {r['number']} closed-loop approach {r['outcome']}: "
+                         f"{v['detected']}/{v['frames']} frames with the marker, latency {latency}")
     lines += [f"note: {n}" for n in dict.fromkeys(status.get("notes", []))]
     return "\n".join(lines)
 
@@ -52,7 +60,7 @@ def follow(client: ApiClient, as_json: bool) -> dict:
             print(f"\r{100 * status['progress']:5.1f} %  stage {status['stage']} subtask {status['subtask']:2d}: "
                   f"{status['title']:<42}", end="", file=sys.stderr)
             last = key
-        if status["state"] not in ("running", "paused", "pausing", "resuming"):
+        if status["state"] not in ("running", "paused", "pausing", "resuming") or status.get("pause"):
             if not as_json:
                 print(file=sys.stderr)
             return status
@@ -77,6 +85,9 @@ def register(app: typer.Typer) -> None:
                 return
             status = follow(client, as_json)
         _emit(status, as_json, describe(status))
+        if status.get("pause"):
+            raise CommandFailed(f"ORU changeout paused [{status['pause']['code']}]: {status['pause']['message']} "
+                                f"(spacearm oru resume | abort)")
         if status["state"] != "done":
             raise CommandFailed(f"ORU changeout {status['state']}: {status.get('failure') or 'aborted'}")
 

@@ -24,11 +24,16 @@ that goal: a proportional twist, limited in linear/angular velocity and accelera
 file's [cartesian] limits), with per-joint velocity limits.
 
 It finishes when a frame exposed while the arm was still measures the remaining pose error
-below tolerance twice in a row. `failure()` (protective stop) when:
-  vision_lost   `lost_frames` consecutive frames without a marker pose (reason given: out of
-                view, too far, ambiguous, no marker), or no frame at all for `no_frame_timeout`
-  too_far       the first measured goal is farther than `max_start_distance` from the tool
-  error_grows   the measured remaining error grows beyond its smallest value + margin
+below tolerance twice in a row. While vision is doubtful (the newest frame had no pose, or
+its result is stale) the mode holds: it decelerates to rest and waits. It fails with a code
+(the ORU runner retries the approach a bounded number of times, then pauses the flow) when:
+  vision_lost     `lost_frames` consecutive frames without a marker pose (reason given: out of
+                  view, too far, ambiguous, no marker)
+  camera_stopped  no new frame for `no_frame_timeout` (none since the start, or none since the last)
+  frame_stale     `lost_frames` consecutive results exposed more than `stale_after` before use
+  too_far         the first measured goal is farther than `max_start_distance` from the tool
+  error_grows     the measured remaining error grows beyond its smallest value + margin
+`report()` gives the figures the task summary shows (frames, detection rate, latency).
 """
 from __future__ import annotations
 
@@ -87,7 +92,12 @@ class ApproachMode(ModeBase):
     _failure: Finding | None = None
     _err0: float | None = None
     _err_min: float = np.inf
-    frames_used: int = 0
+    _stale_frames: int = 0
+    frames_used: int = 0                   # results with a pose that steered the arm
+    frames_seen: int = 0                   # fresh results of frames exposed while this mode ran
+    frames_stale: int = 0                  # results too old to steer by (not in frames_seen)
+    _latency: list = field(default_factory=list)     # cycles from exposure to use
+    _processing: list = field(default_factory=list)  # s per frame in the vision worker
 
     def __post_init__(self) -> None:
         self._data = KinematicData(self.model)
@@ -103,13 +113,13 @@ class ApproachMode(ModeBase):
         self._history[m.sync_counter] = (m.q.copy(), still)
         while len(self._history) > 500:
             self._history.popitem(last=False)
-        self._take_vision(t)
+        self._take_vision(t, m.sync_counter)
         if self._failure is not None or self._done:
             self._v[:] = 0.0
             return JointSetpoint(self._q.copy(), np.zeros_like(self._q), np.zeros_like(self._q))
         T_cur, J = fk_jacobian(self.model, self._data, self._q)
-        if self.goal is None:
-            v_des = np.zeros(6)
+        if self.goal is None or self._bad_frames > 0 or self._stale_frames > 0:
+            v_des = np.zeros(6)                  # no goal yet, or vision doubtful: come to rest and wait
         else:
             v_des = self.tuning.gain * twist_error(self.goal, T_cur)
         v_des[:3] = _clip_norm(v_des[:3], self.limits.linear_velocity)
@@ -135,20 +145,46 @@ class ApproachMode(ModeBase):
         return float(np.clip(1.0 - self.measured_error[0] / self._err0, 0.0, 1.0))
 
     # ------------------------------------------------------------------ vision
-    def _take_vision(self, t: float) -> None:
+    def report(self) -> dict:
+        """Vision figures of this approach (frames, detection rate, latency) and its last measured error."""
+        lat = np.array(self._latency, float) * self.period
+        return {
+            "frames": self.frames_seen, "detected": self.frames_used, "stale": self.frames_stale,
+            "detection_rate": self.frames_used / self.frames_seen if self.frames_seen else 0.0,
+            "latency_median": float(np.median(lat)) if len(lat) else None,
+            "latency_max": float(lat.max()) if len(lat) else None,
+            "processing_median": float(np.median(self._processing)) if self._processing else None,
+            "measured_position": None if self.measured_error is None else self.measured_error[0],
+            "measured_rotation": None if self.measured_error is None else self.measured_error[1],
+        }
+
+    def _take_vision(self, t: float, sync_now: int) -> None:
         latest = self.vision.latest()
         if latest is None or latest is self._seen:
-            if self._last_frame_time is None and t - self._started_at > self.tuning.no_frame_timeout:
-                self._fail(FindingCode.VISION_LOST, f"no camera frame within {self.tuning.no_frame_timeout:.0f} s")
-            elif self._last_frame_time is not None and t - self._last_frame_time > self.tuning.no_frame_timeout:
-                self._fail(FindingCode.VISION_LOST, f"no camera frame for {t - self._last_frame_time:.1f} s")
+            since = self._started_at if self._last_frame_time is None else self._last_frame_time
+            if t - since > self.tuning.no_frame_timeout:
+                self._fail(FindingCode.CAMERA_STOPPED, f"no new camera frame for {t - since:.1f} s")
             return
         self._seen = latest
         result, sync = latest
         entry = self._history.get(sync)
         if entry is None:
-            return                           # exposed before this mode started: not usable
+            # exposed before this mode started (or so long ago that its joints are gone):
+            # it still shows the camera is alive, but it cannot steer
+            self._last_frame_time = t
+            if sync < min(self._history, default=sync):
+                self._stale(f"frame exposed {sync_now - sync} cycles ago, before the approach's history")
+            return
         self._last_frame_time = t
+        self._latency.append(sync_now - sync)
+        self._processing.append(getattr(result, "processing_time", 0.0))
+        age = (sync_now - sync) * self.period
+        if age > self.tuning.stale_after:
+            self.frames_stale += 1
+            self._stale(f"frame exposed {age:.1f} s before use (> {self.tuning.stale_after:.1f} s)")
+            return
+        self._stale_frames = 0
+        self.frames_seen += 1
         if not result.ok:
             self._bad_frames += 1
             self._last_failure = f"{result.reason}: {result.message}"
@@ -180,6 +216,11 @@ class ApproachMode(ModeBase):
                 self._done = True
         elif still:
             self._converged_frames = 0
+
+    def _stale(self, why: str) -> None:
+        self._stale_frames += 1
+        if self._stale_frames >= self.tuning.lost_frames:
+            self._fail(FindingCode.FRAME_STALE, f"{self._stale_frames} stale results in a row ({why})")
 
     def _fail(self, code: str, message: str) -> None:
         if self._failure is None:

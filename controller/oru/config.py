@@ -22,6 +22,7 @@ class StageConfig(Strict):
 class MotionConfig(Strict):
     view_height: float = Field(default=0.15, gt=0.0, le=1.0, description="m")
     contact_gap: float = Field(default=0.010, gt=0.0, le=0.1, description="m")
+    approach_gap: float = Field(default=0.075, gt=0.0, le=0.3, description="m, gap at the end of the closed-loop approach")
     extract_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
     withdraw_clearance: float = Field(default=0.02, gt=0.0, le=0.2, description="m")
     speed: float = Field(default=1.0, gt=0.0, le=1.0)
@@ -41,9 +42,17 @@ class ContactConfig(Strict):
     seat_tolerance: float = Field(default=0.006, gt=0.0, le=0.05, description="m")
 
 
+class VisionRetryConfig(Strict):
+    """What the flow does when the closed-loop approach loses its camera (marker lost, camera
+    stopped, stale frames): hold, retry a bounded number of times, then pause with the reason."""
+    approach_retries: int = Field(default=2, ge=0, le=20, description="new approach attempts before pausing")
+    retry_hold: float = Field(default=1.0, ge=0.0, le=60.0, description="s held still before each retry")
+
+
 class ChangeoutConfig(Strict):
     stages: list[StageConfig] = Field(min_length=2, max_length=8)
     motion: MotionConfig = MotionConfig()
+    vision: VisionRetryConfig = VisionRetryConfig()
     end_effector: EndEffectorConfig = EndEffectorConfig()
     contact: ContactConfig = ContactConfig()
 

@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 
 from spacearm.base.config.scene import SceneConfig
-from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, Mode
+from spacearm.controller.cycle import EndEffectorCommand, EndEffectorState, FindingCode, Mode
 from spacearm.controller.modes import PlannedMode
 from spacearm.controller.impedance.config import ImpedanceParams
 from spacearm.controller.impedance.gravity import GravityModel
@@ -40,6 +40,8 @@ TABLE_1 = {
     13: ("backs to the initial pose", "open loop path planning"),
 }
 STEP_AXES = ("impedance", "impedance", "step", "impedance", "impedance", "impedance")
+# the camera's failures in the closed-loop approach: retried, then the flow pauses (runner.py)
+VISION_CODES = frozenset({FindingCode.VISION_LOST, FindingCode.CAMERA_STOPPED, FindingCode.FRAME_STALE})
 
 
 @dataclass
@@ -66,9 +68,15 @@ class FlowContext:
         T[:3, 3] += slot[:3, 2] * height
         return T
 
+    def gap(self) -> float:
+        """Gap between the parts at the handover to contact: wider after the closed-loop
+        approach, whose camera must still see the whole marker there."""
+        m = self.config.motion
+        return m.approach_gap if "approach" in self.factories else m.contact_gap
+
     def contact_height(self, placing: bool) -> float:
         g = self.scene.geometry
-        return (g.slot_depth if placing else g.guide_depth) + self.config.motion.contact_gap
+        return (g.slot_depth if placing else g.guide_depth) + self.gap()
 
     # ---- the end effector's mass properties (eq. 14) ---------------------------------
     def gravity(self) -> GravityModel:
@@ -109,8 +117,11 @@ def _approach_step(ctx: FlowContext, stage: int, number: int, store: str, placin
     dz = ctx.contact_height(placing)
     factory = ctx.factories.get("approach")
     if factory is not None:
-        return ModeStep(stage, number, title, algorithm,
-                        make=lambda q0: factory(target=store, dz=dz, holding=ctx.holding))
+        # the approach mode's dz: above the adapter's top face (capturing) or above the held
+        # ORU's seated pose (placing); the same pre-contact pose as ctx.above(store, dz)
+        dz_mode = dz if placing else ctx.gap()
+        return ModeStep(stage, number, title, algorithm, retry_codes=VISION_CODES,
+                        make=lambda q0: factory(target=store, dz=dz_mode, holding=ctx.holding))
     target = ctx.above(store, dz)
     limits = ctx.planner.cartesian
     speed = ctx.config.motion.speed
@@ -126,7 +137,7 @@ def _approach_step(ctx: FlowContext, stage: int, number: int, store: str, placin
 def contact_step(ctx: FlowContext, stage: int, number: int, store: str, kind: str) -> ContactStep:
     title, algorithm = TABLE_1[number]
     g = ctx.scene.geometry
-    gap = ctx.config.motion.contact_gap
+    gap = ctx.gap()
     imp = ctx.impedance
 
     def task() -> ContactTask:

@@ -10,7 +10,10 @@ limits and with bounded jerk, whichever step is running (path-time scaling, as a
 controller's speed override does). Any step failure (force limit, capture not
 confirmed, end-effector fault or timeout, jammed insertion, planning refused, lost marker in
 the approach) is reported in the runner's output, and the daemon core makes a protective stop
-(quick stop, brakes) and keeps the reason. Abort ends the flow holding the current target.
+(quick stop, brakes) and keeps the reason. The closed-loop approach's camera failures
+(vision_lost, camera_stopped, frame_stale) are not stops: the runner holds `retry_hold` s and starts the approach again, up to `approach_retries`
+times, then pauses with the code and message (`pause` in status); resume starts the approach
+afresh. Abort ends the flow holding the current target.
 """
 from __future__ import annotations
 
@@ -37,6 +40,10 @@ class StepRecord:
     peak_torque: float = 0.0
     peak_insert_force: float = 0.0
     notes: list[str] = field(default_factory=list)
+    outcome: str = "running"         # running, then done | failed | retried | paused (how the attempt ended)
+    q_end: list[float] | None = None  # measured joints when the step ended (handover to contact)
+    sync_end: int | None = None       # SYNC of that measurement
+    vision: dict | None = None       # the closed-loop approach's report() (frames, detection, latency)
 
 
 def _quintic(x: float) -> float:
@@ -94,6 +101,9 @@ class OruTaskRunner(ModeBase):
         self._last_dt = 0.0
         self.a_max = np.asarray(ctx.model.a_max, float)
         self.v_max = np.asarray(ctx.model.v_max, float)
+        self.pause_reason: Finding | None = None    # why the flow paused itself (vision retries used up)
+        self._retries = 0                           # of the current approach step
+        self._hold_until = 0.0                      # runner clock: hold still before a retry
 
     # ---- operator commands (run inside the cycle) ------------------------------------
     def pause(self) -> str:
@@ -108,6 +118,8 @@ class OruTaskRunner(ModeBase):
         if self.state in ("paused", "pausing"):
             self.state = "resuming"
             self._ramp = PauseRamp(self.rate, 1.0, self._elapsed, self._ramp_time())
+            self.pause_reason = None
+            self._retries = 0
         return self.state
 
     def _ramp_time(self) -> float:
@@ -153,6 +165,9 @@ class OruTaskRunner(ModeBase):
                                            notes=list(step.notes)))
             self.ctx.notes += [f"stage {step.stage + 1} subtask {step.number}: {n}" for n in step.notes]
             self._begun = True
+        if self.clock < self._hold_until:
+            self.clock += period
+            return ModeOutput(hold(self.q_last))
         out = step.update(self.clock, m)
         self._step_progress = out.progress
         if self._last_dt > 0.05 * self.ctx.impedance.period:   # path speed per clock second, for the next ramp
@@ -160,19 +175,41 @@ class OruTaskRunner(ModeBase):
             # target, e.g. between steps, is no speed)
             self._path_speed = np.minimum(np.abs(out.setpoint.q - self.q_last) / self._last_dt, self.v_max)
         self.q_last = out.setpoint.q.copy()
+        if out.failure is not None and out.failure.code in getattr(step, "retry_codes", ()):
+            self._vision_failure(step, out.failure, m)
+            return ModeOutput(hold(self.q_last))
         if out.failure is not None:
             self._failure = out.failure
             self.state = "failed"
-            self._record(step)
+            self._record(step, m, "failed")
             return out
         if out.finished:
-            self._complete(step)
+            self._complete(step, m)
         self.clock += period
         self._last_dt = period        # the clock step between this setpoint and the next
         return out
 
-    def _complete(self, step: Step) -> None:
-        self._record(step)
+    def _vision_failure(self, step, failure: Finding, m: Measurement) -> None:
+        """Hold, then retry the approach, or pause the flow once the retries are used up."""
+        cfg = self.ctx.config.vision
+        self._retries += 1
+        retry = self._retries <= cfg.approach_retries
+        self._record(step, m, "retried" if retry else "paused")
+        step.reset()
+        self._begun = False
+        if retry:
+            self._hold_until = self.clock + cfg.retry_hold
+            self.ctx.notes.append(f"{failure.message}: holding {cfg.retry_hold:.1f} s, approach attempt "
+                                  f"{self._retries + 1} of {cfg.approach_retries + 1}")
+        else:
+            self.state = "paused"
+            self.pause_reason = Finding(failure.code, f"{failure.message} (after {cfg.approach_retries} "
+                                        f"retries): flow paused, resume to try again or abort")
+            self.ctx.notes.append(self.pause_reason.message)
+
+    def _complete(self, step: Step, m: Measurement) -> None:
+        self._retries = 0
+        self._record(step, m)
         store = self.ctx.config.stages[step.stage].store
         if isinstance(step, ContactStep) and step.mode.task.tare_cycles > 0:
             self.ctx.ft_bias = step.mode.bias.copy()
@@ -185,9 +222,15 @@ class OruTaskRunner(ModeBase):
         if self.index >= len(self.steps):
             self.state = "done"
 
-    def _record(self, step: Step) -> None:
+    def _record(self, step: Step, m: Measurement, outcome: str = "done") -> None:
         rec = self.records[-1]
         rec.duration = self.clock - rec.started
+        rec.outcome = outcome
+        rec.q_end = [float(v) for v in m.q]
+        rec.sync_end = int(m.sync_counter)
+        report = getattr(getattr(step, "mode", None), "report", None)
+        if callable(report):
+            rec.vision = report()
         if isinstance(step, ContactStep):
             pk = step.mode.peaks
             rec.peak_force, rec.peak_torque = pk.force, pk.torque
@@ -215,6 +258,8 @@ class OruTaskRunner(ModeBase):
             "algorithm": None if step is None else step.algorithm,
             "holding": self.ctx.holding,
             "failure": None if self._failure is None else self._failure.message,
+            "pause": None if self.pause_reason is None else {"code": str(self.pause_reason.code),
+                                                             "message": self.pause_reason.message},
             "notes": list(self.ctx.notes),
             "records": [vars(r) | {"notes": list(r.notes)} for r in self.records],
         }

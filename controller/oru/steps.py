@@ -56,8 +56,13 @@ class ModeStep(Step):
     make: Callable[[np.ndarray], Any] = None          # type: ignore[assignment]
     wrap: Callable[[Any, float], Mode] | None = None   # plan -> Mode (planned steps)
     background: bool = False
+    retry_codes: frozenset = frozenset()               # failures the runner may retry (closed-loop approach)
     mode: Mode | None = None
     _future: Future | None = None
+
+    def reset(self) -> None:
+        """Forget the attempt (mode, failure) so that begin() starts a new one."""
+        self._failure, self.mode, self._future = None, None, None
 
     def begin(self, q: np.ndarray, t: float) -> None:
         super().begin(q, t)

@@ -26,6 +26,9 @@ from spacearm.base.vision.config import PipelineConfig
 
 TILE = 32                                # px (search scale) tiles of the noise estimate
 NOISE_FLOOR = 0.5                        # DN, 8-bit quantisation noise is 0.29 DN
+# Labelling with statistics: OpenCV's default (Spaghetti) took 2 ms on the 680 x 512 search
+# image here, BBDT 0.5 ms (single thread); the labels are the same.
+CCL = cv2.CCL_BBDT
 DUPLICATE_PX = 1.0                       # full-res px: refined centres this close are one circle
 
 
@@ -61,7 +64,9 @@ def local_noise_sigma(img: np.ndarray) -> tuple[np.ndarray, float]:
     # MAD of a difference of two pixels: sigma = 1.4826 * median|d| / sqrt(2). Quantised 8-bit
     # data make the median 0 on very dark flat areas; the mean of |d| (x sqrt(pi)/2) is the
     # fallback there (still robust enough: a tile gives 256 samples).
-    med = np.median(tiles, axis=2) * (1.4826 / np.sqrt(2))
+    k = tiles.shape[2] // 2          # exact median of an even count, by one partial sort of uint8
+    part = np.partition(tiles.astype(np.uint8), (k - 1, k), axis=2)
+    med = (part[..., k - 1].astype(np.float32) + part[..., k]) * np.float32(0.5 * 1.4826 / np.sqrt(2))
     mean = tiles.mean(axis=2) * (np.sqrt(np.pi) / 2 / np.sqrt(2))
     sig = np.where(med > 0, med, mean).astype(np.float32)
     return cv2.resize(sig, (w, h), interpolation=cv2.INTER_LINEAR), float(np.median(sig))
@@ -110,7 +115,7 @@ class CircleDetector:
             noise = NOISE_FLOOR
             margin = np.full_like(g, max(cfg.min_contrast, cfg.threshold_s * NOISE_FLOOR))
         binary = cv2.compare(g, cv2.add(B, margin), cv2.CMP_GE)
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(binary, connectivity=8)
+        n, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(binary, 8, cv2.CV_32S, CCL)
         if n <= 1:
             return Detection([], 0, 0, noise)
         st = stats[1:].astype(np.float64)
@@ -122,7 +127,7 @@ class CircleDetector:
         idx = np.nonzero(shape_ok & size_ok & (area >= 1))[0]
         n_blobs = len(idx)
         # dark surround: mean of g over a ring of width ~ one blob diameter (integral image)
-        ii = cv2.integral(g, sdepth=cv2.CV_64F)
+        ii = cv2.integral(g8, sdepth=cv2.CV_32S)     # g = g8 exactly; int32 sums are exact and 10x faster than float64
         hs, ws = g.shape
         cands: list[tuple[float, Candidate]] = []
         n_small = 0
@@ -136,8 +141,7 @@ class CircleDetector:
             if ring_area <= 0:
                 continue
             surround = (outer[0] - inner[0]) / ring_area
-            patch = g[by:by + bhi, bx:bx + bwi]
-            peak = float(patch.max())
+            peak = float(g8[by:by + bhi, bx:bx + bwi].max())
             contrast = peak - surround
             if contrast < cfg.min_contrast or surround > cfg.dark_surround_ratio * peak:
                 continue
@@ -157,17 +161,47 @@ class CircleDetector:
                                      touches or c[2]))
         return Detection(out, n_blobs, n_small, noise)
 
-    def _refine(self, full: np.ndarray, bx: int, by: int, bw: int, bh: int, touches: bool):
+    def refine_at(self, image: np.ndarray, centre: np.ndarray, radius: float) -> Candidate | None:
+        """Tracking: the circle predicted at `centre` (full-res px) with `radius` px, measured
+        directly at full resolution without the search stage. None unless a bright blob on a
+        dark surround is found there (contrast and surround ratio as in the search)."""
+        full = image if image.dtype == np.uint8 else np.clip(image, 0, 255).astype(np.uint8)
+        r = max(2.0, float(radius))
+        half = int(np.ceil(r + 3.0))
+        bx, by = int(round(centre[0])) - half, int(round(centre[1])) - half
+        H, W = full.shape
+        if bx < 0 or by < 0 or bx + 2 * half >= W or by + 2 * half >= H:
+            return None
+        got = self._refine(full, bx, by, 2 * half, 2 * half, False, with_levels=True)
+        if got is None:
+            return None
+        # Second pass on a window centred on the circle and sized by it, as the search's blob
+        # box gives: the centre then no longer depends on how far off the prediction was.
+        w, h = got[6]
+        bx, by = int(round(got[0][0] - w / 2)), int(round(got[0][1] - h / 2))
+        if bx < 0 or by < 0 or bx + w >= W or by + h >= H:
+            return None
+        got = self._refine(full, bx, by, w, h, False, with_levels=True)
+        if got is None:
+            return None
+        c, bbox_c, at_border, peak, background, diameter, _ = got
+        contrast = peak - background
+        if contrast < self.cfg.min_contrast or background > self.cfg.dark_surround_ratio * peak:
+            return None
+        return Candidate(c, bbox_c, diameter, contrast, background / max(peak, 1e-9), at_border)
+
+    def _refine(self, full: np.ndarray, bx: int, by: int, bw: int, bh: int, touches: bool, with_levels: bool = False):
         """Full-res centre of the blob whose search-scale box (in full-res px) is given."""
         H, W = full.shape
         m = max(4, int(round(0.8 * max(bw, bh))))
         x0, y0 = max(0, bx - m), max(0, by - m)
         x1, y1 = min(W, bx + bw + m), min(H, by + bh + m)
-        roi = full[y0:y1, x0:x1].astype(np.float32)
-        border = np.concatenate([roi[0], roi[-1], roi[:, 0], roi[:, -1]])
+        raw = full[y0:y1, x0:x1]
+        roi = raw.astype(np.float32)
+        border = np.concatenate([raw[0], raw[-1], raw[:, 0], raw[:, -1]])
         # the circle's own background is the darkest part of the window's rim (black plate);
         # a bright ORU edge or clutter in one corner of the window must not set it
-        b = float(np.percentile(border, 25))
+        b = _quartile(border)
         peak = float(cv2.GaussianBlur(roi, (0, 0), 1.0).max())
         # Core = the level set {I >= t} of the blob (centrally symmetric for a blurred ellipse,
         # so its centroid is unbiased); weights I - t taper to 0 at the core's edge so that noise
@@ -175,7 +209,7 @@ class CircleDetector:
         # the plate edge and the rod out.
         t = b + 0.35 * (peak - b)
         mask = (roi >= t).astype(np.uint8)
-        n, lab, stats, cents = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        n, lab, stats, cents = cv2.connectedComponentsWithStatsWithAlgorithm(mask, 8, cv2.CV_32S, CCL)
         if n <= 1:
             return None
         # the component at (or nearest to) the blob found by the search, not the largest one:
@@ -183,23 +217,37 @@ class CircleDetector:
         seed = np.array([bx + bw / 2 - x0 - 0.5, by + bh / 2 - y0 - 0.5])
         j = 1 + int(np.argmin(np.linalg.norm(cents[1:] - seed, axis=1)))
         sel = lab == j
-        w = np.where(sel, roi - t, 0.0)
-        s = w.sum()
-        if s <= 0:
+        w = np.where(sel, roi - np.float32(t), np.float32(0.0))
+        mom = cv2.moments(w)                     # intensity-weighted centroid without index grids
+        if mom["m00"] <= 0:
             return None
-        ys, xs = np.mgrid[0:roi.shape[0], 0:roi.shape[1]]
-        cx = float((w * xs).sum() / s) + x0
-        cy = float((w * ys).sum() / s) + y0
+        cx = mom["m10"] / mom["m00"] + x0
+        cy = mom["m01"] / mom["m00"] + y0
         # the paper's centre: bounding box of the Canny outline
-        edges = cv2.Canny(np.clip(roi, 0, 255).astype(np.uint8), self.cfg.canny_low, self.cfg.canny_high)
-        ey, ex = np.nonzero(edges)
-        if len(ex):
-            bbox_c = np.array([(ex.min() + ex.max()) / 2 + x0, (ey.min() + ey.max()) / 2 + y0])
+        edges = cv2.Canny(raw, self.cfg.canny_low, self.cfg.canny_high)
+        ex, ey, ew, eh = cv2.boundingRect(edges)          # box of the non-zero (edge) pixels
+        if ew > 0:
+            bbox_c = np.array([ex + (ew - 1) / 2 + x0, ey + (eh - 1) / 2 + y0])
         else:
             bbox_c = np.array([cx, cy])
         st = stats[j]
         at_border = (st[0] + x0 <= 0 or st[1] + y0 <= 0 or st[0] + st[2] + x0 >= W or st[1] + st[3] + y0 >= H)
+        if with_levels:
+            # the core is the blob above 35 % of its contrast: a blurred disc's core diameter
+            # is close to the disc's (the search's equivalent diameter is used the same way)
+            return (np.array([cx, cy]), bbox_c, bool(at_border), peak, b,
+                    float(np.sqrt(4 * st[4] / np.pi)), (int(st[2]), int(st[3])))
         return np.array([cx, cy]), bbox_c, bool(at_border)
+
+
+def _quartile(v: np.ndarray) -> float:
+    """np.percentile(v, 25) (linear interpolation) by a partial sort: 10x cheaper on a few
+    hundred values."""
+    pos = 0.25 * (len(v) - 1)
+    lo = int(pos)
+    hi = min(lo + 1, len(v) - 1)
+    part = np.partition(v, (lo, hi))
+    return float(part[lo]) + (pos - lo) * (float(part[hi]) - float(part[lo]))
 
 
 def _box_sum(ii: np.ndarray, x0: int, y0: int, x1: int, y1: int, w: int, h: int) -> tuple[float, float]:

@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 
 from spacearm.base.vision.camera import CameraModel
@@ -80,6 +81,9 @@ class VisionPipeline:
     detector: CircleDetector = field(init=False)
 
     def __post_init__(self) -> None:
+        if self.cfg.opencv_threads > 0:
+            # process-wide: OpenCV's thread pool cost more than it saved here (pipeline.toml)
+            cv2.setNumThreads(self.cfg.opencv_threads)
         self.detector = CircleDetector(self.cfg)
         t = np.linspace(0, 2 * np.pi, CIRCLE_SAMPLES, endpoint=False)
         ring = self.marker.circle_radius * np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)])
@@ -96,9 +100,14 @@ class VisionPipeline:
         t0 = time.perf_counter()
         result = None
         if prior is not None and self.cfg.track_roi:
-            roi = self._roi(prior)
-            if roi is not None:
-                result = self._measure(frame, roi, prior)
+            # Tracking: measure the four circles where the prior puts them (four small
+            # full-res windows, no search); a doubtful result falls back to the window search
+            # and then to the full frame.
+            result = self._track(frame, prior)
+            if result is None:
+                roi = self._roi(prior)
+                if roi is not None:
+                    result = self._measure(frame, roi, prior)
         if result is None or not result.ok:
             full = self._measure(frame, None, None)
             # keep the more specific reason of the tracked attempt when both fail
@@ -135,23 +144,16 @@ class VisionPipeline:
         if not hyps:
             hyps = hypotheses(self.marker, xy, max_keep=512, depth_range=(0.5 * cfg.min_distance, 1.5 * cfg.max_distance))
             hyps = plate_is_dark(frame.image, centres_px, hyps)[:MAX_PNP]
-        fits: list[tuple[PnpResult, Hypothesis]] = []
-        # Rank every surviving labelling by an unrefined solve, refine the best few. No single
-        # OpenCV solver is reliable on this 3+1 point marker: with pixel noise SQPnP misses the
-        # true pose of the true labelling in ~4 % of close views and AP3P in ~2 % (and EPnP,
-        # used here before, by tens of px even without noise), but they rarely fail together, so
-        # each labelling keeps the better of the configured solver and AP3P.
-        ranked = []
-        for h in hyps:
-            r = self._solve(xy[list(h.indices)], refine=False)
-            if r is not None:
-                ranked.append((r.rms_px, h, r))
-        ranked.sort(key=lambda x: x[0])
-        for _, h, r in ranked[:RESOLVE]:
-            fits.append((self._solve(xy[list(h.indices)], refine=True, guess=r.camera_T_marker), h))
+        # Rank every surviving labelling by one unrefined solve, refine the best few from their
+        # own pose. The cheap check: a correct pose reprojects to ~0.1 px, so a best refined fit
+        # above check_px means the solver may have missed (SQPnP misses the true pose of the true
+        # labelling in ~4 % of close views, AP3P in ~2 %, rarely together): only then the other
+        # solver ranks and refines as well. One solver per labelling instead of two.
+        fits = self._fits(xy, hyps, self.cfg.solver)
+        if not fits or fits[0][0].rms_px > self.cfg.check_px:
+            fits = sorted(fits + self._fits(xy, hyps, _other(self.cfg.solver)), key=lambda f: f[0].rms_px)
         if not fits:
             return self._fail(frame, "no_marker", f"{len(cands)} candidates, no labelling gives a pose")
-        fits.sort(key=lambda f: f[0].rms_px)
         best, hyp = fits[0]
         if best.rms_px > cfg.max_reprojection_px:
             return self._fail(frame, "no_marker", f"best labelling reprojects to {best.rms_px:.2f} px rms "
@@ -161,12 +163,17 @@ class VisionPipeline:
                 return self._fail(frame, "ambiguous", f"two labellings fit ({best.rms_px:.2f} and "
                                   f"{other.rms_px:.2f} px rms) with different poses")
         picked = [cands[i] for i in hyp.indices]
+        return self._finish(frame, xy[list(hyp.indices)], picked, best)
+
+    def _finish(self, frame: Frame, xy4: np.ndarray, picked: list[Candidate], best: PnpResult) -> VisionResult:
+        """Border, ellipse-centre correction and distance gates on the identified circles."""
+        cfg, cam = self.cfg, self.camera
         if any(c.touches_border for c in picked):
             return self._fail(frame, "out_of_view", "a marker circle touches the image border")
         T = best.camera_T_marker
         if cfg.ellipse_centre_correction:
             for _ in range(2):
-                xy_fix = xy[list(hyp.indices)] - self._centre_bias(T)
+                xy_fix = xy4 - self._centre_bias(T)
                 r = solve_pnp(self.marker.points, xy_fix, cam.focal_px, cfg.solver, True, guess=T)
                 if r is None:
                     break
@@ -178,15 +185,58 @@ class VisionPipeline:
             return self._fail(frame, "too_close", f"marker at {depth:.3f} m, nearer than {cfg.min_distance} m")
         return MarkerPose(T, best.rms_px, np.array([c.centre for c in picked]), frame.timestamp, frame.seq, 0.0)
 
+    def _track(self, frame: Frame, prior: np.ndarray) -> VisionResult | None:
+        """The four circles measured in small windows around their predicted positions, LM from
+        the prior. None (caller falls back to the search) unless every circle is found with a
+        plausible size and the pose passes the cheap check."""
+        cam = self.camera
+        pc = self.marker.points @ prior[:3, :3].T + prior[:3, 3]
+        if (pc[:, 2] <= 0.01).any():
+            return None
+        uv = cam.project(pc)
+        r_px = self.marker.circle_radius * cam.focal_px / pc[:, 2]
+        picked = []
+        for centre, r in zip(uv, r_px):
+            c = self.detector.refine_at(frame.image, centre, r)
+            if c is None or not (0.4 * 2 * r <= c.diameter <= 2.5 * 2 * r + 2):
+                return None
+            picked.append(c)
+        xy = cam.undistort_pixels(np.array([c.centre for c in picked]))
+        best = solve_pnp(self.marker.points, xy, cam.focal_px, self.cfg.solver, True, guess=prior)
+        if best is None or best.rms_px > self.cfg.check_px:
+            return None
+        return self._finish(frame, xy, picked, best)
+
+    def _fits(self, xy: np.ndarray, hyps: list[Hypothesis], solver: str) -> list[tuple[PnpResult, Hypothesis]]:
+        """Labellings ranked by one unrefined solve with `solver`; the best RESOLVE refined by LM
+        from their own pose, best first."""
+        pts, f = self.marker.points, self.camera.focal_px
+        ranked = []
+        for h in hyps:
+            r = solve_pnp(pts, xy[list(h.indices)], f, solver, False)
+            if r is not None:
+                ranked.append((r.rms_px, h, r))
+        ranked.sort(key=lambda x: x[0])
+        fits = []
+        for _, h, r in ranked[:RESOLVE]:
+            refined = (solve_pnp(pts, xy[list(h.indices)], f, solver, True, guess=r.camera_T_marker)
+                       if self.cfg.refine_lm else r)
+            fits.append((refined or r, h))
+        return sorted(fits, key=lambda fh: fh[0].rms_px)
+
     def _solve(self, xy: np.ndarray, refine: bool, guess: np.ndarray | None = None) -> PnpResult | None:
-        """The better of the configured solver and AP3P (refined by LM when asked and
-        cfg.refine_lm); a guess, when given, is one more starting point."""
+        """The configured solver (refined by LM when asked and cfg.refine_lm); the other solver
+        too only when the result fails the cheap check (rms above check_px); a guess, when
+        given, is one more starting point."""
         refine = refine and self.cfg.refine_lm
         pts, f = self.marker.points, self.camera.focal_px
-        tries = [solve_pnp(pts, xy, f, self.cfg.solver, refine), solve_pnp(pts, xy, f, "ap3p", refine)]
+        tries = [solve_pnp(pts, xy, f, self.cfg.solver, refine)]
         if guess is not None and refine:
             tries.append(solve_pnp(pts, xy, f, self.cfg.solver, True, guess=guess))
         tries = [r for r in tries if r is not None]
+        if not tries or min(r.rms_px for r in tries) > self.cfg.check_px:
+            other = solve_pnp(pts, xy, f, _other(self.cfg.solver), refine)
+            tries += [other] if other is not None else []
         return min(tries, key=lambda r: r.rms_px) if tries else None
 
     def _centre_bias(self, T: np.ndarray) -> np.ndarray:
@@ -228,6 +278,11 @@ class VisionPipeline:
     @staticmethod
     def _fail(frame: Frame, reason: str, message: str) -> VisionFailure:
         return VisionFailure(reason, message, frame.timestamp, frame.seq)
+
+
+def _other(solver: str) -> str:
+    """The second solver of the cheap check."""
+    return "sqpnp" if solver == "ap3p" else "ap3p"
 
 
 def _polygon_centroid(p: np.ndarray) -> np.ndarray:

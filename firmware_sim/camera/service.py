@@ -81,10 +81,10 @@ class CameraService:
         self.board = board
 
     @classmethod
-    def from_files(cls, plant, sink, scene: str | Path = DEFAULT_SCENE, frame_rate: float | None = None,
+    def from_files(cls, plant, sink, scene: str | Path | SceneConfig = DEFAULT_SCENE, frame_rate: float | None = None,
                    scene_seed: int = 0, noise_seed: int | None = 1) -> "CameraService":
         cam = CameraSimulator.from_configs(scene_seed=scene_seed, noise_seed=noise_seed)
-        return cls(plant, sink, cam, load_scene(scene), frame_rate or 30.0)
+        return cls(plant, sink, cam, scene if isinstance(scene, SceneConfig) else load_scene(scene), frame_rate or 30.0)
 
     # ------------------------------------------------------------------ plant side (SYNC thread)
     def on_sync(self, sync: int) -> None:
@@ -116,12 +116,20 @@ class CameraService:
         """Render and publish one frame (also used directly by single-threaded tests)."""
         site = self._site_in_view(base_T_camera)
         camera_T_marker = inv_transform(base_T_camera) @ site.base_T_marker
-        self.camera.scene.oru = self._oru if site.holds_oru else None
+        self.camera.scene.oru = self._oru if self._holds_oru(site) else None
         irradiance = self.camera.renderer.render(self.camera.scene, camera_T_marker,
                                                  self._board_layers(base_T_camera))
         image = self.camera.sensor.expose(irradiance, self.camera.rng, self.render_noise)
         self.frames += 1
         return self.sink.publish(image, t, camera_T_marker, sync)
+
+    def _holds_oru(self, site: MarkerSite) -> bool:
+        """Whether the store shows an ORU now: the contact world's state when the plant has one
+        (ORUs move during a changeout), else the cell file's."""
+        orus = getattr(getattr(self.plant, "environment", None), "orus", None)
+        if orus is None:
+            return site.holds_oru
+        return any(o.where == "store" and o.store == site.store for o in orus.values())
 
     def _board_layers(self, base_T_camera: np.ndarray) -> list[FlatLayer]:
         if self.board is None:

@@ -21,6 +21,8 @@ from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field
 
+from spacearm.base.config.scene import ScenePose
+
 REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -40,6 +42,9 @@ class ContactConfig(BaseModel):
     grasp_rot_stiffness: float = Field(default=2.0e3, gt=0.0, le=1.0e6, description="N m/rad")
     latch_time: float = Field(default=1.0, gt=0.0, le=30.0, description="s for the store latch to open or close")
     near: float = Field(default=0.25, gt=0.0, le=5.0, description="m: contacts are only evaluated this close")
+    store_offsets: dict[str, ScenePose] = Field(
+        default_factory=dict, description="store name -> true offset (slot_nominal_T_slot_true): the plant's "
+                                          "hidden placement errors, replacing the cell file's true_offset")
 
     def scene_path(self) -> Path:
         path = Path(self.scene)

@@ -63,7 +63,7 @@ class ContactWorld:
         self.config = config
         self.model = model
         self.data = KinematicData(model)
-        self.scene = scene or load_scene(config.scene_path())
+        self.scene = (scene or load_scene(config.scene_path())).with_true_offsets(config.store_offsets)
         g = self.scene.geometry
         self.law = ContactLaw(config.stiffness, config.damping, config.friction, config.slip_velocity)
         self.oru_box = MaleBox(g.oru_size[0] / 2, g.oru_size[1] / 2, g.oru_size[2])

@@ -49,7 +49,7 @@ def test_closed_loop_approach_converges_from_random_starts_and_beats_open_loop(s
 
 @pytest.mark.parametrize("shift, words", [
     (0.045, ("marker lost", "out_of_view", "no_marker")),      # the marker half out of the image
-    (0.25, ("marker lost", "no_marker", "no camera frame")),   # nothing of it in view
+    (0.25, ("marker lost", "no_marker", "no new camera frame")),   # nothing of it in view
 ])
 def test_approach_with_the_marker_out_of_view_stops_safely_with_the_reason(stack, shift, words):
     # the camera's image x is the end frame's y: shifting the tool along y slides the marker sideways
@@ -59,7 +59,7 @@ def test_approach_with_the_marker_out_of_view_stops_safely_with_the_reason(stack
     try:
         assert result["state"] == "stopped"
         reason = stack.daemon.core.stop_reason
-        assert reason.code == "vision_lost" and any(w in reason.message for w in words), reason
+        assert reason.code in ("vision_lost", "camera_stopped") and any(w in reason.message for w in words), reason
         q_after = stack.daemon.snapshot.measurement.q
         assert np.max(np.abs(q_after - q_before)) < np.radians(1.0), "it must not wander off blind"
     finally:
