@@ -43,7 +43,7 @@ from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffec
 from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from spacearm.base.transport import open_bus
+from spacearm.base.transport import frame_sender, open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -122,6 +122,22 @@ class _Listener(can.Listener):
             stats.callback_errors += 1
             logger.exception("error handling frame %s", msg)
 
+    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """In-process bus hot path: a standard data frame as plain values; TPDOs go straight
+        to their decoder, everything else through the library's subscribers."""
+        arm = self.arm
+        arm.stats.rx_frames += 1
+        try:
+            if can_id in arm._tpdo_routes:
+                arm._on_tpdo(can_id, data, timestamp)
+            elif can_id in arm.network.subscribers:
+                arm.network.notify(can_id, data, timestamp)
+            else:
+                arm.stats.unknown += 1
+        except Exception:
+            arm.stats.callback_errors += 1
+            logger.exception("error handling frame 0x%03X", can_id)
+
     def on_error(self, exc: Exception) -> None:
         self.arm.stats.callback_errors += 1
 
@@ -181,6 +197,7 @@ class ArmNetwork:
             return self
         self.network.bus = open_bus(self.bus_spec)
         self.network.connect()
+        self._send_frame = frame_sender(self.network.bus)
         if hasattr(self.network.bus, "add_inline_listener"):
             # in-process bus: TPDOs are handled in the simulator's sending thread (see
             # drivers/transport); the library's Notifier stays for the queued fallback
@@ -356,7 +373,7 @@ class ArmNetwork:
             self._received = set()
             self._expected = self._expected_tpdos()
             self.stats.expected_tpdos += len(self._expected)
-        self.network.send_message(od.SYNC_COB_ID_DEFAULT, b"")
+        self._send(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
 
@@ -417,7 +434,15 @@ class ArmNetwork:
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
                     frames += d.rpdo_frames()
         for cob, data in frames:
-            self.network.send_message(cob, data)
+            self._send(cob, data)
+
+    def _send(self, can_id: int, data: bytes) -> None:
+        """The cycle's frames (SYNC, RPDOs): plain values to the bus, no Message on the
+        in-process bus; the library's send lock keeps them whole against SDO/NMT senders."""
+        if not self._connected:
+            raise DriverError("the network is not connected: call boot() first")
+        with self.network.send_lock:
+            self._send_frame(can_id, data)
 
     def _apply(self, c: ArmCommand) -> None:
         for i, j in enumerate(self.joints):

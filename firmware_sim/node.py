@@ -109,6 +109,7 @@ class _Pdo:
     entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
     event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
     next_event: float = 0.0      # monotonic time of the next event-timer transmission
+    codec: tuple | None = None   # RPDO: decoder compiled on first use (SimNode._compile_rpdo)
 
     @property
     def length(self) -> int:
@@ -338,16 +339,55 @@ class SimNode:
             self.stats.malformed += 1
             self.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
             return
+        codec = pdo.codec
+        if codec is None:
+            codec = pdo.codec = self._compile_rpdo(pdo)
+        store = self.local.data_store
+        callbacks = self.local._write_callbacks
+        generic = callbacks != [self._on_od_write]
         with self._lock:
             self.in_rpdo = True
-            offset = 0
-            for index, sub, size in pdo.entries:
-                try:
-                    self.local.set_data(index, sub, bytes(data[offset:offset + size]))
-                except SdoAbortedError:
-                    self.stats.malformed += 1
-                offset += size
-            self.in_rpdo = False
+            try:
+                for index, sub, start, end, obj, size_ok in codec:
+                    chunk = data[start:end]
+                    if not size_ok:          # mapped size differs from the object's type
+                        self.stats.malformed += 1
+                        continue
+                    try:
+                        if generic:
+                            for callback in callbacks:
+                                callback(index=index, subindex=sub, od=obj, data=chunk)
+                        elif index < 0x2000:   # communication area: the full write rules
+                            self._on_od_write(index, sub, obj, chunk)
+                        else:                  # application objects: only the device's reaction
+                            self.on_write(index, sub, chunk)
+                    except SdoAbortedError:
+                        self.stats.malformed += 1
+                        continue
+                    entry = store.get(index)
+                    if entry is None:
+                        entry = store[index] = {}
+                    entry[sub] = chunk
+            finally:
+                self.in_rpdo = False
+
+    def _compile_rpdo(self, pdo: "_Pdo") -> tuple:
+        """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
+        whether the mapped length fits the object's type (what LocalNode.set_data checks per
+        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
+        out, offset = [], 0
+        for index, sub, size in pdo.entries:
+            try:
+                obj = self.local._find_object(index, sub)
+            except SdoAbortedError:
+                obj = None
+            if obj is not None:
+                size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
+                out.append((index, sub, offset, offset + size, obj, size_ok))
+            else:
+                out.append((index, sub, offset, offset + size, None, False))
+            offset += size
+        return tuple(out)
 
     # ------------------------------------------------------------------ heartbeat consumer
     def consumer_entries(self) -> dict[int, float]:
@@ -439,7 +479,13 @@ class SimNode:
 
     def _transmit(self, pdo: _Pdo) -> None:
         with self._lock:
-            data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
+            try:     # hot path: every entry is a stored value and no read callback is installed
+                if self.local._read_callbacks:
+                    raise KeyError
+                store = self.local.data_store
+                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
+            except KeyError:
+                data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
         if self.faults.drop_tx > 0:
             self.faults.drop_tx -= 1
             self.stats.dropped_tx += 1

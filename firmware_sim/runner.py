@@ -21,7 +21,7 @@ import can
 
 from spacearm.base.canopen import od
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from spacearm.base.transport import open_bus
+from spacearm.base.transport import frame_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
 from spacearm.firmware_sim.joint_drive import JointDriveNode
@@ -51,6 +51,14 @@ class _Listener(can.Listener):
         except Exception:  # never let one frame kill the receive thread
             self.sim.stats.internal_errors += 1
             logger.exception("simulator: error handling frame %s", msg)
+
+    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """In-process bus hot path: a standard data frame as plain values (no Message)."""
+        try:
+            self.sim._route_data(can_id, data)
+        except Exception:
+            self.sim.stats.internal_errors += 1
+            logger.exception("simulator: error handling frame 0x%03X %s", can_id, data.hex())
 
     def on_error(self, exc: Exception) -> None:
         self.sim.stats.internal_errors += 1
@@ -108,6 +116,7 @@ class Simulator:
     # ------------------------------------------------------------------ public
     def start(self) -> "Simulator":
         self.bus = open_bus(self.bus_spec)
+        self._send_frame = frame_sender(self.bus)
         listener = _Listener(self)
         self._notifier = can.Notifier(self.bus, [listener], timeout=0.1)
         if hasattr(self.bus, "add_inline_listener"):
@@ -165,13 +174,11 @@ class Simulator:
 
     # ------------------------------------------------------------------ internals
     def _send(self, can_id: int, data: bytes) -> None:
-        bus = self.bus
-        if bus is None:
+        if self.bus is None:
             return
-        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
         with self._send_lock:
             try:
-                bus.send(msg)
+                self._send_frame(can_id, data)
             except can.CanError as exc:
                 logger.warning("simulator: send failed: %s", exc)
 
@@ -189,8 +196,13 @@ class Simulator:
             for cob in node.rpdo_cob_ids():
                 routes[cob] = node
             syncs.add(node.sync_cob_id())
-        self._rpdo_routes = routes
         self._sync_ids = syncs or {od.SYNC_COB_ID_DEFAULT}
+        # _route_data looks RPDOs up first; a COB-ID that names another service keeps that
+        # meaning, as in the service-by-service order below
+        self._rpdo_routes = {cob: node for cob, node in routes.items()
+                             if cob != od.NMT_COB_ID and cob not in self._sync_ids
+                             and not od.SDO_RX_BASE < cob <= od.SDO_RX_BASE + 127
+                             and not od.HEARTBEAT_BASE < cob <= od.HEARTBEAT_BASE + 127}
 
     def _route(self, msg: can.Message) -> None:
         self.stats.rx_frames += 1
@@ -202,9 +214,21 @@ class Simulator:
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
             self.stats.ignored += 1
             return
+        self._route_data(msg.arbitration_id, bytes(msg.data), counted=True)
+
+    def _route_data(self, cid: int, data: bytes, counted: bool = False) -> None:
+        """A standard data frame: dispatch by COB-ID (PDOs first: they are most of the traffic)."""
+        if not counted:
+            self.stats.rx_frames += 1
         if self._dirty:
             self._rebuild_routes()
-        cid, data = msg.arbitration_id, bytes(msg.data)
+        node = self._rpdo_routes.get(cid)
+        if node is not None:
+            if node.powered and not node.faults.silent:
+                node.stats.rx_frames += 1
+                with self._sync_lock:
+                    node.on_rpdo(cid, data)
+            return
         if cid == od.NMT_COB_ID:
             if len(data) != 2:
                 self.stats.malformed += 1
@@ -241,12 +265,6 @@ class Simulator:
             for node in self.nodes.values():
                 if node.powered and not node.faults.silent:
                     node.on_heartbeat(cid - od.HEARTBEAT_BASE, now)
-        elif cid in self._rpdo_routes:
-            node = self._rpdo_routes[cid]
-            if node.powered and not node.faults.silent:
-                node.stats.rx_frames += 1
-                with self._sync_lock:
-                    node.on_rpdo(cid, data)
         else:
             self.stats.unknown += 1
 

@@ -91,6 +91,10 @@ class _FastVirtual:
       nodes -> TPDOs -> controller), the largest cost left. Frames fall back to the receiver's
       queue (and its Notifier) when delivery to it is already running in this thread or
       frames are still queued for it, so order is kept and nothing recurses.
+    * `send_frame(can_id, data)` is the hot path for standard data frames (SYNC, PDOs,
+      heartbeats): no Message for the sender, and an inline listener that has
+      `on_frame(can_id, data, timestamp)` gets the frame as plain values, so a cycle's ~40
+      frames create no Message objects at all. A Message is built only for a queued receiver.
 
     Listeners called inline must not take a lock the sending code may hold; the simulator's
     and the ArmNetwork's listeners only take their own state locks.
@@ -98,6 +102,41 @@ class _FastVirtual:
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         self.queue.inline_listeners = getattr(self.queue, "inline_listeners", []) + [listener]
+
+    def send_frame(self, can_id: int, data: bytes) -> None:
+        """Send a standard-ID data frame given as plain values (the same frame send() would put
+        on the bus for can.Message(arbitration_id=can_id, data=data, is_extended_id=False))."""
+        if not self._open:
+            raise can.CanOperationError("Cannot operate on a closed bus")
+        if not 0 <= can_id <= 0x7FF or len(data) > 8:
+            raise can.CanOperationError(f"cannot send frame 0x{can_id:X} with {len(data)} bytes: "
+                                        "not a standard CAN data frame")
+        timestamp = time.time()
+        own = self.queue
+        for bus_queue in self.channel:
+            if bus_queue is own and not self.receive_own_messages:
+                continue
+            listeners = getattr(bus_queue, "inline_listeners", None)
+            if listeners and not bus_queue.queue and _enter_inline(bus_queue):   # deque length: no lock
+                try:
+                    for listener in listeners:
+                        try:
+                            on_frame = getattr(listener, "on_frame", None)
+                            if on_frame is not None:
+                                on_frame(can_id, data, timestamp)
+                            else:
+                                listener.on_message_received(self._copy(can_id, data, timestamp, bus_queue))
+                        except Exception as exc:   # a receiver's bug must not fail the sender
+                            listener.on_error(exc)
+                finally:
+                    _leave_inline(bus_queue)
+                continue
+            bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
+
+    def _copy(self, can_id: int, data: bytes, timestamp: float, bus_queue) -> can.Message:
+        return can.Message(timestamp=timestamp, arbitration_id=can_id, is_extended_id=False,
+                           channel=self.channel_id, dlc=len(data), data=data,
+                           is_rx=bus_queue is not self.queue, check=False)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self._check_if_open()
@@ -130,6 +169,19 @@ class _FastVirtual:
                 all_sent = False
         if not all_sent:
             raise can.CanOperationError("Could not send message to one or more recipients")
+
+
+def frame_sender(bus: can.BusABC):
+    """The cheapest way to send a standard data frame on `bus`: send(can_id, data).
+    The in-process bus takes plain values; other transports get the can.Message they need."""
+    fast = getattr(bus, "send_frame", None)
+    if fast is not None:
+        return fast
+    message = can.Message
+
+    def send(can_id: int, data: bytes) -> None:
+        bus.send(message(arbitration_id=can_id, data=data, is_extended_id=False))
+    return send
 
 
 _inline = threading.local()
