@@ -99,6 +99,8 @@ class NetworkStats:
     malformed: int = 0    # known service, wrong length
     ignored: int = 0      # error, remote, extended-ID frames
     callback_errors: int = 0
+    late_cycles: int = 0        # heartbeat checks made after this process was starved (excess excused)
+    starved_time: float = 0.0   # s of starvation excused from heartbeat silence
 
 
 class _Listener(can.Listener):
@@ -190,6 +192,8 @@ class ArmNetwork:
         self._connected = False
         self._stop = threading.Event()
         self._monitor: threading.Thread | None = None
+        self._excused: dict[str, float] = {}          # node -> starvation excused from its current silence
+        self._excused_since: dict[str, float] = {}    # node -> last_heartbeat after the last excuse
 
     # ------------------------------------------------------------------ connection
     def connect(self) -> "ArmNetwork":
@@ -652,22 +656,41 @@ class ArmNetwork:
                     logger.warning("node guarding request to node %d not sent: %s", node_id, exc)
 
     def _monitor_loop(self) -> None:
+        """The master's timer: its own heartbeat, node-guarding polls and heartbeat-loss checks.
+
+        Starvation vs device loss: silence is counted only while this process could observe
+        the bus. When the loop wakes more than STARVED_SLACK after it meant to (the host or a
+        busy process held the CPU; frames may be waiting unread in a queue), the excess is
+        not counted as any node's silence: every last-heard time moves forward by it, and a
+        loss that the wall clock alone would have declared becomes a `late_cycle` event
+        (informational) instead of `heartbeat_lost`. A node that really went silent is still
+        declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
+        excused per silence is capped at the margin up to 3 periods, so the bound of 3
+        heartbeat periods holds whatever the load."""
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id
         next_hb = time.monotonic()
-        while not self._stop.wait(0.005):
+        due = next_hb
+        while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
             now = time.monotonic()
+            excess = now - due - STARVED_SLACK
+            due = now + MONITOR_PERIOD
             if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
                 next_hb = max(next_hb + period, now)
                 try:
                     self.network.send_message(hb_cob, bytes([od.NMT_STATE_OPERATIONAL]))
                 except Exception as exc:
                     logger.warning("controller heartbeat not sent: %s", exc)
+            if period > 0:
+                due = min(due, next_hb)
             if not self._monitoring:
                 continue
             self._poll_guarded(now)
             with self._cv:
+                if excess > 0:
+                    self.stats.starved_time += excess
+                    self._excuse(now, excess, factor)
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
@@ -678,6 +701,41 @@ class ArmNetwork:
                                     f"period {cfg.heartbeat_period:.3f} s)")
                         self._expected = None
                         self._cv.notify_all()
+
+    def _excuse(self, now: float, excess: float, factor: float) -> None:
+        """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""
+        judged = []
+        for cfg in self.config.nodes:
+            h = self.health[cfg.name]
+            if not h.alive or h.last_heartbeat is None:
+                continue
+            # at most the margin between the loss factor and 3 periods per silence (less one
+            # monitor pass): a real loss is still declared within 3 heartbeat periods
+            cap = max(0.0, (3.0 - factor) * cfg.heartbeat_period - MONITOR_PERIOD)
+            if h.last_heartbeat != self._excused_since.get(cfg.name):
+                self._excused[cfg.name] = 0.0
+            grant = min(excess, cap - self._excused.get(cfg.name, 0.0))
+            if grant <= 0.0:
+                continue
+            if now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                judged.append(cfg.name)
+            h.last_heartbeat += grant
+            self._excused[cfg.name] = self._excused.get(cfg.name, 0.0) + grant
+            self._excused_since[cfg.name] = h.last_heartbeat
+        self.stats.late_cycles += 1
+        if judged:
+            names = ", ".join(judged)
+            event = NetworkEvent("late_cycle", judged[0], self.drivers[judged[0]].node_id,
+                                 f"late cycle: the controller was starved for {excess:.3f} s; heartbeat "
+                                 f"silence of {names} in that window not counted as node loss")
+            self._events.append(event)
+
+
+# The master's timer (heartbeat producer, guarding, loss checks) runs at least every
+# MONITOR_PERIOD; a wake later than STARVED_SLACK past its due time counts as starvation.
+MONITOR_PERIOD = 0.010      # s
+MONITOR_MIN_SLEEP = 0.0005  # s
+STARVED_SLACK = 0.020       # s
 
 
 __all__ = ["ArmNetwork", "ArmState", "ArmCommand", "NodeHealth", "NetworkStats", "EeCommand", "State"]

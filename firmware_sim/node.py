@@ -143,6 +143,7 @@ class SimNode:
         self._sync_counter = 0
         self.next_heartbeat = 0.0
         self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
+        self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
         self.sdo_session = SdoSession()
@@ -405,6 +406,18 @@ class SimNode:
     def on_heartbeat(self, producer: int, now: float) -> None:
         if producer in self.consumer_entries():
             self.consumer_last[producer] = now    # monitoring starts with the first heartbeat
+            self.consumer_excused.pop(producer, None)
+
+    def excuse_consumers(self, starved: float) -> None:
+        """The simulator could not observe the bus for `starved` s (its process was starved):
+        not silence of the consumed heartbeats, up to half of each one's timeout per silence."""
+        entries = self.consumer_entries()
+        for producer in list(self.consumer_last):
+            used = self.consumer_excused.get(producer, 0.0)
+            grant = min(starved, 0.5 * entries.get(producer, 0.0) - used)
+            if grant > 0.0:
+                self.consumer_last[producer] += grant
+                self.consumer_excused[producer] = used + grant
 
     def check_consumers(self, now: float) -> None:
         if not self.consumer_last:

@@ -39,6 +39,7 @@ class SimStats:
     malformed: int = 0    # NMT/SYNC frames with a wrong length
     ignored: int = 0      # error, remote, extended-ID and FD frames
     internal_errors: int = 0
+    starved_time: float = 0.0   # s the timer scheduler woke late beyond STARVED_SLACK (not counted as silence)
 
 
 class _Listener(can.Listener):
@@ -290,10 +291,35 @@ class Simulator:
             for node in nodes:
                 if not node.faults.silent:
                     node.send_tpdos()
+            # A heartbeat that fell due is sent here too: the SYNC thread runs anyway, so a
+            # timer thread starved of the GIL does not delay it (whichever runs first sends).
+            now = time.monotonic()
+            for node in nodes:
+                if 0.0 < node.next_heartbeat <= now and node.nmt_state != od.NMT_STATE_BOOTUP:
+                    self._heartbeat_due(node, now)
 
     def _heartbeat_loop(self) -> None:
+        """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
+        and SDO server timeouts. It sleeps until the earliest heartbeat or event timer is due
+        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts) instead of
+        polling, so it takes the GIL a few times per heartbeat period, not 500 times a second.
+
+        Starvation: when this thread wakes more than STARVED_SLACK after it meant to (the host
+        or this process's other threads held the CPU), the excess was time nobody here could
+        observe the bus; it is not counted as silence of a consumed heartbeat (SimNode.
+        excuse_consumers, at most half the consumer timeout per silence), so a starved
+        simulator does not fault its drives for a controller that was alive. A controller
+        that really stopped is still caught: every unstarved scheduler pass counts in full."""
+        due = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
+            excess = now - due - STARVED_SLACK
+            if excess > 0:
+                self.stats.starved_time += excess
+                for node in self.nodes.values():
+                    if node.consumer_last:
+                        node.excuse_consumers(excess)
+            wake = now + TIMER_MAX_SLEEP
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
@@ -304,19 +330,38 @@ class Simulator:
                 if node.has_event_tpdos:
                     with self._sync_lock:
                         node.send_event_tpdos(now)
-                try:
-                    period = node.heartbeat_period()
-                except Exception:
-                    continue
-                if period <= 0.0:
-                    node.next_heartbeat = 0.0
-                    continue
-                if node.next_heartbeat == 0.0:
-                    node.next_heartbeat = now + period
-                elif now >= node.next_heartbeat:
-                    node.send_heartbeat()
-                    node.next_heartbeat = max(node.next_heartbeat + period, now)
-            self._stop.wait(0.002)
+                    for pdo in node._tpdos or ():
+                        if pdo.next_event > 0.0:
+                            wake = min(wake, pdo.next_event)
+                with self._sync_lock:
+                    due_hb = self._heartbeat_due(node, now)
+                if due_hb:
+                    wake = min(wake, due_hb)
+            due = max(wake, now + TIMER_MIN_SLEEP)
+            self._stop.wait(due - now)
+
+    def _heartbeat_due(self, node: SimNode, now: float) -> float:
+        """Send the node's heartbeat if due; returns when the next one is due (0: none)."""
+        try:
+            period = node.heartbeat_period()
+        except Exception:
+            return 0.0
+        if period <= 0.0:
+            node.next_heartbeat = 0.0
+            return 0.0
+        if node.next_heartbeat == 0.0:
+            node.next_heartbeat = now + period
+        elif now >= node.next_heartbeat:
+            node.send_heartbeat()
+            node.next_heartbeat = max(node.next_heartbeat + period, now)
+        return node.next_heartbeat
+
+
+# The timer scheduler's sleep bounds: consumer and SDO timeouts are checked at least every
+# TIMER_MAX_SLEEP; a wake later than STARVED_SLACK past its due time counts as starvation.
+TIMER_MAX_SLEEP = 0.010   # s
+TIMER_MIN_SLEEP = 0.0005  # s
+STARVED_SLACK = 0.020     # s
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
