@@ -99,7 +99,7 @@ class NetworkStats:
     malformed: int = 0    # known service, wrong length
     ignored: int = 0      # error, remote, extended-ID frames
     callback_errors: int = 0
-    late_cycles: int = 0        # heartbeat checks made after this process was starved (excess excused)
+    starved_checks: int = 0     # heartbeat checks made after this process was starved (excess excused)
     starved_time: float = 0.0   # s of starvation excused from heartbeat silence
 
 
@@ -689,8 +689,12 @@ class ArmNetwork:
             self._poll_guarded(now)
             with self._cv:
                 if excess > 0:
+                    # Starved: excuse the time, and judge only at the next pass, once the
+                    # receive path has had the CPU to deliver what waited meanwhile.
                     self.stats.starved_time += excess
                     self._excuse(now, excess, factor)
+                    due = now + RECHECK_AFTER_STARVED
+                    continue
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
@@ -722,7 +726,7 @@ class ArmNetwork:
             h.last_heartbeat += grant
             self._excused[cfg.name] = self._excused.get(cfg.name, 0.0) + grant
             self._excused_since[cfg.name] = h.last_heartbeat
-        self.stats.late_cycles += 1
+        self.stats.starved_checks += 1
         if judged:
             names = ", ".join(judged)
             event = NetworkEvent("late_cycle", judged[0], self.drivers[judged[0]].node_id,
@@ -736,6 +740,7 @@ class ArmNetwork:
 MONITOR_PERIOD = 0.010      # s
 MONITOR_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020       # s
+RECHECK_AFTER_STARVED = 0.003  # s: a starved pass judges nothing; the next one comes this soon
 
 
 __all__ = ["ArmNetwork", "ArmState", "ArmCommand", "NodeHealth", "NetworkStats", "EeCommand", "State"]

@@ -314,16 +314,18 @@ class Simulator:
         while not self._stop.is_set():
             now = time.monotonic()
             excess = now - due - STARVED_SLACK
-            if excess > 0:
+            starved = excess > 0
+            if starved:
                 self.stats.starved_time += excess
                 for node in self.nodes.values():
                     if node.consumer_last:
                         node.excuse_consumers(excess)
-            wake = now + TIMER_MAX_SLEEP
+            # a starved pass sends what is due but judges no consumer: the next pass does, soon
+            wake = now + (TIMER_MIN_SLEEP * 6 if starved else TIMER_MAX_SLEEP)
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
-                if node.consumer_last and not node.faults.silent:
+                if node.consumer_last and not node.faults.silent and not starved:
                     with self._sync_lock:
                         node.check_consumers(now)
                 node.check_sdo_timeout(now)
