@@ -144,7 +144,6 @@ class Stack:
     client: ApiClient | None = None
     lease: str | None = None
     procs: list = field(default_factory=list)
-    load_stops: int = 0
     _rig: object = None
     _net: object = None
 
@@ -249,20 +248,15 @@ class Stack:
     def move(self, q, speed: float = 1.0) -> dict:
         return self.call("move_joints", q=list(map(float, q)), speed=speed)
 
-    def enable_and_hold(self, seconds: float, tries: int = 3) -> None:
-        """Enable and hold for `seconds` without any stop. A stop for missing process data
-        before any fault is injected is this loaded machine missing the real-time budget
-        (counted in `load_stops`), not the fault under test: recover and try again."""
-        for _ in range(tries):
-            self.enable()
-            time.sleep(seconds)
-            status = self.status()
-            if status["state"] == "enabled":
-                return
-            if (status["stop"] or {}).get("code") != "pdo_missing":
-                raise AssertionError(f"stopped while holding: {status['stop_reason']}")
-            self.load_stops += 1
-        raise AssertionError(f"{tries} load stops in a row (no process data)")
+    def enable_and_hold(self, seconds: float) -> None:
+        """Enable and hold for `seconds` without any stop: a stop here, before any fault is
+        injected, fails the test with its code and reason (no retry hides it)."""
+        self.enable()
+        time.sleep(seconds)
+        status = self.status()
+        if status["state"] != "enabled":
+            raise AssertionError(f"stopped while holding [{(status['stop'] or {}).get('code')}]: "
+                                 f"{status['stop_reason']}")
 
     def far_target(self) -> list[float]:
         """HOME or READY, whichever is farther from here (a move of a few seconds)."""
@@ -296,19 +290,6 @@ def start_stack(hub, workdir: Path, plant: Path = NOMINAL_PLANT, name: str | Non
         stack.close()
         raise
     return stack
-
-
-def retry_on_load_stop(stack: Stack, attempt, tries: int = 3):
-    """Run `attempt()`; when it fails on a stop for missing process data (the loaded machine
-    missing the real-time budget, with no fault injected), recover and run it again."""
-    for i in range(tries):
-        try:
-            return attempt()
-        except AssertionError as exc:
-            if "no process data" not in str(exc) or i == tries - 1:
-                raise
-            stack.load_stops += 1
-            stack.recover()
 
 
 def wait_for(predicate, timeout: float, what: str, poll: float = 0.02) -> None:

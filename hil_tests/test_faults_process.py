@@ -12,7 +12,7 @@ import pytest
 
 from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.faults import (FaultyHub, assert_motion_refused, assert_stays_still,
-                              recorded_stop_events, retry_on_load_stop, start_stack, wait_for, wait_safe)
+                              recorded_stop_events, start_stack, wait_for, wait_safe)
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
 
@@ -159,7 +159,7 @@ def test_daemon_killed_mid_motion_restarts_disabled_with_brakes_on(stack):
         stack.enable()
         motion = stack.move(stack.far_target())["motion"]
         assert stack.wait_motion(motion)["state"] == "enabled"
-    retry_on_load_stop(stack, move_after_restart)
+    move_after_restart()
 
 
 def test_node_restart_is_an_unexpected_bootup_and_stops(stack):
