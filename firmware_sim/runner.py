@@ -104,6 +104,7 @@ class Simulator:
                                         target.ranger_config())
         self.camera = None        # spacearm.firmware_sim.camera.service.CameraService, see attach_camera
         self.stats = SimStats()
+        self.cpu_samples: list[float] | None = None   # set to [] to record the CPU s of every SYNC (benchmarks)
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
         self._send_lock = threading.Lock()
@@ -270,6 +271,13 @@ class Simulator:
             self.stats.unknown += 1
 
     def _on_sync(self) -> None:
+        samples = self.cpu_samples
+        started = time.thread_time() if samples is not None else 0.0
+        self._on_sync_locked()
+        if samples is not None:
+            samples.append(time.thread_time() - started)
+
+    def _on_sync_locked(self) -> None:
         with self._sync_lock:
             self.stats.syncs += 1
             nodes = [n for n in self.nodes.values() if n.powered]

@@ -51,7 +51,9 @@ def stopped_with(stack, safe, codes: tuple[str, ...], bound_cycles: float, still
         assert_stays_still(stack)
     assert_motion_refused(stack)
     path = safe.status["recording"]["path"]
-    wait_for(lambda: any(reason in m for m in recorded_stop_events(path)), 4.0, "stop reason recorded")
+    reason = safe.status["stop_reason"]
+    wait_for(lambda: any(reason in m for m in recorded_stop_events(path)), 4.0,
+             lambda: f"stop reason {reason!r} in the recording: {recorded_stop_events(path)}")
 
 
 def test_bus_blackout_stops(hub, stack):
