@@ -51,7 +51,7 @@ import numpy as np
 
 from spacearm.console.client import ApiClient
 from spacearm.base.runtime.child_process import module_env
-from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, use_fifo, use_normal
 from spacearm.base.transport.hub import LoopbackHub
 from hil_tests.harness import free_port
 
@@ -72,6 +72,8 @@ def child_env() -> dict:
 
 
 # ------------------------------------------------------------------------ the bus itself
+HUB_PRIORITY = 50           # as the daemon and the simulator (spacearm daemon/sim --rt-priority 50)
+TEST_THREAD_PRIORITY = 10   # the test's own thread: above CPU-bound neighbours, below the stack
 class FaultyHub:
     """A loopback hub in this process whose frames can be lost, reordered or cut off."""
 
@@ -79,7 +81,16 @@ class FaultyHub:
         # The hub thread shares this process's GIL with the test: a status poll here must not
         # hold frames back for a whole cycle.
         sys.setswitchinterval(GIL_SWITCH_INTERVAL)
+        # Every frame of the stack passes through this hub: at normal priority, CPU-bound
+        # neighbours (hil_tests/cpu_load.py) starve it and the daemon sees a bus that stalls
+        # (false "no process data"). Its threads run SCHED_FIFO like the daemon and the
+        # simulator (they inherit the policy of the thread that starts them); this test
+        # thread stays real-time too, below them, because it shares the hub's GIL: at normal
+        # priority a neighbour could preempt it while it holds the GIL and stall the hub.
+        self._rt = use_fifo(HUB_PRIORITY) is None
         self.hub = LoopbackHub("127.0.0.1", 0).start()
+        if self._rt:
+            use_fifo(TEST_THREAD_PRIORITY)
         self.rng = random.Random(seed)
         self.drop_prob = 0.0
         self.reorder_prob = 0.0
@@ -128,6 +139,8 @@ class FaultyHub:
 
     def stop(self) -> None:
         self.hub.stop()
+        if self._rt:
+            use_normal()
 
 
 # ------------------------------------------------------------------------ the stack
