@@ -164,6 +164,7 @@ class ArmNetwork:
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
         self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
+        self._tpdo_lengths: dict[int, int] = {}         # id(PdoSpec) -> its length (the mapping is fixed)
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
         for cfg in self.config.nodes:
             object_dictionary = load_od(cfg.eds_path, cfg.node_id)   # EdsError: bad input, exit 2
@@ -635,7 +636,10 @@ class ArmNetwork:
 
     def _on_tpdo(self, can_id, data, timestamp):
         driver, spec = self._tpdo_routes[can_id]
-        if len(data) < spec.length:
+        length = self._tpdo_lengths.get(id(spec))
+        if length is None:
+            length = self._tpdo_lengths[id(spec)] = spec.length
+        if len(data) < length:
             self.stats.malformed += 1
             return
         with self._cv:

@@ -66,6 +66,9 @@ class SimLocalNode(canopen.LocalNode):
                 if obj.min is not None and value < obj.min:
                     raise SdoAbortedError(ABORT_VALUE_LOW)
         super().set_data(index, subindex, data, check_writable)
+        params = self.__dict__.get("params_cache")
+        if params:                 # SimNode.param(): the stored value changed
+            params.pop((index, subindex), None)
 
 
 class _NodeTx:
@@ -146,6 +149,8 @@ class SimNode:
         self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
+        self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
+        self.local.params_cache = self._params
         self.sdo_session = SdoSession()
 
     # ------------------------------------------------------------------ OD access
@@ -167,8 +172,20 @@ class SimNode:
                     return data
         return self.local.get_data(index, sub)
 
+    def param(self, index: int, sub: int = 0):
+        """get() for the device's settings (scaling, limits, ratings) read every SYNC: cached
+        until any write reaches the object (SDO, RPDO or put) or the node resets."""
+        key = (index, sub)
+        cache = self._params
+        value = cache.get(key)
+        if value is None:
+            value = cache[key] = self.get(index, sub)
+        return value
+
     def put(self, index: int, sub: int, value) -> None:
         """Firmware-side write: no access checks, no callbacks (updates read-only values)."""
+        if self._params:
+            self._params.pop((index, sub), None)
         obj, codec, integer = self._codec(index, sub)
         if codec is None or isinstance(value, (bytes, bytearray)):
             data = obj.encode_raw(value)
@@ -198,6 +215,7 @@ class SimNode:
         """NMT reset node (application=True) or reset communication; ends with boot-up."""
         with self._lock:
             self.nmt_state = od.NMT_STATE_BOOTUP
+            self._params.clear()
             if application:
                 self.local.data_store.clear()
                 self.reset_application()
@@ -346,6 +364,7 @@ class SimNode:
         store = self.local.data_store
         callbacks = self.local._write_callbacks
         generic = callbacks != [self._on_od_write]
+        params = self._params
         with self._lock:
             self.in_rpdo = True
             try:
@@ -369,6 +388,8 @@ class SimNode:
                     if entry is None:
                         entry = store[index] = {}
                     entry[sub] = chunk
+                    if params and (index, sub) in params:
+                        del params[(index, sub)]
             finally:
                 self.in_rpdo = False
 
@@ -530,6 +551,7 @@ class SimNode:
 
     # ------------------------------------------------------------------ OD write rules
     def _on_od_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
+        self._params.pop((index, subindex), None)
         from spacearm.base.canopen import od as ids
         if ids.RPDO_MAP <= index < ids.RPDO_MAP + ids.N_PDOS or ids.TPDO_MAP <= index < ids.TPDO_MAP + ids.N_PDOS:
             comm = (ids.RPDO_COMM if index < ids.TPDO_MAP else ids.TPDO_COMM) + (index & 0xFF)

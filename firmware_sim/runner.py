@@ -285,7 +285,7 @@ class Simulator:
             # bus config's
             dt = self.dt
             for node in nodes:
-                period = node.get(od.COMM_CYCLE_PERIOD)
+                period = node.param(od.COMM_CYCLE_PERIOD)
                 if period > 0:
                     dt = period / 1e6
                     break
