@@ -75,6 +75,13 @@ def _below_the_cycle() -> None:
 def _open_tap(bus_spec: str, path: Path) -> tuple[can.BusABC, can.Notifier, can.CanutilsLogWriter]:
     tap = open_bus(bus_spec)
     writer = can.CanutilsLogWriter(str(path), channel="can0", append=False)
+    if hasattr(tap, "add_inline_listener"):
+        # in-process bus: frames are appended in the sender's thread and formatted in batches
+        # (base/transport/tap.py), not one Message, queue hop and write per frame on the cycle
+        from spacearm.base.transport.tap import BufferedTap
+        buffered = BufferedTap(writer, str(tap.channel_id))
+        tap.add_inline_listener(buffered)
+        return tap, can.Notifier(tap, [buffered], timeout=0.1), buffered
     return tap, can.Notifier(tap, [writer], timeout=0.1), writer
 
 
