@@ -49,6 +49,10 @@ print(n)
 """
 
 
+ORU = ("configs/arm/oru_testbed_6dof.toml", "configs/bus/arm.toml", "configs/plant/oru_testbed_nominal.toml")
+PANDA = ("configs/arm/panda.toml", "configs/bus/panda.toml", "configs/plant/panda_nominal.toml")  # rigid body, 7 joints
+
+
 def rss_mb() -> float:
     with open("/proc/self/status") as handle:
         for line in handle:
@@ -70,10 +74,6 @@ def start_sim(bus: str, rt_priority: int, arm: tuple[str, str, str] = ORU):
         if "nodes ready" in line:
             break
     return (lambda: (proc.terminate(), proc.wait(10))), None
-
-
-ORU = ("configs/arm/oru_testbed_6dof.toml", "configs/bus/arm.toml", "configs/plant/oru_testbed_nominal.toml")
-PANDA = ("configs/arm/panda.toml", "configs/bus/panda.toml", "configs/plant/panda_nominal.toml")  # rigid body, 7 joints
 
 
 def percentile(values: list[float], q: float) -> float:
