@@ -155,10 +155,12 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=60.0, help="s of the 20 ms real-time run (issue: 600)")
-    ap.add_argument("--duration-4ms", type=float, default=None, help="s of the 4 ms run (default: --duration)")
+    ap.add_argument("--duration-4ms", type=float, default=None,
+                    help="s of the 4 ms run (default: --duration; 0: skip it)")
     ap.add_argument("--transport", default="loopback", choices=["loopback", "virtual"])
     ap.add_argument("--lockstep-cycles", type=int, default=2000)
     ap.add_argument("--lockstep-only", action="store_true", help="skip the real-time runs")
+    ap.add_argument("--realtime-only", action="store_true", help="skip the lockstep runs")
     ap.add_argument("--cpu-load", type=int, default=0,
                     help="CPU-bound processes beside the real-time runs (issue 22: 2)")
     args = ap.parse_args()
@@ -168,17 +170,20 @@ def main() -> None:
     if not args.lockstep_only:
         from hil_tests.cpu_load import CpuLoad
         with CpuLoad(args.cpu_load):
-            realtime = [
-                ("20 ms", run(args.transport, "realtime", 0.02, args.duration, 20, records)),
-                ("4 ms", run(args.transport, "realtime", 0.004, args.duration_4ms or args.duration, 20, records))]
+            realtime = [("20 ms", run(args.transport, "realtime", 0.02, args.duration, 20, records))]
+            duration_4ms = args.duration if args.duration_4ms is None else args.duration_4ms
+            if duration_4ms > 0:     # --duration-4ms 0: the 20 ms run only
+                realtime.append(("4 ms", run(args.transport, "realtime", 0.004, duration_4ms, 20, records)))
     # Lockstep on both transports: in-process (the embedded default bus, frames handled inline)
     # and loopback (simulator in its own process, frames through the hub).
     # Recording on as the daemon runs by default; once off to show what recording costs.
     # Then the rigid-body plant (Pinocchio) with 7 joints: the Panda of the any-arm issue.
-    locks = [(f"{kind}, recording {'on' if rec else 'off'}", run(kind, "lockstep", 0.02, args.lockstep_cycles, 0, rec))
-             for kind, rec in (("virtual", records), ("virtual", None), ("loopback", records))]
-    locks.append(("virtual, recording on, Panda rigid body",
-                  run("virtual", "lockstep", 0.02, args.lockstep_cycles, 0, records, PANDA)))
+    locks = [] if args.realtime_only else [
+        (f"{kind}, recording {'on' if rec else 'off'}", run(kind, "lockstep", 0.02, args.lockstep_cycles, 0, rec))
+        for kind, rec in (("virtual", records), ("virtual", None), ("loopback", records))]
+    if not args.realtime_only:
+        locks.append(("virtual, recording on, Panda rigid body",
+                      run("virtual", "lockstep", 0.02, args.lockstep_cycles, 0, records, PANDA)))
     shutil.rmtree(records, ignore_errors=True)
     ms = lambda v: f"{1e3 * v:.3f} ms"
     for name, r in realtime:
