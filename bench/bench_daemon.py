@@ -53,6 +53,18 @@ ORU = ("configs/arm/oru_testbed_6dof.toml", "configs/bus/arm.toml", "configs/pla
 PANDA = ("configs/arm/panda.toml", "configs/bus/panda.toml", "configs/plant/panda_nominal.toml")  # rigid body, 7 joints
 
 
+_HUB: list = []
+
+
+def own_hub():
+    """This benchmark's own loopback hub, at SCHED_FIFO 50 like the daemon and the simulator
+    (the default address may be served by someone else's hub at normal priority)."""
+    if not _HUB:
+        from spacearm.base.transport.hub import HubProcess
+        _HUB.append(HubProcess(rt_priority=50))
+    return _HUB[0]
+
+
 def rss_mb() -> float:
     with open("/proc/self/status") as handle:
         for line in handle:
@@ -85,7 +97,7 @@ def percentile(values: list[float], q: float) -> float:
 
 def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: float,
         record_dir: Path | None, arm: tuple[str, str, str] = ORU) -> dict:
-    bus = f"virtual:bench-{time.monotonic_ns()}" if bus_kind == "virtual" else f"loopback:bench-{time.monotonic_ns()}"
+    bus = f"virtual:bench-{time.monotonic_ns()}" if bus_kind == "virtual" else own_hub().spec(f"bench-{time.monotonic_ns()}")
     # Real time as `spacearm daemon` runs it: SCHED_FIFO 50 for the daemon and the simulated
     # nodes (drivers/priority.py); lockstep at normal priority. A previous real-time run left
     # this thread at SCHED_FIFO: back to normal first, children inherit the policy.
@@ -145,6 +157,9 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
                 "scheduling": daemon.scheduling, "steal": steal_fraction, "load": load,
                 "process_cpu": process_cpu, "cycle_cpu": cycle_cpu, "sim_cpu": sim_cpu or [],
                 "daemon_cpu": daemon_cpu, "joints": daemon.hardware.dof,
+                # nothing is injected: any stop is a false fault (code), late cycles are excused misses
+                "stop": daemon.core.stop_reason, "late_cycles": daemon.hardware.late_cycles,
+                "starved_checks": daemon.hardware.network.stats.starved_checks,
                 "polls": polls, "rss_start": rss_start, "rss_end": rss_mb(),
                 "rss_mid": memory[len(memory) // 2] if memory else rss_start}
     finally:
@@ -185,6 +200,8 @@ def main() -> None:
         locks.append(("virtual, recording on, Panda rigid body",
                       run("virtual", "lockstep", 0.02, args.lockstep_cycles, 0, records, PANDA)))
     shutil.rmtree(records, ignore_errors=True)
+    for hub in _HUB:
+        hub.stop()
     ms = lambda v: f"{1e3 * v:.3f} ms"
     for name, r in realtime:
         s = r["summary"]
@@ -201,6 +218,11 @@ def main() -> None:
              f"{ms(s.compute_median)} / {ms(s.compute_p99)}", "", ""),
             (f"real time {name}: overruns (skipped cycles)", f"{s.overruns} ({s.skipped_cycles}) of {s.cycles}",
              "0" if r["period"] == 0.02 else "", s.overruns == 0 if r["period"] == 0.02 else ""),
+            (f"real time {name}: false faults (stops, nothing injected)",
+             "0" if r["stop"] is None else f"1: [{r['stop'].code.value}] {r['stop'].message}"[:48], "0",
+             r["stop"] is None),
+            (f"real time {name}: late cycles excused / starved heartbeat checks",
+             f"{r['late_cycles']} / {r['starved_checks']}", "", ""),
             (f"real time {name}: status polls answered", f"{r['polls']} in {r['wall']:.0f} s", "20 Hz", ""),
             (f"real time {name}: host CPU steal / machine load during the run",
              f"{100 * r['steal']:.1f} % / {r['load']:.1f} ({args.cpu_load} CPU-bound neighbours)", "", ""),
