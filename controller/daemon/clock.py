@@ -71,7 +71,7 @@ class RealTimeClock:
 
 
 class LockstepClock:
-    YIELD_INTERVAL = 0.005   # s of wall time between yields to the process's other threads
+    YIELD_INTERVAL = 0.02    # s of wall time between yields to the process's other threads
 
     def __init__(self, period: float, now: Callable[[], float] = time.monotonic):
         if not period > 0:
