@@ -102,6 +102,9 @@ class _FastVirtual:
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         self.queue.inline_listeners = getattr(self.queue, "inline_listeners", []) + [listener]
+        # for send_frame: each listener's plain-value handler, looked up once here
+        self.queue.inline_handlers = getattr(self.queue, "inline_handlers", []) + [
+            (getattr(listener, "on_frame", None), listener)]
 
     def send_frame(self, can_id: int, data: bytes) -> None:
         """Send a standard-ID data frame given as plain values (the same frame send() would put
@@ -113,15 +116,17 @@ class _FastVirtual:
                                         "not a standard CAN data frame")
         timestamp = time.time()
         own = self.queue
+        active = _active_inline()
         for bus_queue in self.channel:
             if bus_queue is own and not self.receive_own_messages:
                 continue
-            listeners = getattr(bus_queue, "inline_listeners", None)
-            if listeners and not bus_queue.queue and _enter_inline(bus_queue):   # deque length: no lock
+            handlers = getattr(bus_queue, "inline_handlers", None)
+            key = id(bus_queue)
+            if handlers and not bus_queue.queue and key not in active:   # deque length: no lock
+                active.add(key)
                 try:
-                    for listener in listeners:
+                    for on_frame, listener in handlers:
                         try:
-                            on_frame = getattr(listener, "on_frame", None)
                             if on_frame is not None:
                                 on_frame(can_id, data, timestamp)
                             else:
@@ -129,7 +134,7 @@ class _FastVirtual:
                         except Exception as exc:   # a receiver's bug must not fail the sender
                             listener.on_error(exc)
                 finally:
-                    _leave_inline(bus_queue)
+                    active.discard(key)
                 continue
             bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
 
@@ -199,6 +204,14 @@ def _enter_inline(bus_queue) -> bool:
 
 def _leave_inline(bus_queue) -> None:
     _inline.active.discard(id(bus_queue))
+
+
+def _active_inline() -> set:
+    """This thread's set of receivers whose inline delivery is running (see _enter_inline)."""
+    active = getattr(_inline, "active", None)
+    if active is None:
+        active = _inline.active = set()
+    return active
 
 
 _CHECKED: dict[str, type] = {}
