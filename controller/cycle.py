@@ -63,6 +63,7 @@ class FindingCode(str, Enum):
     FAULT = "fault"                        # a drive in fault
     BOOTUP = "bootup"                      # a node restarted
     PDO_MISSING = "pdo_missing"
+    LATE_CYCLE = "late_cycle"              # not a stop: the controller itself was starved (event only)
     # motion supervision
     POSITION_LIMIT = "position_limit"
     VELOCITY_LIMIT = "velocity_limit"
@@ -141,6 +142,7 @@ class Measurement:
     end_effector: EndEffectorState = EndEffectorState.UNKNOWN
     events: tuple[DeviceEvent, ...] = ()
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
+    late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
 
 
 @dataclass(frozen=True)

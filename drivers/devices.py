@@ -6,6 +6,7 @@ dataclasses below and commands in SI units back into PDO bytes.
 from __future__ import annotations
 
 import math
+import struct
 from dataclasses import dataclass
 
 import canopen
@@ -18,6 +19,19 @@ from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SET
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
 from spacearm.drivers.pdo_config import PdoSpec, resolve_layout
+
+
+def compile_pdo(spec: PdoSpec) -> tuple[struct.Struct, tuple[tuple[int, int], ...]] | None:
+    """One struct for the whole PDO (built once per mapping) when every entry is a number whose
+    struct size is its mapped size; None otherwise (24/40/48/56-bit types, strings), and the
+    caller codes entry by entry as the library does."""
+    codes = []
+    for e in spec.entries:
+        packer = e.var.STRUCT_TYPES.get(e.var.data_type)
+        if packer is None or packer.size != e.size:
+            return None
+        codes.append(packer.format.lstrip("<"))
+    return struct.Struct("<" + "".join(codes)), tuple((e.index, e.sub) for e in spec.entries)
 
 
 @dataclass
@@ -86,6 +100,7 @@ class DeviceDriver:
         # the configured layout, checked against the EDS (MappingError names node, PDO, object)
         self.rpdos, self.tpdos = resolve_layout(cfg, object_dictionary)
         self.values: dict[tuple[int, int], int] = {}
+        self._pdo_codecs: dict[int, tuple] = {}   # id(PdoSpec) -> (spec, compile_pdo(spec))
         self.rpdo_values: dict[tuple[int, int], int] = {}
 
     # bring-up -------------------------------------------------------------------
@@ -103,6 +118,13 @@ class DeviceDriver:
 
     # cycle ------------------------------------------------------------------------
     def decode(self, spec: PdoSpec, data: bytes) -> None:
+        codec = self._pdo_codecs.get(id(spec))
+        if codec is None or codec[0] is not spec:
+            codec = self._pdo_codecs[id(spec)] = (spec, compile_pdo(spec))
+        packer = codec[1]
+        if packer is not None:       # every entry a fixed-size number: one unpack for the frame
+            self.values.update(zip(packer[1], packer[0].unpack_from(data)))
+            return
         offset = 0
         for e in spec.entries:
             self.values[(e.index, e.sub)] = e.var.decode_raw(data[offset:offset + e.size])
@@ -116,9 +138,16 @@ class DeviceDriver:
 
     def rpdo_frames(self) -> list[tuple[int, bytes]]:
         frames = []
+        values = self.rpdo_values
         for spec in self.rpdos:
-            data = b"".join(e.var.encode_raw(self.rpdo_values.get((e.index, e.sub), 0))
-                            for e in spec.entries)
+            codec = self._pdo_codecs.get(id(spec))
+            if codec is None or codec[0] is not spec:
+                codec = self._pdo_codecs[id(spec)] = (spec, compile_pdo(spec))
+            packer = codec[1]
+            if packer is not None:
+                data = packer[0].pack(*[values.get(key, 0) for key in packer[1]])
+            else:
+                data = b"".join(e.var.encode_raw(values.get((e.index, e.sub), 0)) for e in spec.entries)
             frames.append((spec.cob_id, data))
         return frames
 

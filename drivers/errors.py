@@ -41,7 +41,8 @@ class NetworkEvent:
     """Something the controller must act on. kind is one of:
     heartbeat_lost, heartbeat_restored, bootup (unexpected reboot), nmt_state, emcy,
     emcy_reset, fault_reset_failed, fault_cleared, tpdo_timeout, tpdo_missing (a mapped TPDO
-    of a live node absent for bus.tpdo_loss_cycles SYNCs: a fault like heartbeat_lost)."""
+    of a live node absent for bus.tpdo_loss_cycles SYNCs: a fault like heartbeat_lost),
+    late_cycle (the master was starved: heartbeat silence in that window not counted; informational)."""
     kind: str
     node: str
     node_id: int

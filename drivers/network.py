@@ -43,7 +43,7 @@ from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffec
 from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from spacearm.base.transport import open_bus
+from spacearm.base.transport import frame_sender, open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -99,6 +99,8 @@ class NetworkStats:
     malformed: int = 0    # known service, wrong length
     ignored: int = 0      # error, remote, extended-ID frames
     callback_errors: int = 0
+    starved_checks: int = 0     # heartbeat checks made after this process was starved (excess excused)
+    starved_time: float = 0.0   # s of starvation excused from heartbeat silence
 
 
 class _Listener(can.Listener):
@@ -121,6 +123,22 @@ class _Listener(can.Listener):
         except Exception:
             stats.callback_errors += 1
             logger.exception("error handling frame %s", msg)
+
+    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """In-process bus hot path: a standard data frame as plain values; TPDOs go straight
+        to their decoder, everything else through the library's subscribers."""
+        arm = self.arm
+        arm.stats.rx_frames += 1
+        try:
+            if can_id in arm._tpdo_routes:
+                arm._on_tpdo(can_id, data, timestamp)
+            elif can_id in arm.network.subscribers:
+                arm.network.notify(can_id, data, timestamp)
+            else:
+                arm.stats.unknown += 1
+        except Exception:
+            arm.stats.callback_errors += 1
+            logger.exception("error handling frame 0x%03X", can_id)
 
     def on_error(self, exc: Exception) -> None:
         self.arm.stats.callback_errors += 1
@@ -146,6 +164,7 @@ class ArmNetwork:
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
         self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
+        self._tpdo_lengths: dict[int, int] = {}         # id(PdoSpec) -> its length (the mapping is fixed)
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
         for cfg in self.config.nodes:
             object_dictionary = load_od(cfg.eds_path, cfg.node_id)   # EdsError: bad input, exit 2
@@ -174,6 +193,8 @@ class ArmNetwork:
         self._connected = False
         self._stop = threading.Event()
         self._monitor: threading.Thread | None = None
+        self._excused: dict[str, float] = {}          # node -> starvation excused from its current silence
+        self._excused_since: dict[str, float] = {}    # node -> last_heartbeat after the last excuse
 
     # ------------------------------------------------------------------ connection
     def connect(self) -> "ArmNetwork":
@@ -181,6 +202,7 @@ class ArmNetwork:
             return self
         self.network.bus = open_bus(self.bus_spec)
         self.network.connect()
+        self._send_frame = frame_sender(self.network.bus)
         if hasattr(self.network.bus, "add_inline_listener"):
             # in-process bus: TPDOs are handled in the simulator's sending thread (see
             # drivers/transport); the library's Notifier stays for the queued fallback
@@ -356,7 +378,7 @@ class ArmNetwork:
             self._received = set()
             self._expected = self._expected_tpdos()
             self.stats.expected_tpdos += len(self._expected)
-        self.network.send_message(od.SYNC_COB_ID_DEFAULT, b"")
+        self._send(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
 
@@ -417,7 +439,15 @@ class ArmNetwork:
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
                     frames += d.rpdo_frames()
         for cob, data in frames:
-            self.network.send_message(cob, data)
+            self._send(cob, data)
+
+    def _send(self, can_id: int, data: bytes) -> None:
+        """The cycle's frames (SYNC, RPDOs): plain values to the bus, no Message on the
+        in-process bus; the library's send lock keeps them whole against SDO/NMT senders."""
+        if not self._connected:
+            raise DriverError("the network is not connected: call boot() first")
+        with self.network.send_lock:
+            self._send_frame(can_id, data)
 
     def _apply(self, c: ArmCommand) -> None:
         for i, j in enumerate(self.joints):
@@ -606,7 +636,10 @@ class ArmNetwork:
 
     def _on_tpdo(self, can_id, data, timestamp):
         driver, spec = self._tpdo_routes[can_id]
-        if len(data) < spec.length:
+        length = self._tpdo_lengths.get(id(spec))
+        if length is None:
+            length = self._tpdo_lengths[id(spec)] = spec.length
+        if len(data) < length:
             self.stats.malformed += 1
             return
         with self._cv:
@@ -627,22 +660,45 @@ class ArmNetwork:
                     logger.warning("node guarding request to node %d not sent: %s", node_id, exc)
 
     def _monitor_loop(self) -> None:
+        """The master's timer: its own heartbeat, node-guarding polls and heartbeat-loss checks.
+
+        Starvation vs device loss: silence is counted only while this process could observe
+        the bus. When the loop wakes more than STARVED_SLACK after it meant to (the host or a
+        busy process held the CPU; frames may be waiting unread in a queue), the excess is
+        not counted as any node's silence: every last-heard time moves forward by it, and a
+        loss that the wall clock alone would have declared becomes a `late_cycle` event
+        (informational) instead of `heartbeat_lost`. A node that really went silent is still
+        declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
+        excused per silence is capped at the margin up to 3 periods, so the bound of 3
+        heartbeat periods holds whatever the load."""
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id
         next_hb = time.monotonic()
-        while not self._stop.wait(0.005):
+        due = next_hb
+        while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
             now = time.monotonic()
+            excess = now - due - STARVED_SLACK
+            due = now + MONITOR_PERIOD
             if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
                 next_hb = max(next_hb + period, now)
                 try:
                     self.network.send_message(hb_cob, bytes([od.NMT_STATE_OPERATIONAL]))
                 except Exception as exc:
                     logger.warning("controller heartbeat not sent: %s", exc)
+            if period > 0:
+                due = min(due, next_hb)
             if not self._monitoring:
                 continue
             self._poll_guarded(now)
             with self._cv:
+                if excess > 0:
+                    # Starved: excuse the time, and judge only at the next pass, once the
+                    # receive path has had the CPU to deliver what waited meanwhile.
+                    self.stats.starved_time += excess
+                    self._excuse(now, excess, factor)
+                    due = now + RECHECK_AFTER_STARVED
+                    continue
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
@@ -653,6 +709,42 @@ class ArmNetwork:
                                     f"period {cfg.heartbeat_period:.3f} s)")
                         self._expected = None
                         self._cv.notify_all()
+
+    def _excuse(self, now: float, excess: float, factor: float) -> None:
+        """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""
+        judged = []
+        for cfg in self.config.nodes:
+            h = self.health[cfg.name]
+            if not h.alive or h.last_heartbeat is None:
+                continue
+            # at most the margin between the loss factor and 3 periods per silence (less one
+            # monitor pass): a real loss is still declared within 3 heartbeat periods
+            cap = max(0.0, (3.0 - factor) * cfg.heartbeat_period - MONITOR_PERIOD)
+            if h.last_heartbeat != self._excused_since.get(cfg.name):
+                self._excused[cfg.name] = 0.0
+            grant = min(excess, cap - self._excused.get(cfg.name, 0.0))
+            if grant <= 0.0:
+                continue
+            if now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                judged.append(cfg.name)
+            h.last_heartbeat += grant
+            self._excused[cfg.name] = self._excused.get(cfg.name, 0.0) + grant
+            self._excused_since[cfg.name] = h.last_heartbeat
+        self.stats.starved_checks += 1
+        if judged:
+            names = ", ".join(judged)
+            event = NetworkEvent("late_cycle", judged[0], self.drivers[judged[0]].node_id,
+                                 f"late cycle: the controller was starved for {excess:.3f} s; heartbeat "
+                                 f"silence of {names} in that window not counted as node loss")
+            self._events.append(event)
+
+
+# The master's timer (heartbeat producer, guarding, loss checks) runs at least every
+# MONITOR_PERIOD; a wake later than STARVED_SLACK past its due time counts as starvation.
+MONITOR_PERIOD = 0.010      # s
+MONITOR_MIN_SLEEP = 0.0005  # s
+STARVED_SLACK = 0.020       # s
+RECHECK_AFTER_STARVED = 0.003  # s: a starved pass judges nothing; the next one comes this soon
 
 
 __all__ = ["ArmNetwork", "ArmState", "ArmCommand", "NodeHealth", "NetworkStats", "EeCommand", "State"]

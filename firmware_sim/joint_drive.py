@@ -74,12 +74,12 @@ class JointDriveNode(SimNode):
     # ------------------------------------------------------------------ scaling
     def _scale(self) -> float:
         """Increments per joint radian from 608Fh and 6091h."""
-        enc = self.get(od.POSITION_ENCODER_RESOLUTION, 1) / self.get(od.POSITION_ENCODER_RESOLUTION, 2)
-        gear = self.get(od.GEAR_RATIO, 1) / self.get(od.GEAR_RATIO, 2)
+        enc = self.param(od.POSITION_ENCODER_RESOLUTION, 1) / self.param(od.POSITION_ENCODER_RESOLUTION, 2)
+        gear = self.param(od.GEAR_RATIO, 1) / self.param(od.GEAR_RATIO, 2)
         return enc * gear / (2.0 * math.pi)
 
     def _rated_torque(self) -> float:
-        return self.get(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)
+        return self.param(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)
 
     # ------------------------------------------------------------------ SYNC
     def on_sync_begin(self, dt: float) -> None:
@@ -95,14 +95,14 @@ class JointDriveNode(SimNode):
             self.q_ref = self.q_start = self.joint.q_measured
             self.v_ref = 0.0
             self.pp_target = None
-        self.joint.max_motor_torque = self.get(od.MAX_TORQUE) / 1000.0 * self._rated_torque()
+        self.joint.max_motor_torque = self.param(od.MAX_TORQUE) / 1000.0 * self._rated_torque()
         self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * self._rated_torque()
         self.limit_active = False
         self.q_start = self.q_ref
         if self.state == State.OPERATION_ENABLED:
-            lo = self.get(od.SOFTWARE_POSITION_LIMIT, 1) / k
-            hi = self.get(od.SOFTWARE_POSITION_LIMIT, 2) / k
-            vmax = self.get(od.MAX_PROFILE_VELOCITY) / k
+            lo = self.param(od.SOFTWARE_POSITION_LIMIT, 1) / k
+            hi = self.param(od.SOFTWARE_POSITION_LIMIT, 2) / k
+            vmax = self.param(od.MAX_PROFILE_VELOCITY) / k
             if self.mode == od.MODE_CSP:
                 target = self.get(od.TARGET_POSITION) / k
                 clamped = min(hi, max(lo, target))
@@ -125,11 +125,11 @@ class JointDriveNode(SimNode):
                 if not cw & CW_NEW_SETPOINT:
                     self.pp_ack = False
                 self.pp_halt = bool(cw & CW_HALT)
-                self.pp_v = min(vmax, self.get(od.PROFILE_VELOCITY) / k)
-                self.pp_a = self.get(od.PROFILE_ACCELERATION) / k
-                self.pp_d = self.get(od.PROFILE_DECELERATION) / k
+                self.pp_v = min(vmax, self.param(od.PROFILE_VELOCITY) / k)
+                self.pp_a = self.param(od.PROFILE_ACCELERATION) / k
+                self.pp_d = self.param(od.PROFILE_DECELERATION) / k
         self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
-        self.qs_dec = self.get(od.QUICK_STOP_DECELERATION) / k
+        self.qs_dec = self.param(od.QUICK_STOP_DECELERATION) / k
         self.joint.brake_engaged = self.state not in ENERGISED
 
     def _servo(self, s: float, q_meas: float, qd: float) -> float:
@@ -165,16 +165,16 @@ class JointDriveNode(SimNode):
         if self.state == State.FAULT_REACTION_ACTIVE and self.v_ref == 0.0:
             self.state = State.FAULT
         if self.state == State.QUICK_STOP_ACTIVE and self.v_ref == 0.0 and \
-                self.get(od.QUICK_STOP_OPTION) in (1, 2, 3, 4):
+                self.param(od.QUICK_STOP_OPTION) in (1, 2, 3, 4):
             self.state = State.SWITCH_ON_DISABLED
         j.brake_engaged = self.state not in ENERGISED
         # following error (CSP and PP while enabled)
         err = self.q_ref - j.q_measured
-        window = self.get(od.FOLLOWING_ERROR_WINDOW) / self._k
+        window = self.param(od.FOLLOWING_ERROR_WINDOW) / self._k
         if self.state == State.OPERATION_ENABLED and abs(err) > window:
             self.fe_time += dt
             self.following_error = True
-            if self.fe_time * 1000.0 > self.get(od.FOLLOWING_ERROR_TIMEOUT):
+            if self.fe_time * 1000.0 > self.param(od.FOLLOWING_ERROR_TIMEOUT):
                 self._fault(od.EMCY_FOLLOWING_ERROR)
         else:
             self.fe_time = 0.0
@@ -183,7 +183,7 @@ class JointDriveNode(SimNode):
             self._fault(od.EMCY_OVER_TEMPERATURE_DRIVE, od.ERR_REG_TEMPERATURE)
         if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
             self.target_reached = (self.q_ref == self.pp_target and
-                                   abs(self.pp_target - j.q_measured) * self._k <= self.get(od.POSITION_WINDOW))
+                                   abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
         self._update_od()
 
     def _update_od(self) -> None:
@@ -262,7 +262,7 @@ class JointDriveNode(SimNode):
         elif s == State.QUICK_STOP_ACTIVE:
             if cmd == Command.DISABLE_VOLTAGE:
                 new = State.SWITCH_ON_DISABLED                                    # 12
-            elif cmd == Command.ENABLE_OPERATION and self.get(od.QUICK_STOP_OPTION) in (5, 6, 7, 8):
+            elif cmd == Command.ENABLE_OPERATION and self.param(od.QUICK_STOP_OPTION) in (5, 6, 7, 8):
                 new = State.OPERATION_ENABLED                                     # 16
         if new == State.OPERATION_ENABLED and s != State.OPERATION_ENABLED:
             if s != State.QUICK_STOP_ACTIVE:

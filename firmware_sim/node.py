@@ -66,6 +66,9 @@ class SimLocalNode(canopen.LocalNode):
                 if obj.min is not None and value < obj.min:
                     raise SdoAbortedError(ABORT_VALUE_LOW)
         super().set_data(index, subindex, data, check_writable)
+        params = self.__dict__.get("params_cache")
+        if params:                 # SimNode.param(): the stored value changed
+            params.pop((index, subindex), None)
 
 
 class _NodeTx:
@@ -109,6 +112,7 @@ class _Pdo:
     entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
     event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
     next_event: float = 0.0      # monotonic time of the next event-timer transmission
+    codec: tuple | None = None   # RPDO: decoder compiled on first use (SimNode._compile_rpdo)
 
     @property
     def length(self) -> int:
@@ -142,8 +146,11 @@ class SimNode:
         self._sync_counter = 0
         self.next_heartbeat = 0.0
         self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
+        self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
+        self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
+        self.local.params_cache = self._params
         self.sdo_session = SdoSession()
 
     # ------------------------------------------------------------------ OD access
@@ -165,8 +172,20 @@ class SimNode:
                     return data
         return self.local.get_data(index, sub)
 
+    def param(self, index: int, sub: int = 0):
+        """get() for the device's settings (scaling, limits, ratings) read every SYNC: cached
+        until any write reaches the object (SDO, RPDO or put) or the node resets."""
+        key = (index, sub)
+        cache = self._params
+        value = cache.get(key)
+        if value is None:
+            value = cache[key] = self.get(index, sub)
+        return value
+
     def put(self, index: int, sub: int, value) -> None:
         """Firmware-side write: no access checks, no callbacks (updates read-only values)."""
+        if self._params:
+            self._params.pop((index, sub), None)
         obj, codec, integer = self._codec(index, sub)
         if codec is None or isinstance(value, (bytes, bytearray)):
             data = obj.encode_raw(value)
@@ -196,6 +215,7 @@ class SimNode:
         """NMT reset node (application=True) or reset communication; ends with boot-up."""
         with self._lock:
             self.nmt_state = od.NMT_STATE_BOOTUP
+            self._params.clear()
             if application:
                 self.local.data_store.clear()
                 self.reset_application()
@@ -338,16 +358,58 @@ class SimNode:
             self.stats.malformed += 1
             self.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
             return
+        codec = pdo.codec
+        if codec is None:
+            codec = pdo.codec = self._compile_rpdo(pdo)
+        store = self.local.data_store
+        callbacks = self.local._write_callbacks
+        generic = callbacks != [self._on_od_write]
+        params = self._params
         with self._lock:
             self.in_rpdo = True
-            offset = 0
-            for index, sub, size in pdo.entries:
-                try:
-                    self.local.set_data(index, sub, bytes(data[offset:offset + size]))
-                except SdoAbortedError:
-                    self.stats.malformed += 1
-                offset += size
-            self.in_rpdo = False
+            try:
+                for index, sub, start, end, obj, size_ok in codec:
+                    chunk = data[start:end]
+                    if not size_ok:          # mapped size differs from the object's type
+                        self.stats.malformed += 1
+                        continue
+                    try:
+                        if generic:
+                            for callback in callbacks:
+                                callback(index=index, subindex=sub, od=obj, data=chunk)
+                        elif index < 0x2000:   # communication area: the full write rules
+                            self._on_od_write(index, sub, obj, chunk)
+                        else:                  # application objects: only the device's reaction
+                            self.on_write(index, sub, chunk)
+                    except SdoAbortedError:
+                        self.stats.malformed += 1
+                        continue
+                    entry = store.get(index)
+                    if entry is None:
+                        entry = store[index] = {}
+                    entry[sub] = chunk
+                    if params and (index, sub) in params:
+                        del params[(index, sub)]
+            finally:
+                self.in_rpdo = False
+
+    def _compile_rpdo(self, pdo: "_Pdo") -> tuple:
+        """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
+        whether the mapped length fits the object's type (what LocalNode.set_data checks per
+        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
+        out, offset = [], 0
+        for index, sub, size in pdo.entries:
+            try:
+                obj = self.local._find_object(index, sub)
+            except SdoAbortedError:
+                obj = None
+            if obj is not None:
+                size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
+                out.append((index, sub, offset, offset + size, obj, size_ok))
+            else:
+                out.append((index, sub, offset, offset + size, None, False))
+            offset += size
+        return tuple(out)
 
     # ------------------------------------------------------------------ heartbeat consumer
     def consumer_entries(self) -> dict[int, float]:
@@ -365,6 +427,18 @@ class SimNode:
     def on_heartbeat(self, producer: int, now: float) -> None:
         if producer in self.consumer_entries():
             self.consumer_last[producer] = now    # monitoring starts with the first heartbeat
+            self.consumer_excused.pop(producer, None)
+
+    def excuse_consumers(self, starved: float) -> None:
+        """The simulator could not observe the bus for `starved` s (its process was starved):
+        not silence of the consumed heartbeats, up to half of each one's timeout per silence."""
+        entries = self.consumer_entries()
+        for producer in list(self.consumer_last):
+            used = self.consumer_excused.get(producer, 0.0)
+            grant = min(starved, 0.5 * entries.get(producer, 0.0) - used)
+            if grant > 0.0:
+                self.consumer_last[producer] += grant
+                self.consumer_excused[producer] = used + grant
 
     def check_consumers(self, now: float) -> None:
         if not self.consumer_last:
@@ -439,7 +513,13 @@ class SimNode:
 
     def _transmit(self, pdo: _Pdo) -> None:
         with self._lock:
-            data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
+            try:     # hot path: every entry is a stored value and no read callback is installed
+                if self.local._read_callbacks:
+                    raise KeyError
+                store = self.local.data_store
+                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
+            except KeyError:
+                data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
         if self.faults.drop_tx > 0:
             self.faults.drop_tx -= 1
             self.stats.dropped_tx += 1
@@ -471,6 +551,7 @@ class SimNode:
 
     # ------------------------------------------------------------------ OD write rules
     def _on_od_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
+        self._params.pop((index, subindex), None)
         from spacearm.base.canopen import od as ids
         if ids.RPDO_MAP <= index < ids.RPDO_MAP + ids.N_PDOS or ids.TPDO_MAP <= index < ids.TPDO_MAP + ids.N_PDOS:
             comm = (ids.RPDO_COMM if index < ids.TPDO_MAP else ids.TPDO_COMM) + (index & 0xFF)

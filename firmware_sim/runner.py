@@ -21,7 +21,7 @@ import can
 
 from spacearm.base.canopen import od
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from spacearm.base.transport import open_bus
+from spacearm.base.transport import frame_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
 from spacearm.firmware_sim.joint_drive import JointDriveNode
@@ -39,6 +39,7 @@ class SimStats:
     malformed: int = 0    # NMT/SYNC frames with a wrong length
     ignored: int = 0      # error, remote, extended-ID and FD frames
     internal_errors: int = 0
+    starved_time: float = 0.0   # s the timer scheduler woke late beyond STARVED_SLACK (not counted as silence)
 
 
 class _Listener(can.Listener):
@@ -51,6 +52,14 @@ class _Listener(can.Listener):
         except Exception:  # never let one frame kill the receive thread
             self.sim.stats.internal_errors += 1
             logger.exception("simulator: error handling frame %s", msg)
+
+    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        """In-process bus hot path: a standard data frame as plain values (no Message)."""
+        try:
+            self.sim._route_data(can_id, data)
+        except Exception:
+            self.sim.stats.internal_errors += 1
+            logger.exception("simulator: error handling frame 0x%03X %s", can_id, data.hex())
 
     def on_error(self, exc: Exception) -> None:
         self.sim.stats.internal_errors += 1
@@ -95,6 +104,7 @@ class Simulator:
                                         target.ranger_config())
         self.camera = None        # spacearm.firmware_sim.camera.service.CameraService, see attach_camera
         self.stats = SimStats()
+        self.cpu_samples: list[float] | None = None   # set to [] to record the CPU s of every SYNC (benchmarks)
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
         self._send_lock = threading.Lock()
@@ -108,6 +118,7 @@ class Simulator:
     # ------------------------------------------------------------------ public
     def start(self) -> "Simulator":
         self.bus = open_bus(self.bus_spec)
+        self._send_frame = frame_sender(self.bus)
         listener = _Listener(self)
         self._notifier = can.Notifier(self.bus, [listener], timeout=0.1)
         if hasattr(self.bus, "add_inline_listener"):
@@ -167,13 +178,11 @@ class Simulator:
 
     # ------------------------------------------------------------------ internals
     def _send(self, can_id: int, data: bytes) -> None:
-        bus = self.bus
-        if bus is None:
+        if self.bus is None:
             return
-        msg = can.Message(arbitration_id=can_id, data=data, is_extended_id=False)
         with self._send_lock:
             try:
-                bus.send(msg)
+                self._send_frame(can_id, data)
             except can.CanError as exc:
                 logger.warning("simulator: send failed: %s", exc)
 
@@ -191,8 +200,13 @@ class Simulator:
             for cob in node.rpdo_cob_ids():
                 routes[cob] = node
             syncs.add(node.sync_cob_id())
-        self._rpdo_routes = routes
         self._sync_ids = syncs or {od.SYNC_COB_ID_DEFAULT}
+        # _route_data looks RPDOs up first; a COB-ID that names another service keeps that
+        # meaning, as in the service-by-service order below
+        self._rpdo_routes = {cob: node for cob, node in routes.items()
+                             if cob != od.NMT_COB_ID and cob not in self._sync_ids
+                             and not od.SDO_RX_BASE < cob <= od.SDO_RX_BASE + 127
+                             and not od.HEARTBEAT_BASE < cob <= od.HEARTBEAT_BASE + 127}
 
     def _route(self, msg: can.Message) -> None:
         self.stats.rx_frames += 1
@@ -204,9 +218,21 @@ class Simulator:
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
             self.stats.ignored += 1
             return
+        self._route_data(msg.arbitration_id, bytes(msg.data), counted=True)
+
+    def _route_data(self, cid: int, data: bytes, counted: bool = False) -> None:
+        """A standard data frame: dispatch by COB-ID (PDOs first: they are most of the traffic)."""
+        if not counted:
+            self.stats.rx_frames += 1
         if self._dirty:
             self._rebuild_routes()
-        cid, data = msg.arbitration_id, bytes(msg.data)
+        node = self._rpdo_routes.get(cid)
+        if node is not None:
+            if node.powered and not node.faults.silent:
+                node.stats.rx_frames += 1
+                with self._sync_lock:
+                    node.on_rpdo(cid, data)
+            return
         if cid == od.NMT_COB_ID:
             if len(data) != 2:
                 self.stats.malformed += 1
@@ -243,16 +269,17 @@ class Simulator:
             for node in self.nodes.values():
                 if node.powered and not node.faults.silent:
                     node.on_heartbeat(cid - od.HEARTBEAT_BASE, now)
-        elif cid in self._rpdo_routes:
-            node = self._rpdo_routes[cid]
-            if node.powered and not node.faults.silent:
-                node.stats.rx_frames += 1
-                with self._sync_lock:
-                    node.on_rpdo(cid, data)
         else:
             self.stats.unknown += 1
 
     def _on_sync(self) -> None:
+        samples = self.cpu_samples
+        started = time.thread_time() if samples is not None else 0.0
+        self._on_sync_locked()
+        if samples is not None:
+            samples.append(time.thread_time() - started)
+
+    def _on_sync_locked(self) -> None:
         with self._sync_lock:
             self.stats.syncs += 1
             nodes = [n for n in self.nodes.values() if n.powered]
@@ -260,7 +287,7 @@ class Simulator:
             # bus config's
             dt = self.dt
             for node in nodes:
-                period = node.get(od.COMM_CYCLE_PERIOD)
+                period = node.param(od.COMM_CYCLE_PERIOD)
                 if period > 0:
                     dt = period / 1e6
                     break
@@ -274,33 +301,79 @@ class Simulator:
             for node in nodes:
                 if not node.faults.silent:
                     node.send_tpdos()
+            # A heartbeat that fell due is sent here too: the SYNC thread runs anyway, so a
+            # timer thread starved of the GIL does not delay it (whichever runs first sends).
+            now = time.monotonic()
+            for node in nodes:
+                if 0.0 < node.next_heartbeat <= now and node.nmt_state != od.NMT_STATE_BOOTUP:
+                    self._heartbeat_due(node, now)
 
     def _heartbeat_loop(self) -> None:
+        """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
+        and SDO server timeouts. It sleeps until the earliest heartbeat or event timer is due
+        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts) instead of
+        polling, so it takes the GIL a few times per heartbeat period, not 500 times a second.
+
+        Starvation: when this thread wakes more than STARVED_SLACK after it meant to (the host
+        or this process's other threads held the CPU), the excess was time nobody here could
+        observe the bus; it is not counted as silence of a consumed heartbeat (SimNode.
+        excuse_consumers, at most half the consumer timeout per silence), so a starved
+        simulator does not fault its drives for a controller that was alive. A controller
+        that really stopped is still caught: every unstarved scheduler pass counts in full."""
+        due = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
+            excess = now - due - STARVED_SLACK
+            starved = excess > 0
+            if starved:
+                self.stats.starved_time += excess
+                for node in self.nodes.values():
+                    if node.consumer_last:
+                        node.excuse_consumers(excess)
+            # a starved pass sends what is due but judges no consumer: the next pass does, soon
+            wake = now + (TIMER_MIN_SLEEP * 6 if starved else TIMER_MAX_SLEEP)
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
-                if node.consumer_last and not node.faults.silent:
+                if node.consumer_last and not node.faults.silent and not starved:
                     with self._sync_lock:
                         node.check_consumers(now)
                 node.check_sdo_timeout(now)
                 if node.has_event_tpdos:
                     with self._sync_lock:
                         node.send_event_tpdos(now)
-                try:
-                    period = node.heartbeat_period()
-                except Exception:
-                    continue
-                if period <= 0.0:
-                    node.next_heartbeat = 0.0
-                    continue
-                if node.next_heartbeat == 0.0:
-                    node.next_heartbeat = now + period
-                elif now >= node.next_heartbeat:
-                    node.send_heartbeat()
-                    node.next_heartbeat = max(node.next_heartbeat + period, now)
-            self._stop.wait(0.002)
+                    for pdo in node._tpdos or ():
+                        if pdo.next_event > 0.0:
+                            wake = min(wake, pdo.next_event)
+                with self._sync_lock:
+                    due_hb = self._heartbeat_due(node, now)
+                if due_hb:
+                    wake = min(wake, due_hb)
+            due = max(wake, now + TIMER_MIN_SLEEP)
+            self._stop.wait(due - now)
+
+    def _heartbeat_due(self, node: SimNode, now: float) -> float:
+        """Send the node's heartbeat if due; returns when the next one is due (0: none)."""
+        try:
+            period = node.heartbeat_period()
+        except Exception:
+            return 0.0
+        if period <= 0.0:
+            node.next_heartbeat = 0.0
+            return 0.0
+        if node.next_heartbeat == 0.0:
+            node.next_heartbeat = now + period
+        elif now >= node.next_heartbeat:
+            node.send_heartbeat()
+            node.next_heartbeat = max(node.next_heartbeat + period, now)
+        return node.next_heartbeat
+
+
+# The timer scheduler's sleep bounds: consumer and SDO timeouts are checked at least every
+# TIMER_MAX_SLEEP; a wake later than STARVED_SLACK past its due time counts as starvation.
+TIMER_MAX_SLEEP = 0.010   # s
+TIMER_MIN_SLEEP = 0.0005  # s
+STARVED_SLACK = 0.020     # s
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,

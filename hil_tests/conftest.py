@@ -50,6 +50,10 @@ def vcan_available(name: str = "vcan0") -> bool:
 
 
 def pytest_addoption(parser):
+    parser.addoption("--cpu-load", action="store", type=int,
+                     default=int(os.environ.get("SPACEARM_CPU_LOAD", "0") or 0),
+                     help="run the whole session beside this many CPU-bound processes (hil_tests/cpu_load.py); "
+                          "tests marked under_load get 2 of them in any case")
     parser.addoption("--transport", action="store", default=os.environ.get("SPACEARM_HIL_TRANSPORTS", ""),
                      help="comma list of transports for bus_spec: virtual,loopback,socketcan "
                           "(default: all available here)")
@@ -59,6 +63,8 @@ def pytest_configure(config):
     config.addinivalue_line("markers", "hil: hardware-in-the-loop test over a CAN bus")
     config.addinivalue_line("markers", "vcan_vm: part of the short subset run over real SocketCAN inside the test VM")
     config.addinivalue_line("markers", "multiprocess: needs the bus to reach another process (not virtual)")
+    config.addinivalue_line("markers", "under_load: runs beside two CPU-bound processes (the suite must hold "
+                                       "on a loaded machine)")
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
@@ -102,6 +108,31 @@ def pytest_collection_modifyitems(config, items):
             inside = False
         if inside:
             item.add_marker(pytest.mark.hil)
+
+
+# --------------------------------------------------------------------------- CPU load
+from hil_tests.cpu_load import CpuLoad  # noqa: E402
+
+
+@pytest.fixture(scope="session", autouse=True)
+def session_cpu_load(request):
+    """--cpu-load N: the whole session runs beside N CPU-bound processes."""
+    count = request.config.getoption("--cpu-load")
+    if count <= 0:
+        yield None
+        return
+    with CpuLoad(count) as load:
+        yield load
+
+
+@pytest.fixture(autouse=True)
+def marked_cpu_load(request):
+    """Tests marked under_load run beside two CPU-bound processes."""
+    if request.node.get_closest_marker("under_load") is None:
+        yield None
+        return
+    with CpuLoad(2) as load:
+        yield load
 
 
 # --------------------------------------------------------------------------- loopback hub

@@ -12,7 +12,7 @@ import pytest
 
 from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.faults import (FaultyHub, assert_motion_refused, assert_stays_still,
-                              recorded_stop_events, retry_on_load_stop, start_stack, wait_for, wait_safe)
+                              recorded_stop_events, start_stack, wait_for, wait_safe)
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
 
@@ -51,7 +51,9 @@ def stopped_with(stack, safe, codes: tuple[str, ...], bound_cycles: float, still
         assert_stays_still(stack)
     assert_motion_refused(stack)
     path = safe.status["recording"]["path"]
-    wait_for(lambda: any(reason in m for m in recorded_stop_events(path)), 4.0, "stop reason recorded")
+    reason = safe.status["stop_reason"]
+    wait_for(lambda: any(reason in m for m in recorded_stop_events(path)), 4.0,
+             lambda: f"stop reason {reason!r} in the recording: {recorded_stop_events(path)}")
 
 
 def test_bus_blackout_stops(hub, stack):
@@ -159,7 +161,7 @@ def test_daemon_killed_mid_motion_restarts_disabled_with_brakes_on(stack):
         stack.enable()
         motion = stack.move(stack.far_target())["motion"]
         assert stack.wait_motion(motion)["state"] == "enabled"
-    retry_on_load_stop(stack, move_after_restart)
+    move_after_restart()
 
 
 def test_node_restart_is_an_unexpected_bootup_and_stops(stack):

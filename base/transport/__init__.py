@@ -91,6 +91,10 @@ class _FastVirtual:
       nodes -> TPDOs -> controller), the largest cost left. Frames fall back to the receiver's
       queue (and its Notifier) when delivery to it is already running in this thread or
       frames are still queued for it, so order is kept and nothing recurses.
+    * `send_frame(can_id, data)` is the hot path for standard data frames (SYNC, PDOs,
+      heartbeats): no Message for the sender, and an inline listener that has
+      `on_frame(can_id, data, timestamp)` gets the frame as plain values, so a cycle's ~40
+      frames create no Message objects at all. A Message is built only for a queued receiver.
 
     Listeners called inline must not take a lock the sending code may hold; the simulator's
     and the ArmNetwork's listeners only take their own state locks.
@@ -98,6 +102,46 @@ class _FastVirtual:
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         self.queue.inline_listeners = getattr(self.queue, "inline_listeners", []) + [listener]
+        # for send_frame: each listener's plain-value handler, looked up once here
+        self.queue.inline_handlers = getattr(self.queue, "inline_handlers", []) + [
+            (getattr(listener, "on_frame", None), listener)]
+
+    def send_frame(self, can_id: int, data: bytes) -> None:
+        """Send a standard-ID data frame given as plain values (the same frame send() would put
+        on the bus for can.Message(arbitration_id=can_id, data=data, is_extended_id=False))."""
+        if not self._open:
+            raise can.CanOperationError("Cannot operate on a closed bus")
+        if not 0 <= can_id <= 0x7FF or len(data) > 8:
+            raise can.CanOperationError(f"cannot send frame 0x{can_id:X} with {len(data)} bytes: "
+                                        "not a standard CAN data frame")
+        timestamp = time.time()
+        own = self.queue
+        active = _active_inline()
+        for bus_queue in self.channel:
+            if bus_queue is own and not self.receive_own_messages:
+                continue
+            handlers = getattr(bus_queue, "inline_handlers", None)
+            key = id(bus_queue)
+            if handlers and not bus_queue.queue and key not in active:   # deque length: no lock
+                active.add(key)
+                try:
+                    for on_frame, listener in handlers:
+                        try:
+                            if on_frame is not None:
+                                on_frame(can_id, data, timestamp)
+                            else:
+                                listener.on_message_received(self._copy(can_id, data, timestamp, bus_queue))
+                        except Exception as exc:   # a receiver's bug must not fail the sender
+                            listener.on_error(exc)
+                finally:
+                    active.discard(key)
+                continue
+            bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
+
+    def _copy(self, can_id: int, data: bytes, timestamp: float, bus_queue) -> can.Message:
+        return can.Message(timestamp=timestamp, arbitration_id=can_id, is_extended_id=False,
+                           channel=self.channel_id, dlc=len(data), data=data,
+                           is_rx=bus_queue is not self.queue, check=False)
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self._check_if_open()
@@ -132,6 +176,19 @@ class _FastVirtual:
             raise can.CanOperationError("Could not send message to one or more recipients")
 
 
+def frame_sender(bus: can.BusABC):
+    """The cheapest way to send a standard data frame on `bus`: send(can_id, data).
+    The in-process bus takes plain values; other transports get the can.Message they need."""
+    fast = getattr(bus, "send_frame", None)
+    if fast is not None:
+        return fast
+    message = can.Message
+
+    def send(can_id: int, data: bytes) -> None:
+        bus.send(message(arbitration_id=can_id, data=data, is_extended_id=False))
+    return send
+
+
 _inline = threading.local()
 
 
@@ -147,6 +204,14 @@ def _enter_inline(bus_queue) -> bool:
 
 def _leave_inline(bus_queue) -> None:
     _inline.active.discard(id(bus_queue))
+
+
+def _active_inline() -> set:
+    """This thread's set of receivers whose inline delivery is running (see _enter_inline)."""
+    active = getattr(_inline, "active", None)
+    if active is None:
+        active = _inline.active = set()
+    return active
 
 
 _CHECKED: dict[str, type] = {}

@@ -93,6 +93,10 @@ class ControllerCore:
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m
         self._apply_pending(m)
+        for event in m.events:   # the controller's own starvation: recorded with its code, not a stop
+            if event.kind is FindingCode.LATE_CYCLE:
+                self._event(m.time, "late_cycle", event.detail,
+                            Finding(FindingCode.LATE_CYCLE, event.detail, node=event.node or None))
         moving = self.state is MachineState.ENABLED and self.mode is not None and self.mode.moving
         if self.state in (MachineState.ENABLED, MachineState.ENABLING):
             findings = self.supervisor.check(m, self.last_target, moving)

@@ -21,6 +21,10 @@ from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 # limit is the independent backstop.
 DRIVE_LIMIT_MARGIN = 0.05  # rad
 
+# A cycle whose I/O ran this many periods late (read after the last one, or TPDO wait past its
+# budget) was starved: its missing process data is reported as `late_cycle`, not counted as loss.
+LATE_CYCLE_SLACK = 0.5
+
 # Network event kinds the supervisor treats as faults (others are informational).
 FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingCode.BOOTUP, "emcy": FindingCode.EMCY,
                 "fault_reset_failed": FindingCode.FAULT}
@@ -50,6 +54,9 @@ class CanopenHardware:
         self._enabled = False
         self.info_events: list[str] = []
         self.last_io_wait = 0.0    # s the last read() waited for its SYNC's TPDOs
+        self.period = self.network.config.bus.sync_period
+        self._last_read: float | None = None
+        self.late_cycles = 0       # cycles whose missing data was excused as the controller's own lateness
 
     @property
     def dof(self) -> int:
@@ -74,18 +81,27 @@ class CanopenHardware:
         self.network.fault_reset()
 
     def statistics(self) -> dict:
-        return dict(vars(self.network.stats))
+        return {**vars(self.network.stats), "late_cycles": self.late_cycles}
 
     def bringup_report(self) -> dict:
         """Per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded."""
         return {name: vars(report) for name, report in getattr(self.network, "bringup", {}).items()}
 
     def read(self, time: float) -> Measurement:
+        started = time_module.monotonic()
         sync = self.network.send_sync()
         timeout = None if self.lockstep else self.realtime_budget
-        waited = time_module.monotonic()
         complete = self.network.wait_all_tpdos(timeout)
-        self.last_io_wait = time_module.monotonic() - waited
+        done = time_module.monotonic()
+        self.last_io_wait = done - started
+        late = 0.0
+        if not self.lockstep:
+            # How late this cycle's I/O ran: a read more than a period after the last one, or
+            # a TPDO wait that overshot its budget, means this process did not get the CPU.
+            if self._last_read is not None:
+                late = started - self._last_read - self.period
+            late = max(late, self.last_io_wait - self.realtime_budget)
+        self._last_read = started
         state = self.network.read(complete)
         events = []
         for event in self.network.poll_events():
@@ -94,15 +110,21 @@ class CanopenHardware:
                 self.info_events.append(str(event))
             else:
                 events.append(DeviceEvent(event.node, kind, event.message))
-        return self._measurement(time, sync, state, tuple(events))
+        starved = late > LATE_CYCLE_SLACK * self.period
+        return self._measurement(time, sync, state, tuple(events), late if starved else 0.0)
 
     def _measurement(self, time: float, sync: int, state: ArmState,
-                     events: tuple[DeviceEvent, ...]) -> Measurement:
+                     events: tuple[DeviceEvent, ...], late: float = 0.0) -> Measurement:
         joints = state.joints
         missing: tuple[str, ...] = ()
         if not state.complete:
             dead = [name for name, health in state.nodes.items() if not health.alive]
             missing = tuple(dead + self.network.nodes_missing_tpdos())
+            if late > 0.0:
+                self.late_cycles += 1
+                events += (DeviceEvent(missing[0] if missing else "", FindingCode.LATE_CYCLE,
+                                       f"late cycle: I/O {1e3 * late:.1f} ms late; missing process data of "
+                                       f"{', '.join(missing)} not counted as node loss"),)
         ft = state.ft
         wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
         return Measurement(
@@ -115,7 +137,7 @@ class CanopenHardware:
             wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
             end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
                           else EndEffectorState.NONE),
-            events=events, missing=missing)
+            events=events, missing=missing, late=late > 0.0 and bool(missing))
 
     def write(self, command: Command, protective_stop: bool) -> None:
         if command.enable and not self._enabled:

@@ -61,6 +61,20 @@ class RotatingTraceWriter(can.Listener):
     def file(self):
         return self._writer.file
 
+    @property
+    def last_timestamp(self) -> float | None:      # for the in-process tap's batch formatting
+        return self._writer.last_timestamp
+
+    @last_timestamp.setter
+    def last_timestamp(self, value: float | None) -> None:
+        self._writer.last_timestamp = value
+
+    def rotate_if_full(self) -> None:
+        """After a batch written straight to `file` (the in-process tap)."""
+        with self._lock:
+            if self.limit.max_bytes and self._writer.file.tell() >= self.limit.max_bytes:
+                self._rotate()
+
     def on_message_received(self, msg: can.Message) -> None:
         with self._lock:
             self._writer.on_message_received(msg)
@@ -134,6 +148,13 @@ def _below_the_cycle() -> None:
 def _open_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC, can.Notifier, RotatingTraceWriter]:
     tap = open_bus(bus_spec)
     writer = RotatingTraceWriter(path, limit)
+    if hasattr(tap, "add_inline_listener"):
+        # in-process bus: frames are appended in the sender's thread and formatted in batches
+        # (base/transport/tap.py), not one Message, queue hop and write per frame on the cycle
+        from spacearm.base.transport.tap import BufferedTap
+        buffered = BufferedTap(writer, str(tap.channel_id))
+        tap.add_inline_listener(buffered)
+        return tap, can.Notifier(tap, [buffered], timeout=0.1), buffered
     return tap, can.Notifier(tap, [writer], timeout=0.1), writer
 
 

@@ -1,0 +1,52 @@
+"""Missing process data in a cycle that ran late (the controller itself starved) is no evidence
+of a lost node: the count is held a few times per gap, then a real loss still stops."""
+import numpy as np
+
+from spacearm.controller.cycle import Measurement
+from spacearm.controller.daemon.supervision import LATE_CYCLES_EXCUSED, SupervisionLimits, Supervisor
+
+
+def measurement(missing: tuple[str, ...], late: bool) -> Measurement:
+    n = 2
+    return Measurement(time=0.0, sync_counter=0, q=np.zeros(n), dq=np.zeros(n), tau=np.zeros(n),
+                       joints_enabled=np.ones(n, bool), joints_faulted=np.zeros(n, bool), wrench=np.zeros(6),
+                       missing=missing, late=late)
+
+
+def supervisor() -> Supervisor:
+    return Supervisor(SupervisionLimits(np.full(2, -3.0), np.full(2, 3.0), np.ones(2)), ["j1", "j2"])
+
+
+def cycles_to_stop(late: bool) -> int:
+    sup = supervisor()
+    for k in range(1, 50):
+        if any(f.code == "pdo_missing" for f in sup.check(measurement(("joint_1",), late), None, False)):
+            return k
+    raise AssertionError("never stopped")
+
+
+def test_on_time_cycles_stop_after_missing_pdo_cycles() -> None:
+    assert cycles_to_stop(late=False) == supervisor().limits.missing_pdo_cycles
+
+
+def test_late_cycles_are_excused_a_bounded_number_of_times() -> None:
+    limit = supervisor().limits.missing_pdo_cycles
+    assert cycles_to_stop(late=True) == limit + LATE_CYCLES_EXCUSED
+    assert limit + LATE_CYCLES_EXCUSED <= 12        # the fault tests' bound (hil_tests/faults.py)
+
+
+def test_a_late_cycle_holds_the_count_instead_of_resetting_it() -> None:
+    sup = supervisor()
+    limit = sup.limits.missing_pdo_cycles
+    pattern = [False] * (limit - 1) + [True, False]
+    codes = [[f.code for f in sup.check(measurement(("joint_1",), late), None, False)] for late in pattern]
+    assert codes[-2] == [] and codes[-1] == ["pdo_missing"]
+    assert sup.late_cycles_excused == 1
+
+
+def test_data_back_clears_count_and_excuses() -> None:
+    sup = supervisor()
+    for _ in range(3):
+        sup.check(measurement(("joint_1",), True), None, False)
+    sup.check(measurement((), False), None, False)
+    assert cycles_to_stop(late=True) == sup.limits.missing_pdo_cycles + LATE_CYCLES_EXCUSED
