@@ -19,18 +19,21 @@ import argparse
 import math
 import os
 import platform
+import re
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from spacearm.offline.scenarios.changeout import run_changeout  # noqa: E402
-from spacearm.offline.contact.trials import PLANT, ContactTrials, run_stiffness_direct  # noqa: E402
+from spacearm.offline.contact.trials import ContactTrials, run_stiffness_direct  # noqa: E402
 from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 from spacearm.controller.impedance.config import load_impedance  # noqa: E402
 from spacearm.offline.scenarios.approach_trials import ApproachTrials, trial_plan  # noqa: E402
@@ -56,29 +59,31 @@ def vision_timing(seed: int, frames: int = 30) -> list[tuple[str, str, str]]:
     return out
 
 
-def insertions(trials: ContactTrials, n: int, seed: int) -> dict:
-    rng = np.random.default_rng(seed)
-    rows = []
-    for i in range(n):
-        r = math.sqrt(rng.uniform()) * 0.008                       # uniform over the 8 mm disc
-        phi = rng.uniform(0, 2 * math.pi)
-        axis = rng.uniform(0, 2 * math.pi)
-        angle = rng.uniform(0, math.radians(1.5))
-        rotvec = (angle * math.cos(axis), angle * math.sin(axis), 0.0)   # tilt about a horizontal axis
-        result = trials.run("insert", "airlock_empty", (r * math.cos(phi), r * math.sin(phi)), rotvec)
-        rows.append(result)
-        print(f"\r  insertion {i + 1}/{n}: {'ok' if result.success else 'FAILED'} "
-              f"({1e3 * r:.1f} mm, {math.degrees(angle):.2f} deg)", end="", file=sys.stderr, flush=True)
-    print(file=sys.stderr)
-    ok = [x for x in rows if x.success]
+INSERTION_CAMPAIGN = ROOT / "configs" / "campaigns" / "insertion.toml"
+
+
+def insertions(n: int, seed: int, workers: int | None) -> dict:
+    """The randomised insertions as a campaign on Dask (configs/campaigns/insertion.toml with this
+    run's count and seed; `spacearm campaign` runs, resumes and replays the same trials)."""
+    from spacearm.offline.campaign.runner import run_campaign
+    from spacearm.offline.campaign.schema import campaign_from_text
+    from spacearm.offline.campaign.store import ResultStore
+    text = INSERTION_CAMPAIGN.read_text()
+    text = re.sub(r"(?m)^seed = \d+", f"seed = {seed}", text)
+    text = re.sub(r"(?m)^trials = \d+", f"trials = {n}", text)
+    results = Path(tempfile.mkdtemp(prefix="bench-oru-insertions-"))
+    run_campaign(campaign_from_text(text, str(INSERTION_CAMPAIGN)), results, workers=workers)
+    rows = ResultStore(results).rows()
+    print(f"  insertion trials: {results} (Parquet, one file per trial)", file=sys.stderr)
+    ok = [r for r in rows if r["success"]]
+    figure = lambda name, of=rows: np.array([r[f"f_{name}"] for r in of if r.get(f"f_{name}") is not None])  # noqa: E731
     return {
         "success": len(ok) / n, "n": n,
-        "lateral": np.array([x.peak_lateral_force for x in rows]),
-        "torque": np.array([x.peak_torque for x in rows]),
-        "insert": np.array([x.peak_insert_force for x in rows]),
-        "time": np.array([x.arm_time for x in ok]) if ok else np.array([math.nan]),
-        "wall": np.array([x.wall_time for x in rows]),
-        "failures": [x.failure for x in rows if not x.success][:3],
+        "lateral": figure("peak_lateral_force"), "torque": figure("peak_torque"),
+        "insert": figure("peak_insert_force"),
+        "time": figure("arm_time", ok) if ok else np.array([math.nan]),
+        "wall": np.array([r["w_trial_wall_time"] for r in rows if r.get("w_trial_wall_time") is not None]),
+        "failures": [r["failure"] or r["error"] for r in rows if not r["success"]][:3],
     }
 
 
@@ -168,6 +173,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--workers", type=int, default=None, help="Dask workers for the insertions (default: one per core)")
     parser.add_argument("--approaches", type=int, default=200, help="randomised approaches, open vs closed loop")
     parser.add_argument("--skip-realtime", action="store_true", help="leave out the real-time changeout (4 min)")
     parser.add_argument("--bus-config", default=CHANGEOUT_BUS,
@@ -185,7 +191,7 @@ def main() -> None:
     rows.append(("stiffness experiment: |y|, |z| drift", f"{1e3 * np.max(np.abs(stiff.displacement[1:])):.3f} mm",
                  "< 0.5 mm"))
 
-    ins = insertions(trials, args.trials, args.seed)
+    ins = insertions(args.trials, args.seed, args.workers)
     rows.append((f"randomised insertions ({ins['n']}, <= 8 mm, <= 1.5 deg): success",
                  f"{100 * ins['success']:.1f} %", ">= 99 %"))
     rows.append(("  peak lateral force median / max", f"{np.median(ins['lateral']):.2f} / {ins['lateral'].max():.2f} N", "-"))
