@@ -19,6 +19,7 @@ import threading
 import can
 
 FLUSH_PERIOD = 0.2   # s
+WRITE_LINES = 256    # lines per write between a rotating writer's size checks
 
 
 class BufferedTap(can.Listener):
@@ -28,6 +29,7 @@ class BufferedTap(can.Listener):
         self._frames: list = []
         self._stop = threading.Event()
         self._lock = threading.Lock()        # formatting (flush thread vs stop), never the hot path
+        self._closed = False
         self._thread = threading.Thread(target=self._run, name="can-trace-tap", daemon=True)
         self._thread.start()
 
@@ -49,8 +51,8 @@ class BufferedTap(can.Listener):
     def flush(self) -> None:
         with self._lock:
             frames, self._frames = self._frames, []
-            if not frames:
-                return
+            if not frames or self._closed:
+                return     # after stop: the writer is closed (frames still in flight are dropped)
             writer = self.writer
             if writer.last_timestamp is None:
                 first = frames[0]
@@ -61,20 +63,33 @@ class BufferedTap(can.Listener):
                 if isinstance(item, tuple):     # a received standard data frame, as the writer prints it
                     ts, can_id, data = item
                     lines.append(f"({max(ts, floor):f}) {self.channel} {can_id:03X}#{data.hex().upper()} R\n")
-                else:
-                    if lines:
-                        writer.file.write("".join(lines))
+                    if len(lines) >= WRITE_LINES:
+                        self._write(lines)
                         lines = []
+                else:
+                    self._write(lines)
+                    lines = []
                     writer.on_message_received(item)
-            if lines:
-                writer.file.write("".join(lines))
+            self._write(lines)
             writer.file.flush()
-            rotate = getattr(writer, "rotate_if_full", None)   # a size-limited, rotating writer
+
+    def _write(self, lines: list[str]) -> None:
+        """Write formatted lines; a size-limited writer rotates between writes of at most
+        WRITE_LINES lines, so a file overshoots its limit by at most one such write."""
+        if lines:
+            self.writer.file.write("".join(lines))
+            rotate = getattr(self.writer, "rotate_if_full", None)
             if rotate is not None:
                 rotate()
 
     def stop(self) -> None:
+        """Format what is left and close the writer; a second call (the Notifier stops its
+        listeners, the owner stops the tap) does nothing."""
+        if self._closed:
+            return
         self._stop.set()
         self._thread.join(1.0)
         self.flush()
-        self.writer.stop()
+        with self._lock:
+            self._closed = True
+            self.writer.stop()

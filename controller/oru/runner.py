@@ -116,10 +116,16 @@ class OruTaskRunner(ModeBase):
     def resume(self) -> str:
         """Bring the flow from rest back up to speed along its path."""
         if self.state in ("paused", "pausing"):
-            self.state = "resuming"
-            self._ramp = PauseRamp(self.rate, 1.0, self._elapsed, self._ramp_time())
             self.pause_reason = None
             self._retries = 0
+            if self.rate >= 1.0:
+                # paused by the flow itself (approach retries used up): its clock never slowed and
+                # the arm is at rest; the approach starts afresh under its own acceleration limits
+                self._ramp = None
+                self.state = "running"
+            else:
+                self.state = "resuming"
+                self._ramp = PauseRamp(self.rate, 1.0, self._elapsed, self._ramp_time())
         return self.state
 
     def _ramp_time(self) -> float:
