@@ -94,7 +94,7 @@ def test_console_commands_end_to_end(stack):
     assert bob.run("control", "take", check=False).returncode == 1
     # Bad commands from the controlling console: clear one-line errors, no motion.
     for args, code, message in ((["jog", "9", "1deg"], "bad_argument", "not a joint"),
-                                (["jog", "1", "2rad"], "bad_argument", "less than or equal"),
+                                (["jog", "1", "2rad"], "bad_argument", "out of range"),
                                 (["move", "joints", "0", "0"], "bad_argument", "expected 6 joint values"),
                                 (["move", "pose", "5", "0", "0", "0", "0", "0"], "planning_refused", "beyond the arm's reach"),
                                 (["jog", "1", "ten"], None, "is not an angle")):   # refused by the console itself

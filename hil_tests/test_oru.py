@@ -80,12 +80,15 @@ def test_blocked_slot_stops_the_insertion(stack):
 def test_pause_resume_and_abort(stack):
     stack.call("oru.run", stages=[1])
     stack.run_until(1, 2)
-    assert stack.call("oru.pause") == "paused"
+    # pause slows the flow to rest along its path (controller/oru/runner.py PauseRamp), then holds
+    assert stack.call("oru.pause") in ("pausing", "paused")
+    stack.wait(lambda: stack.oru_status()["state"] == "paused", 30)
     held = stack.daemon.snapshot.command.q.copy()
     cycle = stack.daemon.snapshot.tick.cycle
     stack.wait(lambda: stack.daemon.snapshot.tick.cycle > cycle + 25, 30)
     np.testing.assert_allclose(stack.daemon.snapshot.command.q, held, atol=1e-12)
-    assert stack.call("oru.resume") == "running"
+    assert stack.call("oru.resume") in ("resuming", "running")
+    stack.wait(lambda: stack.oru_status()["state"] == "running", 30)
     stack.run_until(1, 3)
     assert stack.call("oru.abort") == "aborted"
     stack.wait(lambda: stack.daemon.snapshot.mode == "hold", 10)

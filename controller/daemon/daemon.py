@@ -58,6 +58,12 @@ class DaemonOptions:
     # 0: normal scheduling. `spacearm daemon` asks for 50.
     rt_priority: int = 0
 
+# Lockstep with a camera: at most this many times real time. The camera renders in wall time
+# (~0.1-0.3 s a frame, more on a loaded machine) and the approach refuses results older than
+# [approach] stale_after (3 s) of controller time; unpaced, a lockstep cycle of ~0.6 ms ran 30x
+# real time and every frame arrived stale.
+CAMERA_LOCKSTEP_SPEEDUP = 4.0
+
 
 @dataclass(frozen=True)
 class Snapshot:
@@ -159,6 +165,8 @@ class Daemon:
         from spacearm.controller.daemon.approach_mode import approach_factory
         from spacearm.base.vision.config import load_mount
         from spacearm.controller.vision.worker import VisionWorker
+        if isinstance(self.clock, LockstepClock):
+            self.clock.max_speedup = CAMERA_LOCKSTEP_SPEEDUP
         self.vision = VisionWorker(source).start()
         self.mode_factories["approach"] = approach_factory(
             self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
