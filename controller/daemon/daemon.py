@@ -96,7 +96,8 @@ class Daemon:
         self.core = ControllerCore(self.supervisor, names, options.period)
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
-        bus_config = with_drive_limits(load_bus_config(options.bus_config), self.model.q_min, self.model.q_max)
+        bus_config = with_drive_limits(load_bus_config(options.bus_config), self.model.q_min, self.model.q_max,
+                                       [j.drive for j in self.arm.joints])
         lockstep = options.clock == "lockstep"
         # Real time: wait for this SYNC's TPDOs at most 40 % of the period (8 ms at 20 ms),
         # leaving the rest to compute and write; a silent node costs a bounded share of the

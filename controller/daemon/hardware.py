@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import time as time_module
 
+from typing import Sequence
+
 import numpy as np
 
 from spacearm.base.canopen.od import EeCommand
+from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
 from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
@@ -30,14 +33,22 @@ FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingC
                 "fault_reset_failed": FindingCode.FAULT}
 
 
-def with_drive_limits(bus: BusConfig, q_min, q_max) -> BusConfig:
-    """The bus configuration with each joint drive's 607Dh limits taken from the arm file."""
+def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits] = ()) -> BusConfig:
+    """The bus configuration with each joint drive's limits taken from the arm file: 607Dh
+    position limits (outside the arm's, see DRIVE_LIMIT_MARGIN) and, where the arm file gives
+    its drives ([joints.drive]), 607Fh maximum velocity and 6072h maximum torque, so the drives
+    (simulated or real) enforce the arm's own limits, not a test bed's."""
     nodes, joint = [], 0
     for node in bus.nodes:
         if node.device == "joint_drive":
-            limits = {"lower": float(q_min[joint]) - DRIVE_LIMIT_MARGIN,
-                      "upper": float(q_max[joint]) + DRIVE_LIMIT_MARGIN}
             settings = node.joint or JointSettings()
+            limits: dict = {"lower": float(q_min[joint]) - DRIVE_LIMIT_MARGIN,
+                            "upper": float(q_max[joint]) + DRIVE_LIMIT_MARGIN}
+            if joint < len(drives):
+                drive = drives[joint]
+                limits["max_velocity"] = min(float(drive.velocity), 10.0)           # 607Fh field range
+                limits["profile_velocity"] = min(settings.profile_velocity, limits["max_velocity"])
+                limits["max_torque"] = min(float(drive.torque) / settings.rated_joint_torque, 3.0)
             node = node.model_copy(update={"joint": settings.model_copy(update=limits)})
             joint += 1
         nodes.append(node)
