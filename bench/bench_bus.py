@@ -4,7 +4,7 @@
     .venv/bin/python bench/bench_bus.py [--duration 60] [--transports virtual,loopback,socketcan]
 
 Per transport (virtual: responder in a thread of this process; loopback and socketcan: the
-responder is another process, drivers/transport/peer.py):
+responder is another process, base/transport/peer.py):
 
 1. SYNC to last TPDO received, 8 nodes x 4 TPDOs (32 x 8-byte frames per SYNC), at
    --latency-hz for --latency-syncs SYNCs: median and p99 (target p99 <= 2 ms).

@@ -99,7 +99,7 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
         record_dir: Path | None, arm: tuple[str, str, str] = ORU) -> dict:
     bus = f"virtual:bench-{time.monotonic_ns()}" if bus_kind == "virtual" else own_hub().spec(f"bench-{time.monotonic_ns()}")
     # Real time as `spacearm daemon` runs it: SCHED_FIFO 50 for the daemon and the simulated
-    # nodes (drivers/priority.py); lockstep at normal priority. A previous real-time run left
+    # nodes (base/runtime/priority.py); lockstep at normal priority. A previous real-time run left
     # this thread at SCHED_FIFO: back to normal first, children inherit the policy.
     use_normal()
     rt_priority = 50 if clock == "realtime" else 0

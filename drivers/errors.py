@@ -32,7 +32,7 @@ class FaultResetError(DriverError):
     """A fault reset did not clear the fault."""
 
 
-# EMCY error codes -> text: one table (drivers/canopen_codes.py)
+# EMCY error codes -> text: one table (base/canopen/codes.py)
 from spacearm.base.canopen.codes import EMCY_TEXT, abort_text, emcy_text  # noqa: E402,F401
 
 

@@ -13,7 +13,7 @@
 runs ``-m vcan_vm --transport socketcan``. Everything collected under hil_tests/ is marked
 ``hil``. Helpers for other tests: ``launch`` (start a subprocess on a bus spec, killed at
 teardown), ``open_test_bus`` (open buses closed at teardown), ``peer`` (a second node process,
-see drivers/transport/peer.py), ``time_scale`` (multiply timeouts by it: 15 inside the VM).
+see base/transport/peer.py), ``time_scale`` (multiply timeouts by it: 15 inside the VM).
 """
 from __future__ import annotations
 

@@ -177,7 +177,7 @@ class Stack:
         return proc
 
     def start_sim(self) -> None:
-        # The simulated hardware at real-time priority like the daemon (drivers/priority.py), so
+        # The simulated hardware at real-time priority like the daemon (base/runtime/priority.py), so
         # the reaction times measured are the controller's, not this machine's other load.
         self.sim = self._spawn(["sim", "--plant", str(self.plant), "--control-node", "126", "--rt-priority", "50"],
                                "sim", "nodes ready", 60)

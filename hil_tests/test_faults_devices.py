@@ -66,7 +66,7 @@ def check_stopped(stack, safe, codes: tuple[str, ...], bound_cycles: float, conc
 
 
 def test_heartbeat_loss_stops_the_arm(enabled):
-    # The real-time daemon asks for SCHED_FIFO 50 (drivers/priority.py) and says if refused.
+    # The real-time daemon asks for SCHED_FIFO 50 (base/runtime/priority.py) and says if refused.
     scheduling = enabled.status()["scheduling"]
     assert scheduling == "SCHED_FIFO 50" or scheduling.startswith("SCHED_FIFO not permitted")
     t0 = time.monotonic()

@@ -42,7 +42,7 @@ PDO_SYNC_START = 6
 PDO_COB_ID_INVALID = 0x8000_0000   # bit 31 of the COB-ID: PDO does not exist / disabled (= canopen_codes.COB_ID_INVALID)
 TRANSMISSION_SYNC = 1              # transmission type 1: on every SYNC
 
-# Pre-defined connection set (CiA 301 7.3.5): the numbers live in drivers/canopen_codes.py
+# Pre-defined connection set (CiA 301 7.3.5): the numbers live in base/canopen/codes.py
 from spacearm.base.canopen.codes import (EMCY_BASE, HEARTBEAT_BASE, NMT_COB_ID, RPDO_BASE,  # noqa: E402,F401
                                    SDO_RX_BASE, SDO_TX_BASE, SYNC_COB_ID_DEFAULT, TPDO_BASE)
 
@@ -55,7 +55,7 @@ ERR_REG_COMMUNICATION = 0x10
 ERR_REG_PROFILE = 0x20
 ERR_REG_MANUFACTURER = 0x80
 
-# EMCY error codes used by the devices (drivers/canopen_codes.py)
+# EMCY error codes used by the devices (base/canopen/codes.py)
 from spacearm.base.canopen.codes import (EMCY_EE_JAM, EMCY_EE_SCREW_TORQUE, EMCY_FOLLOWING_ERROR,  # noqa: E402,F401
                                    EMCY_FT_OVERLOAD, EMCY_GENERIC, EMCY_HEARTBEAT_ERROR, EMCY_NO_ERROR,
                                    EMCY_OVER_TEMPERATURE_DEVICE, EMCY_OVER_TEMPERATURE_DRIVE, EMCY_PDO_LENGTH,

@@ -130,7 +130,7 @@ class NodeConfig(StrictModel):
     eds: str | None = Field(default=None, min_length=1, description=(
         "the node's EDS/DCF (relative to configs/eds/ or absolute); default configs/eds/<device>.eds"))
     pdo: PdoLayout | None = Field(default=None, description="PDO mapping; default: the device type's "
-                                  "standard layout (drivers/pdo_maps.py)")
+                                  "standard layout (base/canopen/pdo_maps.py)")
     sdo: dict[ObjectRef, int] = Field(default_factory=dict, description=(
         "extra SDO writes at bring-up, object -> raw value, in file order (as ros2_canopen's sdo: "
         "list); each object must exist and be writable in the EDS"))

@@ -1,6 +1,6 @@
 """URDF chain -> arm file (configs/arm/*.toml): modified D-H rows, limits, drive limits, inertials.
 
-The D-H rows come from the URDF's joint axes at q = 0 (controller/kinematics/dh_from_axes.py),
+The D-H rows come from the URDF's joint axes at q = 0 (base/kinematics/dh_from_axes.py),
 the base and tool frames carry the rest of the geometry as xyz + rpy, and `[[links]]` holds
 each moving joint's rigid body expressed in its D-H link frame (fixed links folded in). The
 URDF stays referenced in `[urdf]` for meshes. FK of the result agrees with the URDF
@@ -134,7 +134,7 @@ def _validated(urdf: Path, data: dict[str, Any]) -> ArmConfig:
 
 def arm_toml(data: dict[str, Any], command: str) -> str:
     """TOML text of imported arm data with a header saying how it was made."""
-    header = (f"# Arm file written by `{command}` (controller/kinematics/arm_import.py).\n"
+    header = (f"# Arm file written by `{command}` (base/kinematics/arm_import.py).\n"
               "# Modified D-H (Craig) rows derived from the URDF's joint axes at q = 0; base and tool\n"
               "# frames are xyz + rpy (R = Rz(yaw) Ry(pitch) Rx(roll)); SI units (m, rad, kg).\n"
               "# Planner limits: half the URDF velocity (<= 0.5 rad/s), acceleration 2x, jerk 20x that.\n"

@@ -335,7 +335,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--quiet-if-running", action="store_true",
                         help="exit 0 silently if the port is already taken (used by auto-start)")
     parser.add_argument("--rt-priority", type=int, default=0,
-                        help="SCHED_FIFO priority 1..99 (0 = normal scheduling; drivers/priority.py)")
+                        help="SCHED_FIFO priority 1..99 (0 = normal scheduling; base/runtime/priority.py)")
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
     return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose, args.rt_priority)

@@ -33,7 +33,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 STOP_ID = 0x7FF
 SYNC_ID = SYNC_COB_ID_DEFAULT
-TPDO_BASES = TPDO_BASE   # CiA 301 pre-defined connection set (drivers/canopen_codes.py)
+TPDO_BASES = TPDO_BASE   # CiA 301 pre-defined connection set (base/canopen/codes.py)
 
 
 def open_any(spec: str) -> can.BusABC:

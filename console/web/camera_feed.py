@@ -1,5 +1,5 @@
 """Camera monitor: the newest eye-in-hand frame from the shared-memory ring
-(controller/vision/frames.py) with the marker found by the controller's own vision pipeline
+(base/vision/frames.py) with the marker found by the controller's own vision pipeline
 (controller/vision/pipeline.py) drawn on it: the identified circle centres, the marker axes
 from the PnP pose, distance and reprojection error, or the reason no marker was found.
 

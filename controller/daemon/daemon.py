@@ -52,9 +52,9 @@ class DaemonOptions:
     can_trace_limit: TraceLimit = field(default_factory=TraceLimit)   # raw CAN trace: size per file, files kept
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
     # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
-    # (drivers/priority.py); None leaves the interpreter's setting alone.
+    # (base/runtime/priority.py); None leaves the interpreter's setting alone.
     gil_switch_interval: float | None = GIL_SWITCH_INTERVAL
-    # SCHED_FIFO priority of the daemon's threads with the real-time clock (drivers/priority.py);
+    # SCHED_FIFO priority of the daemon's threads with the real-time clock (base/runtime/priority.py);
     # 0: normal scheduling. `spacearm daemon` asks for 50.
     rt_priority: int = 0
 
