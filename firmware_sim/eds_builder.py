@@ -10,12 +10,12 @@ and commit the result (tests/canopen/test_eds.py checks the files are up to date
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
+from spacearm.base.paths import CONFIGS
 from spacearm.base.canopen import od
 from spacearm.base.canopen.pdo_maps import PDO_MAPS
 
-EDS_DIR = Path(__file__).resolve().parents[1] / "configs" / "eds"
+EDS_DIR = CONFIGS / "eds"
 
 from spacearm.base.canopen.codes import (BOOLEAN, INTEGER8, INTEGER16, INTEGER32, UNSIGNED8,  # noqa: E402,F401
                                    UNSIGNED16, UNSIGNED32, VISIBLE_STRING)

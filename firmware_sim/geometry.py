@@ -12,12 +12,13 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from spacearm.base.paths import REPO_ROOT
+from spacearm.base.config.loader import StrictModel
 from spacearm.base.kinematics.model import KinematicModel, load_model
 from spacearm.base.spatial import xyz_rpy_to_transform
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_ARM = "configs/arm/oru_testbed_6dof.toml"
 
 Vec3 = tuple[float, float, float]
@@ -25,9 +26,7 @@ PerJoint = tuple[float, ...]   # tuples keep the model hashable for the cache be
 _ERR = dict(default=(), max_length=12)
 
 
-class GeometryErrors(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class GeometryErrors(StrictModel):
     arm: str = Field(default=DEFAULT_ARM, description="arm TOML the truth starts from (repo-relative or absolute)")
     da: PerJoint = Field(**_ERR, description="m, added to a_i")
     dalpha: PerJoint = Field(**_ERR, description="rad, added to alpha_i")

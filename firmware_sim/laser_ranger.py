@@ -15,8 +15,9 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from spacearm.base.config.loader import StrictModel
 from spacearm.base.laser_ranger_protocol import frame, parse_frame
 
 MODEL = "SIM-LR1"
@@ -108,11 +109,9 @@ class LaserRangerSim:
                 os.write(self.master, out)
 
 
-class LaserTarget(BaseModel):
+class LaserTarget(StrictModel):
     """Plant-file section `[laser]`: a ranger on the tool (beam along tool +z from the tool
     origin) aimed at a plane n.p + f = 0 in the base frame; the simulator serves it on a pty."""
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     plane: tuple[float, float, float, float] = Field(description="n_x, n_y, n_z, f of the true plane (m)")
     sigma: float = Field(default=0.2e-3, ge=0.0, le=0.01, description="m, reading noise (1 sigma)")
     min_range: float = Field(default=0.05, ge=0.0, le=100.0, description="m")

@@ -19,9 +19,9 @@ from pathlib import Path
 from typing import Callable, Protocol
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.firmware_sim.effects import (DelayLine, TemperatureProfile, dead_zone, friction_torque, ft_sensor_error,
@@ -34,11 +34,7 @@ from spacearm.firmware_sim.rigid_body_config import RigidBodyParams
 ARCSEC = math.pi / (180.0 * 3600.0)
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class JointParams(Strict):
+class JointParams(StrictModel):
     motor_inertia: float = Field(default=3.0e-4, gt=0.0, le=1.0, description="kg m^2, motor side")
     link_inertia: float = Field(default=5.0, ge=0.0, le=1.0e6, description="kg m^2, joint side (constant)")
     gear_ratio: float = Field(default=100.0, ge=1.0, le=10000.0, description="harmonic drive reduction")
@@ -71,7 +67,7 @@ class JointParams(Strict):
     torque_noise: float = Field(default=0.0, ge=0.0, le=1.0e3, description="N m rms (joint side) on the reported torque")
 
 
-class EndEffectorParams(Strict):
+class EndEffectorParams(StrictModel):
     grip_close_time: float = Field(default=1.0, gt=0.0, le=60.0, description="s from open to closed")
     screw_speed: float = Field(default=5.0, gt=0.0, le=100.0, description="turns/s")
     screw_stiffness: float = Field(default=20.0, gt=0.0, le=1.0e4, description="N m per turn once seated")
@@ -79,7 +75,7 @@ class EndEffectorParams(Strict):
     target_present: bool = Field(default=True, description="an ORU interface is inside the grip")
 
 
-class FtParams(Strict):
+class FtParams(StrictModel):
     noise_force: float = Field(default=0.0, ge=0.0, le=100.0, description="N rms; off = 0")
     noise_torque: float = Field(default=0.0, ge=0.0, le=100.0, description="N m rms; off = 0")
     bias: tuple[float, float, float, float, float, float] = (0.0,) * 6
@@ -90,12 +86,12 @@ class FtParams(Strict):
         default=(0.0,) * 6, description="N (N m) per K from the profile's reference; off = 0")
 
 
-class PayloadParams(Strict):
+class PayloadParams(StrictModel):
     mass_error: float = Field(default=0.0, ge=-1000.0, le=1000.0, description="kg more than the nominal payload")
     com_error: float = Field(default=0.0, ge=-1.0, le=1.0, description="m along each joint's payload lever")
 
 
-class PlantConfig(Strict):
+class PlantConfig(StrictModel):
     substeps: int = Field(default=10, ge=1, le=1000, description="servo/physics sub-steps per SYNC period")
     joint: JointParams = JointParams()
     joints: list[JointParams] = Field(default_factory=list, description="per-joint overrides (in bus order)")

@@ -2,13 +2,13 @@
 plant file does not import Pinocchio unless the dynamics are switched on)."""
 from __future__ import annotations
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
+
+from spacearm.base.config.loader import StrictModel
 
 
-class RigidBodyParams(BaseModel):
+class RigidBodyParams(StrictModel):
     """`[rigid_body]` of a plant file: switches the coupled dynamics on."""
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
     gravity: tuple[float, float, float] = Field(
         default=(0.0, 0.0, 0.0), description="m/s^2 in the arm's base frame; (0, 0, -9.81) on the ground, 0 on orbit")
     payload_mass: float | None = Field(default=None, ge=0.0, le=1.0e5,

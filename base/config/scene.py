@@ -12,10 +12,11 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field, model_validator
 
+from spacearm.base.paths import CONFIGS
 from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.spatial import xyz_rpy_to_transform
 
-DEFAULT_SCENE = Path(__file__).resolve().parents[2] / "configs" / "scene" / "oru_testbed.toml"
+DEFAULT_SCENE = CONFIGS / "scene" / "oru_testbed.toml"
 
 
 class ScenePose(StrictModel):

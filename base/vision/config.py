@@ -9,19 +9,16 @@ import math
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.paths import CONFIGS
+from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.spatial import xyz_rpy_to_transform
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs" / "vision"
+CONFIG_DIR = CONFIGS / "vision"
 
 
-class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class Pose(Strict):
+class Pose(StrictModel):
     """Rigid transform parent_T_child = Trans(xyz) * Rz(yaw) Ry(pitch) Rx(roll)."""
     xyz: tuple[float, float, float] = Field(description="m")
     rpy: tuple[float, float, float] = Field(description="rad")
@@ -39,7 +36,7 @@ class Pose(Strict):
 
 
 # ----------------------------------------------------------------------------- camera
-class Sensor(Strict):
+class Sensor(StrictModel):
     width: int = Field(ge=16, le=10000, description="px")
     height: int = Field(ge=16, le=10000, description="px")
     pixel_size: float = Field(gt=0.5e-6, lt=50e-6, description="m")
@@ -51,7 +48,7 @@ class Sensor(Strict):
     dark_offset: float = Field(ge=0.0, le=1000.0, description="e-")
 
 
-class Intrinsics(Strict):
+class Intrinsics(StrictModel):
     fx: float = Field(gt=10.0, lt=1e5, description="px")
     fy: float = Field(gt=10.0, lt=1e5, description="px")
     cx: float = Field(ge=0.0, lt=1e4, description="px")
@@ -60,7 +57,7 @@ class Intrinsics(Strict):
     distortion: tuple[float, float, float, float, float]
 
 
-class Optics(Strict):
+class Optics(StrictModel):
     focal_length: float = Field(gt=1e-3, lt=0.5, description="m")
     f_number: float = Field(ge=1.0, le=32.0)
     focus_distance: float = Field(gt=0.05, le=100.0, description="m")
@@ -68,7 +65,7 @@ class Optics(Strict):
     vignetting: float = Field(ge=0.0, le=1.0, description="relative fall-off at the image corner")
 
 
-class CameraConfig(Strict):
+class CameraConfig(StrictModel):
     name: str
     sensor: Sensor
     intrinsics: Intrinsics
@@ -83,17 +80,17 @@ class CameraConfig(Strict):
         return self
 
 
-class MountConfig(Strict):
+class MountConfig(StrictModel):
     end_T_camera: Pose
 
 
 # ----------------------------------------------------------------------------- marker
-class Circle(Strict):
+class Circle(StrictModel):
     name: str
     xyz: tuple[float, float, float] = Field(description="centre in the marker frame, m")
 
 
-class MarkerConfig(Strict):
+class MarkerConfig(StrictModel):
     plate_size: tuple[float, float] = Field(description="m (x, y)")
     plate_thickness: float = Field(gt=0.0, lt=0.05, description="m")
     circle_diameter: float = Field(gt=0.0, lt=0.05, description="m")
@@ -123,7 +120,7 @@ class MarkerConfig(Strict):
 
 
 # ----------------------------------------------------------------------------- pipeline
-class PipelineConfig(Strict):
+class PipelineConfig(StrictModel):
     gaussian_sigma: float = Field(ge=0.0, le=5.0, description="px, denoising before thresholding")
     search_scale: int = Field(ge=1, le=4, description="down-sampling factor of the full-frame search")
     background_window: int = Field(ge=3, le=301, description="px (search scale), local mean B window")

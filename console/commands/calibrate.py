@@ -10,11 +10,11 @@ from typing import Optional
 import numpy as np
 import typer
 
+from spacearm.base.paths import CONFIGS
 from spacearm.console.client import DEFAULT_API
 from spacearm.console.errors import CommandFailed, friendly_errors
 
 STUDIES = ("laser-ranger", "ekf")
-CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 DEFAULT_BOARD = CONFIGS / "calibration" / "board.toml"
 DEFAULT_MOUNT = CONFIGS / "vision" / "mount.toml"
 

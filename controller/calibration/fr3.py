@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from spacearm.base.paths import SHARED_DATA
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import find_identifiable
 from spacearm.controller.calibration.residuals import Problem
@@ -26,7 +27,7 @@ from spacearm.base.kinematics import KinematicModel
 from spacearm.base.spatial import rotz, trans
 
 Array = NDArray[np.float64]
-DATA = Path(__file__).resolve().parents[3] / "shared" / "data" / "fr3_eye_in_hand" / "samples.csv"
+DATA = SHARED_DATA / "fr3_eye_in_hand" / "samples.csv"
 
 FR3_A = [0, 0, 0, 0.0825, -0.0825, 0, 0.088]
 FR3_D = [0.333, 0, 0.316, 0, 0.384, 0, 0]

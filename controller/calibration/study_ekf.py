@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from spacearm.base.paths import REPO_ROOT
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.residuals import Problem
 from spacearm.controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, lm, lse
@@ -26,8 +27,7 @@ from spacearm.controller.calibration.validation import ValidationStats, compare_
 from spacearm.base.kinematics import KinematicData, jacobian, load_model, rotvec_to_matrix
 
 Array = NDArray[np.float64]
-REPO = Path(__file__).resolve().parents[2]
-ARM_FILE = REPO / "configs" / "arm" / "ssrms_7dof.toml"
+ARM_FILE = REPO_ROOT / "configs" / "arm" / "ssrms_7dof.toml"
 DEG, MM = np.pi / 180.0, 1e-3
 
 # Table 3: theta (deg), alpha (deg), a (mm), d (mm) per joint.

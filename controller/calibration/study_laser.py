@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from spacearm.base.paths import REPO_ROOT
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
 from spacearm.controller.calibration.observability import (configuration_blocks, laser_ok, observability,
@@ -26,8 +27,7 @@ from spacearm.controller.calibration.validation import ValidationStats, compare_
 from spacearm.base.kinematics import load_model
 
 Array = NDArray[np.float64]
-REPO = Path(__file__).resolve().parents[2]
-ARM_FILE = REPO / "configs" / "arm" / "space_robot_6dof_laser.toml"
+ARM_FILE = REPO_ROOT / "configs" / "arm" / "space_robot_6dof_laser.toml"
 MRAD, MM = 1e-3, 1e-3
 
 # Table 2 (mrad / mm); None = "-" (not a parameter of the identification model).

@@ -17,11 +17,11 @@ degrees, two joints swapped, poses in mm); the plausibility check must reject ev
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
 
+from spacearm.base.paths import CONFIGS
 from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.measurement_models import (MeasurementModel, PlaneModel, PointModel,
@@ -30,7 +30,7 @@ from spacearm.controller.calibration.trusted_fit import FitOptions, FitReport, f
 from spacearm.base.kinematics import load_model
 
 Array = NDArray[np.float64]
-ARMS = Path(__file__).resolve().parents[2] / "configs" / "arm"
+ARMS = CONFIGS / "arm"
 MODELS = ("pose", "point", "range", "plane")
 NOISE = {"pose": [0.1e-3] * 3 + [np.radians(0.02)] * 3, "point": 0.1e-3, "range": 0.1e-3, "plane": 0.1e-3}
 

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import Field, model_validator
 
-from spacearm.base.config.loader import load_toml_model
+from spacearm.base.paths import CONFIGS
+from spacearm.base.config.loader import StrictModel, load_toml_model
 
 AXES = ("x", "y", "z", "rx", "ry", "rz")
 Six = tuple[float, float, float, float, float, float]
-DEFAULT_IMPEDANCE = Path(__file__).resolve().parents[2] / "configs" / "impedance.toml"
+DEFAULT_IMPEDANCE = CONFIGS / "impedance.toml"
 POLE_MARGIN = 0.95     # |pole| above this is refused (too little damping left in contact)
 
 
@@ -47,9 +48,7 @@ class StabilityReport:
                 f"sampled pole {a.pole:+.3f} (needs |pole| < {POLE_MARGIN})" for a in self.axes if not a.stable]
 
 
-class ImpedanceParams(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class ImpedanceParams(StrictModel):
     period: float = Field(default=0.02, gt=0.0, le=1.0, description="s, the control cycle")
     damping: Six = Field(default=(500.0, 500.0, 500.0, 10.0, 10.0, 10.0), description="B_d: N s/m, N m s/rad")
     stiffness: Six = Field(default=(1000.0, 1000.0, 1000.0, 20.0, 20.0, 20.0), description="K_d: N/m, N m/rad")

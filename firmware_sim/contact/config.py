@@ -19,16 +19,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
+from spacearm.base.paths import REPO_ROOT
+from spacearm.base.config.loader import StrictModel
 from spacearm.base.config.scene import ScenePose
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
-class ContactConfig(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class ContactConfig(StrictModel):
     scene: str = Field(default="configs/scene/oru_testbed.toml", description="cell file (repo-relative or absolute)")
     stiffness: float = Field(default=2.5e3, gt=0.0, le=1.0e7, description="N/m per contact point")
     damping: float = Field(default=30.0, ge=0.0, le=1.0e5, description="N s/m per contact point")

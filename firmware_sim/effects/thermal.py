@@ -6,12 +6,12 @@ temperature range; with aluminium links (2.3e-5 /K) that is a swing of about 43 
 from __future__ import annotations
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import Field, field_validator
+
+from spacearm.base.config.loader import StrictModel
 
 
-class TemperatureProfile(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
-
+class TemperatureProfile(StrictModel):
     reference: float = Field(default=20.0, ge=-150.0, le=200.0, description="degC at which the geometry is nominal")
     points: tuple[tuple[float, float], ...] = Field(
         default=(), max_length=10000, description="(t s, degC) pairs, t increasing; empty = reference throughout")
