@@ -7,7 +7,7 @@ list append in the sender's thread; a background thread formats the batch every
 FLUSH_PERIOD, in the writer's own candump format, in arrival order.
 
     tap = open_bus("virtual:arm")
-    buffered = BufferedTap(can.CanutilsLogWriter(path), channel=tap.channel_id)
+    buffered = BufferedTap(RotatingTraceWriter(path, limit), channel=tap.channel_id)   # controller/recording/can_trace.py
     tap.add_inline_listener(buffered)
     ...
     buffered.stop()          # formats what is left, closes the writer
@@ -23,7 +23,9 @@ WRITE_LINES = 256    # lines per write between a rotating writer's size checks
 
 
 class BufferedTap(can.Listener):
-    def __init__(self, writer: can.Listener, channel: str):   # a CanutilsLogWriter or a rotating one
+    def __init__(self, writer: can.Listener, channel: str):
+        # writer: candump format with `file`, `last_timestamp`, `rotate_if_full()` and `stop()`
+        # (can_trace.RotatingTraceWriter: python-can's CanutilsLogWriter under a size limit)
         self.writer = writer
         self.channel = channel
         self._frames: list = []
@@ -78,9 +80,7 @@ class BufferedTap(can.Listener):
         WRITE_LINES lines, so a file overshoots its limit by at most one such write."""
         if lines:
             self.writer.file.write("".join(lines))
-            rotate = getattr(self.writer, "rotate_if_full", None)
-            if rotate is not None:
-                rotate()
+            self.writer.rotate_if_full()
 
     def stop(self) -> None:
         """Format what is left and close the writer; a second call (the Notifier stops its
