@@ -106,7 +106,13 @@ def enable(page) -> None:
     raise AssertionError(f"arm not enabled: {status(page).get('stop_reason')}")
 
 
-LOAD_SYMPTOMS = ("heartbeat lost", "no process data")
+LOAD_STOP_CODES = ("heartbeat_lost", "pdo_missing")
+
+
+def stopped_for_load(page) -> bool:
+    """The arm is in a protective stop whose code is a node's heartbeat or process data."""
+    stop = status(page).get("stop") or {}
+    return stop.get("code") in LOAD_STOP_CODES
 
 
 def presimulate_accepted(page) -> None:
@@ -119,7 +125,7 @@ def presimulate_accepted(page) -> None:
         if page.evaluate("() => spacearm.lastPresim.accepted"):
             return
         reason = page.evaluate("() => spacearm.lastPresim.reason")
-        assert attempt < 2 and any(s in reason for s in LOAD_SYMPTOMS), f"presimulation rejected: {reason}"
+        assert attempt < 2 and stopped_for_load(page), f"presimulation rejected: {reason}"
         enable(page)
 
 
@@ -138,7 +144,7 @@ def send_until(page, done: str) -> None:
             if page.evaluate(f"() => {done}"):
                 return
             result = status(page)["stop_reason"]
-        assert attempt < 2 and any(s in result for s in LOAD_SYMPTOMS), f"command failed: {result}"
+        assert attempt < 2 and stopped_for_load(page), f"command failed: {result}"
         enable(page)
         presimulate_accepted(page)
 
