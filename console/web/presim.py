@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from spacearm.base.config.loader import format_location
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
-from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError, PlanningFailure
 from spacearm.controller.planning.motion_planner import MotionPlanner
 from spacearm.console.web.state_feed import arm_frames
 
@@ -101,7 +101,7 @@ class Presimulator:
         try:
             plan = self._plan(cmd, request, q0)
         except PlanningError as exc:
-            return self._refuse(result, self._check_name(cmd, str(exc)), str(exc))
+            return self._refuse(result, self._check_name(cmd, exc.kind), str(exc))
         result.checks.append(Check("joint limits", True, "every joint stays inside its limits along the path"))
         if cmd == "move_pose":
             result.checks.append(Check("reachability", True,
@@ -126,10 +126,10 @@ class Presimulator:
                                       request.frame, request.speed)
 
     @staticmethod
-    def _check_name(cmd: str, message: str) -> str:
-        if "limit" in message:
+    def _check_name(cmd: str, failure: PlanningFailure) -> str:
+        if failure is PlanningFailure.JOINT_LIMITS:
             return "joint limits"
-        if cmd == "move_pose":
+        if failure is PlanningFailure.REACHABILITY or cmd == "move_pose":
             return "reachability"
         return "planning"
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 from ruckig import InputParameter, Result, Ruckig, Synchronization, Trajectory
 
-from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError, PlanningFailure
 
 
 @dataclass(frozen=True)
@@ -60,7 +60,7 @@ class JointMove:
             i = int(outside[0])
             raise PlanningError(
                 f"joint {i + 1} goal {q_goal[i]:.4f} rad is outside its limits "
-                f"[{limits.q_min[i]:.4f}, {limits.q_max[i]:.4f}] rad")
+                f"[{limits.q_min[i]:.4f}, {limits.q_max[i]:.4f}] rad", PlanningFailure.JOINT_LIMITS)
         zeros = np.zeros(n)
         params = InputParameter(n)
         params.current_position = q_start.tolist()
@@ -77,7 +77,7 @@ class JointMove:
         trajectory = Trajectory(n)
         result = Ruckig(n).calculate(params, trajectory)
         if result not in (Result.Working, Result.Finished):
-            raise PlanningError(f"Ruckig could not plan the move: {result.name}")
+            raise PlanningError(f"Ruckig could not plan the move: {result.name}", PlanningFailure.PLANNER)
         return cls(trajectory, q_goal.copy())
 
     def sample(self, t: float) -> JointSetpoint:

@@ -15,7 +15,7 @@ from spacearm.base.kinematics.jacobian import jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.spatial import rpy_to_matrix
 from spacearm.controller.planning.cartesian_path import CartesianLimits, CartesianPath
-from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError, PlanningFailure
 from spacearm.controller.planning.joint_move import JointLimits, JointMove
 from spacearm.controller.planning.resolved_rate import SampledJointPath, resolve_cartesian_path
 
@@ -60,7 +60,7 @@ class MotionPlanner:
             raise PlanningError(f"frame must be 'base' or 'tool', got {frame!r}")
         if np.linalg.norm(target[:3, 3] - self.model.base[:3, 3]) > self.model.reach:
             raise PlanningError(f"target {np.round(target[:3, 3], 4).tolist()} m is beyond the "
-                                f"arm's reach ({self.model.reach:.3f} m)")
+                                f"arm's reach ({self.model.reach:.3f} m)", PlanningFailure.REACHABILITY)
         limits = self.cartesian
         if speed != 1.0:
             limits = replace(limits, linear_velocity=limits.linear_velocity * speed,

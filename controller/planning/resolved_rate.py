@@ -15,7 +15,7 @@ import numpy as np
 
 from spacearm.base.kinematics.pose_error import twist_error as pose_error
 from spacearm.controller.planning.cartesian_path import CartesianPath
-from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError, PlanningFailure
 from spacearm.controller.planning.joint_move import JointLimits, JointSetpoint
 
 Forward = Callable[[np.ndarray], np.ndarray]     # q -> 4x4 tool pose
@@ -75,7 +75,8 @@ def resolve_cartesian_path(path: CartesianPath, q_start: np.ndarray, forward: Fo
         raise PlanningError(
             f"Cartesian goal not reached along the straight path: remaining error "
             f"{np.linalg.norm(error[:3]) * 1e3:.2f} mm / {np.degrees(np.linalg.norm(error[3:])):.3f} deg "
-            "(unreachable or through a singularity)")
+            "(unreachable or through a singularity)",
+            PlanningFailure.REACHABILITY)
     _check_limits(path.duration, q, np.zeros(n), limits)
     qs[-1] = q
     dqs[-1] = 0.0
@@ -87,9 +88,11 @@ def _check_limits(t: float, q: np.ndarray, dq: np.ndarray, limits: JointLimits) 
     if outside.size:
         i = int(outside[0])
         raise PlanningError(f"joint {i + 1} would leave its limits at t = {t:.2f} s "
-                            f"({q[i]:.4f} rad outside [{limits.q_min[i]:.4f}, {limits.q_max[i]:.4f}])")
+                            f"({q[i]:.4f} rad outside [{limits.q_min[i]:.4f}, {limits.q_max[i]:.4f}])",
+                            PlanningFailure.JOINT_LIMITS)
     fast = np.flatnonzero(np.abs(dq) > limits.v_max * 1.05)
     if fast.size:
         i = int(fast[0])
         raise PlanningError(f"joint {i + 1} would need {abs(dq[i]):.4f} rad/s at t = {t:.2f} s, "
-                            f"above its {limits.v_max[i]:.4f} rad/s limit (near a singularity?)")
+                            f"above its {limits.v_max[i]:.4f} rad/s limit (near a singularity?)",
+                            PlanningFailure.JOINT_LIMITS)

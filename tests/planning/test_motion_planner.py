@@ -6,7 +6,7 @@ import pytest
 
 from spacearm.base.kinematics.model import load_model
 from spacearm.base.kinematics.pose_error import position_error, rotation_error
-from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.errors import PlanningError, PlanningFailure
 from spacearm.base.spatial import rpy_to_matrix
 from spacearm.controller.planning.motion_planner import MotionPlanner
 
@@ -45,18 +45,27 @@ def test_tool_relative_move_ends_on_the_goal_and_stays_on_the_line(planner):
 
 
 def test_unreachable_pose_is_refused_before_any_motion(planner):
-    with pytest.raises(PlanningError, match="beyond the arm's reach"):
+    with pytest.raises(PlanningError, match="beyond the arm's reach") as refused:
         planner.pose_move(working_posture(planner), np.array([5.0, 0, 0]), np.zeros(3))
+    assert refused.value.kind is PlanningFailure.REACHABILITY
 
 
 def test_jog_beyond_the_limit_is_refused(planner):
     q0 = np.array(planner.model.q_home)
-    with pytest.raises(PlanningError, match="outside its limits"):
+    with pytest.raises(PlanningError, match="outside its limits") as refused:
         planner.jog(q0, 0, 3.5)
+    assert refused.value.kind is PlanningFailure.JOINT_LIMITS
 
 
 def test_move_through_the_singular_home_posture_is_refused(planner):
     # At home the wrist is singular: a sideways tool move needs unbounded joint rates.
-    with pytest.raises(PlanningError, match="singularity|limit|not reached"):
+    with pytest.raises(PlanningError, match="singularity|limit|not reached") as refused:
         planner.pose_move(np.array(planner.model.q_home), np.array([0.0, 0.05, 0.0]), np.zeros(3),
                           frame="tool")
+    assert refused.value.kind in (PlanningFailure.JOINT_LIMITS, PlanningFailure.REACHABILITY)
+
+
+def test_malformed_request_is_a_request_failure(planner):
+    with pytest.raises(PlanningError) as refused:
+        planner.pose_move(working_posture(planner), np.array([0.01, 0, 0]), np.zeros(3), frame="world")
+    assert refused.value.kind is PlanningFailure.REQUEST
