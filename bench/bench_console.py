@@ -7,6 +7,11 @@ process was spawned (what the operator waits for before the daemon can act). Rou
 spawn to exit. Stack: `spacearm sim` (SCHED_FIFO 50, standing in for hardware) and
 `spacearm daemon` (real-time clock) on a loopback hub.
 
+The proxy's threads run at SCHED_FIFO 50 like the daemon's API threads they stand in for (when
+permitted): at normal priority the CPU hogs of the loaded phase delay the proxy itself, and the
+arrival it notes would be late by its own wait, not the command's. The bench's main thread,
+and so the commands it spawns, stay at normal priority.
+
     .venv/bin/python bench/bench_console.py [--rounds 20]
 """
 from __future__ import annotations
@@ -28,10 +33,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from bench.bench_web import start, stop  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
+from spacearm.base.runtime.priority import describe, use_fifo  # noqa: E402
 
 COMMANDS = ("reset", "enable", "status", "disable", "stop")
 TARGETS = {"stop": (0.150, 0.500)}      # s: idle, loaded (issue 21)
 SPACEARM = str(Path(sys.executable).parent / "spacearm")
+PROXY_RT_PRIORITY = 50      # the daemon's API threads' (spacearm daemon --rt-priority default)
 
 
 class ArrivalProxy:
@@ -42,9 +49,11 @@ class ArrivalProxy:
         self.server = socket.create_server(("127.0.0.1", 0))
         self.port = self.server.getsockname()[1]
         self.arrivals: list[float] = []
+        self.scheduling = "starting"
         threading.Thread(target=self._accept, daemon=True).start()
 
     def _accept(self) -> None:
+        self.scheduling = use_fifo(PROXY_RT_PRIORITY) or describe()   # inherited by the connection threads
         while True:
             try:
                 client, _ = self.server.accept()
@@ -109,7 +118,9 @@ def main() -> None:
                           "spacearm daemon:", work / "daemon.log")
         procs.append(daemon)
         proxy = ArrivalProxy(api_port)
+        proxy_scheduling = "not started"
         measure(proxy, 1, env)                        # warm the page cache and the lease
+        proxy_scheduling = proxy.scheduling
         rows = []
         for phase, burners in (("idle", 0), ("loaded", 2)):
             load = cpu_load(burners)
@@ -140,7 +151,7 @@ def main() -> None:
                   f"{1e3 * np.percentile(total, 99):5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
     print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
           "idle = no load of ours (the load column includes other users of the machine); loaded = 2 CPU-bound "
-          "processes added")
+          f"processes added; proxy threads: {proxy_scheduling}")
 
 
 if __name__ == "__main__":
