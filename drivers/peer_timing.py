@@ -41,6 +41,8 @@ class PeerTimingListener:
                 kept.popleft()
 
     def reports(self) -> dict[str, list[tuple[float, TimingReport]]]:
-        """Per source (simulator, hub): (received at, report), oldest first, within the window."""
+        """Per source (simulator, hub): (received at, report), oldest first, within the window
+        (or the last one, however old: a source that stopped reporting stays visible as silent)."""
+        since = time.monotonic() - self.window
         with self._lock:
-            return {name: list(kept) for name, kept in self._reports.items()}
+            return {name: [r for r in kept if r[0] >= since] or list(kept)[-1:] for name, kept in self._reports.items()}

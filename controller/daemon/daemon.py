@@ -309,8 +309,10 @@ class Daemon:
         }
 
     def node_timing_summary(self):
-        """The daemon's view of the nodes' timing, with the simulator's and hub's own reports."""
-        return self.node_timing.summary(self.hardware.peers.reports(), time.monotonic())
+        """The daemon's view of the nodes' timing, with the simulator's and hub's own reports
+        (real-time clock only: in lockstep nobody waits for anybody's timer)."""
+        lockstep = self.options.clock == "lockstep"
+        return self.node_timing.summary(None if lockstep else self.hardware.peers.reports(), time.monotonic())
 
     def _session_closed(self, session: Session) -> None:
         pass  # the control lease is keyed, not tied to a connection (see leases.py)
