@@ -35,8 +35,9 @@ from bench.bench_web import start, stop  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
 from spacearm.base.runtime.priority import describe, use_fifo  # noqa: E402
 
-COMMANDS = ("reset", "enable", "status", "disable", "stop")
-TARGETS = {"stop": (0.150, 0.500)}      # s: idle, loaded (issue 21)
+COMMANDS = ("reset", "enable", "status", "disable", "stop", "stop-nort")
+NO_RT = {"stop-nort": ("stop", {"SPACEARM_STOP_RT_PRIORITY": "0"})}   # stop without its SCHED_FIFO request
+TARGETS = {"stop": (0.150, 0.500), "stop-nort": (0.150, 0.500)}      # s: idle, loaded (issue 21)
 SPACEARM = str(Path(sys.executable).parent / "spacearm")
 PROXY_RT_PRIORITY = 50      # the daemon's API threads' (spacearm daemon --rt-priority default)
 
@@ -86,7 +87,8 @@ def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list
         for command in COMMANDS:
             before = len(proxy.arrivals)
             spawned = time.monotonic()
-            subprocess.run([SPACEARM, command, "--api", f"tcp:127.0.0.1:{proxy.port}"], env=env,
+            word, extra = NO_RT.get(command, (command, {}))
+            subprocess.run([SPACEARM, word, "--api", f"tcp:127.0.0.1:{proxy.port}"], env={**env, **extra},
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
             ended = time.monotonic()
             if len(proxy.arrivals) > before:
@@ -94,6 +96,21 @@ def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list
             results[command][1].append(ended - spawned)
             if command == "reset":
                 time.sleep(0.3)       # let the drives clear their faults before enable
+    return results
+
+
+# Where the time goes: a bare interpreter start, without and with site (the .pth files: the
+# editable install's finder, cmeel, setuptools' distutils hack), beside the commands.
+FLOORS = {"python -S": ["-S", "-c", "pass"], "python": ["-c", "pass"]}
+
+
+def measure_floors(rounds: int, env: dict) -> dict[str, tuple[list[float], list[float]]]:
+    results: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in FLOORS}
+    for _ in range(rounds):
+        for name, args in FLOORS.items():
+            spawned = time.monotonic()
+            subprocess.run([sys.executable, *args], env=env, timeout=60)
+            results[name][1].append(time.monotonic() - spawned)
     return results
 
 
@@ -128,6 +145,7 @@ def main() -> None:
                 steal = CpuSteal()
                 time.sleep(1.0 if burners else 0.0)
                 results = measure(proxy, args.rounds, env)
+                results.update(measure_floors(args.rounds, env))
                 rows.append((phase, results, os.getloadavg()[0], steal.fraction()))
             finally:
                 for p in load:
@@ -138,7 +156,7 @@ def main() -> None:
             stop(proc)
     print(f"\nconsole command-to-daemon latency ({args.rounds} runs per command and phase; "
           f"{platform.node()}, {os.cpu_count()} CPUs, Python {platform.python_version()})")
-    print(f"{'phase':<7} {'command':<8} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
+    print(f"{'phase':<7} {'command':<10} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
           f"{'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
     for phase, results, load, steal in rows:
         for command, (arrive, total) in results.items():
@@ -147,11 +165,12 @@ def main() -> None:
             med, p99 = (1e3 * np.median(arrive), 1e3 * np.percentile(arrive, 99)) if arrive else (float("nan"),) * 2
             verdict = "-" if limit is None else (f"<= {1e3 * limit:.0f}: median " + ("ok" if med <= 1e3 * limit else "MISSED")
                                                  + ", p99 " + ("ok" if p99 <= 1e3 * limit else "MISSED"))
-            print(f"{phase:<7} {command:<8} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
+            print(f"{phase:<7} {command:<10} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
                   f"{1e3 * np.percentile(total, 99):5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
     print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
           "idle = no load of ours (the load column includes other users of the machine); loaded = 2 CPU-bound "
-          f"processes added; proxy threads: {proxy_scheduling}")
+          f"processes added; proxy threads: {proxy_scheduling}. stop-nort: stop without its SCHED_FIFO 20 "
+          "request; python / python -S: a bare interpreter start with and without site (round trip only)")
 
 
 if __name__ == "__main__":

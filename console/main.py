@@ -70,6 +70,7 @@ def __getattr__(name: str):
 # machine a new process otherwise queues behind every CPU-bound one before it can even import
 # the client (bench/bench_console.py: p99 ~1 s beside two CPU hogs). Below the control path
 # (daemon, simulator, hub at 50), so it never delays a cycle; refused without CAP_SYS_NICE.
+# SPACEARM_STOP_RT_PRIORITY=0 turns it off (the benchmark compares both).
 STOP_RT_PRIORITY = 20
 
 
@@ -78,7 +79,11 @@ def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else list(argv)
     if args[:1] == ["stop"] and argv is None:
         from spacearm.base.runtime.priority import use_fifo
-        use_fifo(STOP_RT_PRIORITY)
+        try:
+            priority = int(os.environ.get("SPACEARM_STOP_RT_PRIORITY", STOP_RT_PRIORITY))
+            use_fifo(priority)
+        except ValueError:
+            pass           # a bad setting must not keep a stop from going out
     from spacearm.console import quick
 
     plain = quick.parse(args)
