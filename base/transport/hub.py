@@ -89,10 +89,10 @@ class LoopbackHub:
         self._stop = False
         self._thread: threading.Thread | None = None
         self.frames_forwarded = 0
-        # Its own lateness, as a CAN frame on every channel (base/canopen/peer_timing.py): the
-        # daemon can then say "the hub is starved" rather than blame the nodes. Only to clients
-        # that ask for it in their hello (like a CAN socket's error-frame filter: the other
-        # nodes never see it); `spacearm hub` turns it on.
+        # Its own lateness, as a CAN frame (base/canopen/peer_timing.py): the daemon can then
+        # say "the hub is starved" rather than blame the nodes. Only to the clients that ask for
+        # it in their hello (like a CAN socket's error-frame filter: the nodes never see it);
+        # `spacearm hub` turns it on, hubs built inside a test's own process leave it off.
         self.lateness = peer_timing.LatenessMeter() if timing_reports else None
         # Fault injection for tests (hil_tests/faults.py): the hub is the bus, so frames are
         # lost or reordered here. fault_filter(channel, records) -> records to deliver now;
