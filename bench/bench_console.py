@@ -50,6 +50,7 @@ class ArrivalProxy:
         self.server = socket.create_server(("127.0.0.1", 0))
         self.port = self.server.getsockname()[1]
         self.arrivals: list[float] = []
+        self.answers: list[float] = []      # s from a connection's first request to the daemon's first answer byte
         self.scheduling = "starting"
         threading.Thread(target=self._accept, daemon=True).start()
 
@@ -63,29 +64,33 @@ class ArrivalProxy:
             threading.Thread(target=self._serve, args=(client,), daemon=True).start()
 
     def _serve(self, client: socket.socket) -> None:
-        first = True
+        arrived: list[float] = []
         with client, socket.create_connection(("127.0.0.1", self.upstream)) as upstream:
-            threading.Thread(target=self._pipe, args=(upstream, client), daemon=True).start()
+            threading.Thread(target=self._pipe, args=(upstream, client, arrived), daemon=True).start()
             while data := client.recv(65536):
-                if first and b"\n" in data:
-                    self.arrivals.append(time.monotonic())
-                    first = False
+                if not arrived and b"\n" in data:
+                    arrived.append(time.monotonic())
+                    self.arrivals.append(arrived[0])
                 upstream.sendall(data)
 
-    @staticmethod
-    def _pipe(source: socket.socket, sink: socket.socket) -> None:
+    def _pipe(self, source: socket.socket, sink: socket.socket, arrived: list[float]) -> None:
+        first = True
         try:
             while data := source.recv(65536):
+                if first and arrived:
+                    self.answers.append(time.monotonic() - arrived[0])
+                    first = False
                 sink.sendall(data)
         except OSError:
             pass
 
 
-def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list[float], list[float]]]:
-    results: dict[str, tuple[list[float], list[float]]] = {c: ([], []) for c in COMMANDS}
+def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list[float], list[float], list[float]]]:
+    """Per command: (spawn -> request at the daemon, spawn -> exit, request -> the daemon's answer)."""
+    results: dict[str, tuple[list[float], list[float], list[float]]] = {c: ([], [], []) for c in COMMANDS}
     for _ in range(rounds):
         for command in COMMANDS:
-            before = len(proxy.arrivals)
+            before, answered = len(proxy.arrivals), len(proxy.answers)
             spawned = time.monotonic()
             word, extra = NO_RT.get(command, (command, {}))
             subprocess.run([SPACEARM, word, "--api", f"tcp:127.0.0.1:{proxy.port}"], env={**env, **extra},
@@ -94,6 +99,8 @@ def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list
             if len(proxy.arrivals) > before:
                 results[command][0].append(proxy.arrivals[before] - spawned)
             results[command][1].append(ended - spawned)
+            if len(proxy.answers) > answered:
+                results[command][2].append(proxy.answers[answered])
             if command == "reset":
                 time.sleep(0.3)       # let the drives clear their faults before enable
     return results
@@ -104,8 +111,8 @@ def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list
 FLOORS = {"python -S": ["-S", "-c", "pass"], "python": ["-c", "pass"]}
 
 
-def measure_floors(rounds: int, env: dict) -> dict[str, tuple[list[float], list[float]]]:
-    results: dict[str, tuple[list[float], list[float]]] = {name: ([], []) for name in FLOORS}
+def measure_floors(rounds: int, env: dict) -> dict[str, tuple[list[float], list[float], list[float]]]:
+    results: dict[str, tuple[list[float], list[float], list[float]]] = {name: ([], [], []) for name in FLOORS}
     for _ in range(rounds):
         for name, args in FLOORS.items():
             spawned = time.monotonic()
@@ -157,17 +164,19 @@ def main() -> None:
     print(f"\nconsole command-to-daemon latency ({args.rounds} runs per command and phase; "
           f"{platform.node()}, {os.cpu_count()} CPUs, Python {platform.python_version()})")
     print(f"{'phase':<7} {'command':<10} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
-          f"{'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
+          f"{'p99':>8} {'daemon answer median':>21} {'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
     for phase, results, load, steal in rows:
-        for command, (arrive, total) in results.items():
+        for command, (arrive, total, answer) in results.items():
             target = TARGETS.get(command)
             limit = None if target is None else target[0 if phase == "idle" else 1]
             med, p99 = (1e3 * np.median(arrive), 1e3 * np.percentile(arrive, 99)) if arrive else (float("nan"),) * 2
+            a_med, a_p99 = (1e3 * np.median(answer), 1e3 * np.percentile(answer, 99)) if answer else (float("nan"),) * 2
             verdict = "-" if limit is None else (f"<= {1e3 * limit:.0f}: median " + ("ok" if med <= 1e3 * limit else "MISSED")
                                                  + ", p99 " + ("ok" if p99 <= 1e3 * limit else "MISSED"))
             print(f"{phase:<7} {command:<10} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
-                  f"{1e3 * np.percentile(total, 99):5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
+                  f"{1e3 * np.percentile(total, 99):5.1f} ms {a_med:18.1f} ms {a_p99:5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
     print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
+          "daemon answer: that request -> the first byte of the daemon's answer (its API thread and the cycle). "
           "idle = no load of ours (the load column includes other users of the machine); loaded = 2 CPU-bound "
           f"processes added; proxy threads: {proxy_scheduling}. stop-nort: stop without its SCHED_FIFO 20 "
           "request; python / python -S: a bare interpreter start with and without site (round trip only)")
