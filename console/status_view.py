@@ -19,6 +19,10 @@ def status_lines(status: dict[str, Any]) -> list[str]:
     ]
     if status.get("stop_reason"):
         lines.append(f"protective stop: {status['stop_reason']}")
+        late = [name for name, p in ((status.get("nodes") or {}).get("peers") or {}).items() if p["level"] != "ok"]
+        if late and (status.get("stop") or {}).get("code") in ("pdo_missing", "heartbeat_lost"):
+            lines.append(f"  likely cause: the {' and the '.join(late)} reported itself late (below); "
+                         "the nodes it hosts or carries are not at fault")
     lines.append(f"control: {control.get('holder') or 'free'}   "
                  f"recording: {(status.get('recording') or {}).get('path') or 'off'}")
     if stats:

@@ -59,3 +59,5 @@ def test_status_names_the_frozen_process_from_its_own_report(stack, frozen):
     assert "joint_" not in nodes["message"].split(" (the daemon sees")[0]
     text = render_status(status)
     assert f"{frozen} late: " in text and "their own timing:" in text
+    if (status["stop"] or {}).get("code") in ("pdo_missing", "heartbeat_lost"):   # the daemon stopped the arm
+        assert f"likely cause: the {frozen} reported itself late" in text, text

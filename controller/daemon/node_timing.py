@@ -49,7 +49,7 @@ def peer_summary(name: str, reports: list, now: float) -> PeerTimingSummary | No
     scheduling = reports[-1][1].scheduling
     age = now - reports[-1][0]
     window = now - reports[0][0]
-    numbers = f"{late} cycles, max {1e3 * worst:.1f} ms in the last {window:.0f} s ({scheduling})"
+    numbers = f"{late} late of {wakes} cycles, max {1e3 * worst:.1f} ms (last {window:.0f} s, {scheduling})"
     if age > PEER_SILENT:
         level, message = "silent", f"{name} silent: no timing report for {age:.1f} s"
     elif worst >= PEER_LATE or (wakes and late > LATE_CYCLES * wakes):
@@ -57,6 +57,19 @@ def peer_summary(name: str, reports: list, now: float) -> PeerTimingSummary | No
     else:
         level, message = "ok", f"{name} on time: {numbers}"
     return PeerTimingSummary(level, late, wakes, worst, scheduling, window, age, message)
+
+
+COMMANDS = {"simulator": "spacearm sim", "hub": "spacearm hub"}
+
+
+def _peer_advice(name: str, peer: PeerTimingSummary) -> str:
+    command = COMMANDS.get(name, name)
+    if peer.level == "silent":
+        return f"is `{command}` still running?"
+    if peer.scheduling == "normal":
+        return f"run `{command}` with --rt-priority 50 (or lower the machine's load)"
+    return (f"`{command}` already runs {peer.scheduling}: something stopped it or ran above it "
+            "(a debugger, SIGSTOP, a higher real-time priority)")
 
 
 @dataclass(frozen=True)
@@ -119,9 +132,7 @@ class NodeTiming:
             level, what = "ok", "nodes answer in time"
         peers = {name: p for name, r in (peer_reports or {}).items() if (p := peer_summary(name, r, now))}
         behind = [p.message for p in peers.values() if p.level != "ok"]
-        advice = ADVICE if not behind else (
-            f"run {' and '.join(f'`spacearm {n}`' for n, p in peers.items() if p.level != 'ok')} with "
-            "--rt-priority 50 (or lower the machine's load)")
+        advice = ADVICE if not behind else "; ".join(_peer_advice(n, p) for n, p in peers.items() if p.level != "ok")
         if behind:      # the host process is named first: the drives behind it are not at fault
             what = "; ".join(behind) + ("" if level == "ok" else f" (the daemon sees: {what})")
             level = "late" if level == "ok" else level

@@ -58,7 +58,8 @@ def test_a_late_simulator_is_named_beside_the_daemons_own_view():
     feed(timing, 250, 0.001)
     summary = timing.summary({"simulator": _reports(100.0, 3, 0.301), "hub": _reports(100.0, 0, 0.0004)}, 100.0)
     assert summary.level == "late"
-    assert summary.message.startswith("simulator late: 3 cycles, max 301.0 ms")
+    assert summary.message.startswith("simulator late: 3 late of 500 cycles, max 301.0 ms")
+    assert "run `spacearm sim` with --rt-priority 50" in summary.message
     assert "hub late" not in summary.message and "`spacearm hub`" not in summary.message   # the hub was on time
     assert summary.peers["hub"]["level"] == "ok" and summary.peers["simulator"]["max_lateness"] > 0.3
 
