@@ -57,3 +57,26 @@ def test_simulator_publishes_its_own_timing_to_the_master():
     finally:
         sim.stop()
         network.disconnect()
+
+
+def test_hub_reports_go_only_to_clients_that_ask_for_them():
+    from spacearm.base.transport.hub import LoopbackHub
+    from spacearm.base.transport.loopback import LoopbackBus
+
+    hub = LoopbackHub("127.0.0.1", 0, timing_reports=True)
+    hub.lateness.period = 0.2
+    hub.start()
+    master = LoopbackBus("peer", "127.0.0.1", hub.port, hub_reports=True, autostart=False)
+    node = LoopbackBus("peer", "127.0.0.1", hub.port, autostart=False)
+    try:
+        deadline, got = time.monotonic() + 5.0, None
+        while got is None and time.monotonic() < deadline:
+            msg = master.recv(0.2)
+            if msg is not None and msg.arbitration_id == peer_timing.HUB_COB_ID:
+                got = decode(bytes(msg.data))
+        assert got is not None and got.wakes > 0      # the hub's timer ticks every 10 ms
+        assert node.recv(0.5) is None                 # a node on the same channel never sees them
+    finally:
+        master.shutdown()
+        node.shutdown()
+        hub.stop()
