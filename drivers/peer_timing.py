@@ -18,14 +18,16 @@ WINDOW = 60.0       # s of reports kept
 
 
 class PeerTimingListener:
-    def __init__(self, network, window: float = WINDOW):
-        """`network`: the canopen.Network of the master (ArmNetwork.network)."""
+    def __init__(self, network, window: float = WINDOW, device_cob_ids: set[int] = frozenset()):
+        """`network`: the canopen.Network of the master (ArmNetwork.network). A report COB-ID
+        that a device of the bus already uses (`device_cob_ids`, its PDOs) is not listened to:
+        that device's data is not a timing report."""
         self.window = window
         self.malformed = 0
         self._lock = threading.Lock()
         self._reports: dict[str, deque[tuple[float, TimingReport]]] = {
             name: deque() for name in peer_timing.SOURCES.values()}
-        for cob_id in peer_timing.SOURCES:
+        for cob_id in set(peer_timing.SOURCES) - set(device_cob_ids):
             network.subscribe(cob_id, self._on_frame)
 
     def _on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:

@@ -13,6 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
+from spacearm.base.canopen.codes import TPDO_BASE
 from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
@@ -61,7 +62,9 @@ class CanopenHardware:
 
     def __init__(self, bus: str, bus_config: BusConfig, lockstep: bool, realtime_budget: float = 0.005):
         self.network = ArmNetwork(bus, bus_config)
-        self.peers = PeerTimingListener(self.network.network)   # the simulator's and hub's own lateness
+        # the simulator's and hub's own lateness (not on a COB-ID a device's PDOs use)
+        self.peers = PeerTimingListener(self.network.network, device_cob_ids={
+            base + node.node_id for node in bus_config.nodes for base in TPDO_BASE})
         self.lockstep = lockstep
         self.realtime_budget = realtime_budget
         self._enabled = False

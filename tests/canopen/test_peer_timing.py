@@ -80,3 +80,9 @@ def test_hub_reports_go_only_to_clients_that_ask_for_them():
         master.shutdown()
         node.shutdown()
         hub.stop()
+
+
+def test_a_device_on_a_report_cob_id_is_not_taken_for_a_report():
+    network = canopen.Network()
+    PeerTimingListener(network, device_cob_ids={peer_timing.HUB_COB_ID})
+    assert peer_timing.SIMULATOR_COB_ID in network.subscribers and peer_timing.HUB_COB_ID not in network.subscribers
