@@ -7,6 +7,11 @@ process was spawned (what the operator waits for before the daemon can act). Rou
 spawn to exit. Stack: `spacearm sim` (SCHED_FIFO 50, standing in for hardware) and
 `spacearm daemon` (real-time clock) on a loopback hub.
 
+The proxy's threads run at SCHED_FIFO 50 like the daemon's API threads they stand in for (when
+permitted): at normal priority the CPU hogs of the loaded phase delay the proxy itself, and the
+arrival it notes would be late by its own wait, not the command's. The bench's main thread,
+and so the commands it spawns, stay at normal priority.
+
     .venv/bin/python bench/bench_console.py [--rounds 20]
 """
 from __future__ import annotations
@@ -28,10 +33,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from bench.bench_web import start, stop  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
+from spacearm.base.runtime.priority import describe, use_fifo  # noqa: E402
 
-COMMANDS = ("reset", "enable", "status", "disable", "stop")
-TARGETS = {"stop": (0.150, 0.500)}      # s: idle, loaded (issue 21)
+COMMANDS = ("reset", "enable", "status", "disable", "stop", "stop-nort")
+NO_RT = {"stop-nort": ("stop", {"SPACEARM_STOP_RT_PRIORITY": "0"})}   # stop without its SCHED_FIFO request
+TARGETS = {"stop": (0.150, 0.500), "stop-nort": (0.150, 0.500)}      # s: idle, loaded (issue 21)
 SPACEARM = str(Path(sys.executable).parent / "spacearm")
+PROXY_RT_PRIORITY = 50      # the daemon's API threads' (spacearm daemon --rt-priority default)
 
 
 class ArrivalProxy:
@@ -42,9 +50,12 @@ class ArrivalProxy:
         self.server = socket.create_server(("127.0.0.1", 0))
         self.port = self.server.getsockname()[1]
         self.arrivals: list[float] = []
+        self.answers: list[float] = []      # s from a connection's first request to the daemon's first answer byte
+        self.scheduling = "starting"
         threading.Thread(target=self._accept, daemon=True).start()
 
     def _accept(self) -> None:
+        self.scheduling = use_fifo(PROXY_RT_PRIORITY) or describe()   # inherited by the connection threads
         while True:
             try:
                 client, _ = self.server.accept()
@@ -53,38 +64,60 @@ class ArrivalProxy:
             threading.Thread(target=self._serve, args=(client,), daemon=True).start()
 
     def _serve(self, client: socket.socket) -> None:
-        first = True
+        arrived: list[float] = []
         with client, socket.create_connection(("127.0.0.1", self.upstream)) as upstream:
-            threading.Thread(target=self._pipe, args=(upstream, client), daemon=True).start()
+            threading.Thread(target=self._pipe, args=(upstream, client, arrived), daemon=True).start()
             while data := client.recv(65536):
-                if first and b"\n" in data:
-                    self.arrivals.append(time.monotonic())
-                    first = False
+                if not arrived and b"\n" in data:
+                    arrived.append(time.monotonic())
+                    self.arrivals.append(arrived[0])
                 upstream.sendall(data)
 
-    @staticmethod
-    def _pipe(source: socket.socket, sink: socket.socket) -> None:
+    def _pipe(self, source: socket.socket, sink: socket.socket, arrived: list[float]) -> None:
+        first = True
         try:
             while data := source.recv(65536):
+                if first and arrived:
+                    self.answers.append(time.monotonic() - arrived[0])
+                    first = False
                 sink.sendall(data)
         except OSError:
             pass
 
 
-def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list[float], list[float]]]:
-    results: dict[str, tuple[list[float], list[float]]] = {c: ([], []) for c in COMMANDS}
+def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list[float], list[float], list[float]]]:
+    """Per command: (spawn -> request at the daemon, spawn -> exit, request -> the daemon's answer)."""
+    results: dict[str, tuple[list[float], list[float], list[float]]] = {c: ([], [], []) for c in COMMANDS}
     for _ in range(rounds):
         for command in COMMANDS:
-            before = len(proxy.arrivals)
+            before, answered = len(proxy.arrivals), len(proxy.answers)
             spawned = time.monotonic()
-            subprocess.run([SPACEARM, command, "--api", f"tcp:127.0.0.1:{proxy.port}"], env=env,
+            word, extra = NO_RT.get(command, (command, {}))
+            subprocess.run([SPACEARM, word, "--api", f"tcp:127.0.0.1:{proxy.port}"], env={**env, **extra},
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
             ended = time.monotonic()
             if len(proxy.arrivals) > before:
                 results[command][0].append(proxy.arrivals[before] - spawned)
             results[command][1].append(ended - spawned)
+            if len(proxy.answers) > answered:
+                results[command][2].append(proxy.answers[answered])
             if command == "reset":
                 time.sleep(0.3)       # let the drives clear their faults before enable
+    return results
+
+
+# Where the time goes: a bare interpreter start, without and with site (the .pth files: the
+# editable install's finder, cmeel, setuptools' distutils hack), beside the commands.
+FLOORS = {"python -S": ["-S", "-c", "pass"], "python": ["-c", "pass"]}
+
+
+def measure_floors(rounds: int, env: dict) -> dict[str, tuple[list[float], list[float], list[float]]]:
+    results: dict[str, tuple[list[float], list[float], list[float]]] = {name: ([], [], []) for name in FLOORS}
+    for _ in range(rounds):
+        for name, args in FLOORS.items():
+            spawned = time.monotonic()
+            subprocess.run([sys.executable, *args], env=env, timeout=60)
+            results[name][1].append(time.monotonic() - spawned)
     return results
 
 
@@ -109,7 +142,9 @@ def main() -> None:
                           "spacearm daemon:", work / "daemon.log")
         procs.append(daemon)
         proxy = ArrivalProxy(api_port)
+        proxy_scheduling = "not started"
         measure(proxy, 1, env)                        # warm the page cache and the lease
+        proxy_scheduling = proxy.scheduling
         rows = []
         for phase, burners in (("idle", 0), ("loaded", 2)):
             load = cpu_load(burners)
@@ -117,6 +152,7 @@ def main() -> None:
                 steal = CpuSteal()
                 time.sleep(1.0 if burners else 0.0)
                 results = measure(proxy, args.rounds, env)
+                results.update(measure_floors(args.rounds, env))
                 rows.append((phase, results, os.getloadavg()[0], steal.fraction()))
             finally:
                 for p in load:
@@ -127,20 +163,23 @@ def main() -> None:
             stop(proc)
     print(f"\nconsole command-to-daemon latency ({args.rounds} runs per command and phase; "
           f"{platform.node()}, {os.cpu_count()} CPUs, Python {platform.python_version()})")
-    print(f"{'phase':<7} {'command':<8} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
-          f"{'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
+    print(f"{'phase':<7} {'command':<10} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
+          f"{'p99':>8} {'daemon answer median':>21} {'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
     for phase, results, load, steal in rows:
-        for command, (arrive, total) in results.items():
+        for command, (arrive, total, answer) in results.items():
             target = TARGETS.get(command)
             limit = None if target is None else target[0 if phase == "idle" else 1]
             med, p99 = (1e3 * np.median(arrive), 1e3 * np.percentile(arrive, 99)) if arrive else (float("nan"),) * 2
+            a_med, a_p99 = (1e3 * np.median(answer), 1e3 * np.percentile(answer, 99)) if answer else (float("nan"),) * 2
             verdict = "-" if limit is None else (f"<= {1e3 * limit:.0f}: median " + ("ok" if med <= 1e3 * limit else "MISSED")
                                                  + ", p99 " + ("ok" if p99 <= 1e3 * limit else "MISSED"))
-            print(f"{phase:<7} {command:<8} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
-                  f"{1e3 * np.percentile(total, 99):5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
+            print(f"{phase:<7} {command:<10} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
+                  f"{1e3 * np.percentile(total, 99):5.1f} ms {a_med:18.1f} ms {a_p99:5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
     print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
+          "daemon answer: that request -> the first byte of the daemon's answer (its API thread and the cycle). "
           "idle = no load of ours (the load column includes other users of the machine); loaded = 2 CPU-bound "
-          "processes added")
+          f"processes added; proxy threads: {proxy_scheduling}. stop-nort: stop without its SCHED_FIFO 20 "
+          "request; python / python -S: a bare interpreter start with and without site (round trip only)")
 
 
 if __name__ == "__main__":

@@ -19,6 +19,10 @@ def status_lines(status: dict[str, Any]) -> list[str]:
     ]
     if status.get("stop_reason"):
         lines.append(f"protective stop: {status['stop_reason']}")
+        late = [name for name, p in ((status.get("nodes") or {}).get("peers") or {}).items() if p["level"] != "ok"]
+        if late and (status.get("stop") or {}).get("code") in ("pdo_missing", "heartbeat_lost"):
+            lines.append(f"  likely cause: the {' and the '.join(late)} reported itself late (below); "
+                         "the nodes it hosts or carries are not at fault")
     lines.append(f"control: {control.get('holder') or 'free'}   "
                  f"recording: {(status.get('recording') or {}).get('path') or 'off'}")
     if stats:
@@ -32,6 +36,9 @@ def status_lines(status: dict[str, Any]) -> list[str]:
     if nodes.get("level") not in (None, "ok"):
         lines.append(f"WARNING {nodes['message']} (answer p99 {1e3 * nodes['io_wait_p99']:.1f} ms of "
                      f"{1e3 * nodes['budget']:.1f} ms)")
+    peers = nodes.get("peers") or {}
+    if peers:       # the simulator's and the hub's own view of their timing, beside the daemon's
+        lines.append("their own timing: " + "; ".join(p["message"] for p in peers.values()))
     wrench = status.get("wrench")
     if wrench:
         lines.append("wrench: F " + " ".join(f"{v:7.2f}" for v in wrench[:3]) + " N   T "

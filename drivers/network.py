@@ -200,7 +200,7 @@ class ArmNetwork:
     def connect(self) -> "ArmNetwork":
         if self._connected:
             return self
-        self.network.bus = open_bus(self.bus_spec)
+        self.network.bus = open_bus(self.bus_spec, hub_reports=True)   # the master hears the hub's lateness
         self.network.connect()
         self._send_frame = frame_sender(self.network.bus)
         if hasattr(self.network.bus, "add_inline_listener"):

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import can
 
-from spacearm.base.canopen import od
+from spacearm.base.canopen import od, peer_timing
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
 from spacearm.base.transport import frame_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
@@ -68,7 +68,8 @@ class _Listener(can.Listener):
 
 class Simulator:
     def __init__(self, bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
-                 plant: Plant | PlantConfig | str | Path | None = None, control_node_id: int | None = None):
+                 plant: Plant | PlantConfig | str | Path | None = None, control_node_id: int | None = None,
+                 diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE):
         self.bus_spec = bus_spec
         self.config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config)
         if isinstance(plant, Plant):
@@ -104,6 +105,12 @@ class Simulator:
                                         target.ranger_config())
         self.camera = None        # spacearm.firmware_sim.camera.service.CameraService, see attach_camera
         self.stats = SimStats()
+        # this process's own lateness, published as the TPDO of a diagnostics node (None: off)
+        if diag_node_id in self.nodes:
+            logger.warning("simulator: node ID %d is a device of the bus config; no timing reports", diag_node_id)
+            diag_node_id = None
+        self.diag_node_id = diag_node_id
+        self.lateness = peer_timing.LatenessMeter()
         self.cpu_samples: list[float] | None = None   # set to [] to record the CPU s of every SYNC (benchmarks)
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
@@ -323,6 +330,7 @@ class Simulator:
         due = time.monotonic()
         while not self._stop.is_set():
             now = time.monotonic()
+            self.lateness.woke(now - due, now)
             excess = now - due - STARVED_SLACK
             starved = excess > 0
             if starved:
@@ -349,6 +357,10 @@ class Simulator:
                     due_hb = self._heartbeat_due(node, now)
                 if due_hb:
                     wake = min(wake, due_hb)
+            if self.diag_node_id is not None:
+                if self.lateness.due(now):
+                    self._send(od.TPDO_BASE[0] + self.diag_node_id, self.lateness.report(now))
+                wake = min(wake, self.lateness.next_due())
             due = max(wake, now + TIMER_MIN_SLEEP)
             self._stop.wait(due - now)
 
@@ -378,7 +390,8 @@ STARVED_SLACK = 0.020     # s
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
                     plant: Plant | PlantConfig | str | Path | None = None,
-                    control_node_id: int | None = None) -> Simulator:
+                    control_node_id: int | None = None,
+                    diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE) -> Simulator:
     """Start all simulated nodes of the bus config on the bus; returns the handle (.stop()).
     control_node_id: also serve the fault-injection unit (spacearm.firmware_sim.control) at this ID."""
-    return Simulator(bus_spec, bus_config, plant, control_node_id).start()
+    return Simulator(bus_spec, bus_config, plant, control_node_id, diag_node_id).start()

@@ -20,11 +20,14 @@ class StrictModel(BaseModel):
 
 
 def format_location(loc: tuple) -> str:
-    """('joints', 2, 'limits', 'upper') -> 'joints[2].limits.upper'."""
+    """('joints', 2, 'limits', 'upper') -> 'joints #3.limits.upper': the third [[joints]] table.
+
+    Positions in a list count from 1, as operators count joints (joint 1 is the first, as in
+    the CLI's `jog 1` and the bus's joint_1); '#' marks them as counts, not Python indices."""
     text = ""
     for part in loc:
         if isinstance(part, int):
-            text += f"[{part}]"
+            text += f" #{part + 1}"
         else:
             text += ("." if text else "") + str(part)
     return text or "(top level)"

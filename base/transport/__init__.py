@@ -234,7 +234,10 @@ def open_bus(spec: str, **kwargs) -> can.BusABC:
 
     Raises BusSpecError for a malformed spec, and a can.CanInitializationError subclass when
     the transport is fine but cannot be opened (no hub, no such interface, no kernel CAN).
+    hub_reports=True: on a loopback hub, also receive the hub's own timing reports (other
+    transports have no hub; the option is dropped).
     """
+    hub_reports = kwargs.pop("hub_reports", False)
     kind, rest = parse_bus_spec(spec)
     if kind == "virtual":
         # receive_own_messages=False: like a real controller, a node does not see its own frames.
@@ -246,7 +249,7 @@ def open_bus(spec: str, **kwargs) -> can.BusABC:
             name, host, port = parse_spec(rest)
         except ValueError as exc:
             raise BusSpecError(f"bus '{spec}': {exc}") from exc
-        return LoopbackBus(channel=name, host=host, port=port, **kwargs)
+        return LoopbackBus(channel=name, host=host, port=port, hub_reports=hub_reports, **kwargs)
     # socketcan
     if "/" in rest or len(rest) > 15 or any(c.isspace() for c in rest):
         raise BusSpecError(f"bus '{spec}': '{rest}' is not a network interface name")

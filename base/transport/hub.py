@@ -25,7 +25,10 @@ import threading
 import time
 import uuid
 
+import can
+
 from . import wire
+from spacearm.base.canopen import peer_timing
 from spacearm.base.runtime.child_process import REPO_ROOT, module_env, readline_within
 from spacearm.base.runtime.priority import use_fifo
 
@@ -40,8 +43,8 @@ HELLO_TIMEOUT = 5.0
 
 
 class _Client:
-    __slots__ = ("sock", "addr", "cid", "channel", "receive_own", "inbuf", "outbuf", "hello_deadline",
-                 "writing")
+    __slots__ = ("sock", "addr", "cid", "channel", "receive_own", "hub_reports", "inbuf", "outbuf",
+                 "hello_deadline", "writing")
 
     def __init__(self, sock: socket.socket, addr, cid: int):
         self.sock = sock
@@ -49,6 +52,7 @@ class _Client:
         self.cid = cid
         self.channel: str | None = None
         self.receive_own = False
+        self.hub_reports = False
         self.inbuf = bytearray()
         self.outbuf = bytearray()
         self.hello_deadline = time.monotonic() + HELLO_TIMEOUT
@@ -59,7 +63,7 @@ class LoopbackHub:
     """The hub server. ``serve_forever()`` blocks; ``start()`` runs it in a daemon thread."""
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, idle_exit: float = 0.0,
-                 max_backlog: int = MAX_BACKLOG):
+                 max_backlog: int = MAX_BACKLOG, timing_reports: bool = False):
         self.host = host
         self.idle_exit = idle_exit
         self.max_backlog = max_backlog
@@ -85,6 +89,11 @@ class LoopbackHub:
         self._stop = False
         self._thread: threading.Thread | None = None
         self.frames_forwarded = 0
+        # Its own lateness, as a CAN frame (base/canopen/peer_timing.py): the daemon can then
+        # say "the hub is starved" rather than blame the nodes. Only to the clients that ask for
+        # it in their hello (like a CAN socket's error-frame filter: the nodes never see it);
+        # `spacearm hub` turns it on, hubs built inside a test's own process leave it off.
+        self.lateness = peer_timing.LatenessMeter() if timing_reports else None
         # Fault injection for tests (hil_tests/faults.py): the hub is the bus, so frames are
         # lost or reordered here. fault_filter(channel, records) -> records to deliver now;
         # disconnect requests cut every TCP client of a channel (they reconnect by themselves).
@@ -113,9 +122,11 @@ class LoopbackHub:
     def serve_forever(self) -> None:
         log.info("hub listening on %s:%d", self.host, self.port)
         idle_since = time.monotonic()
+        tick = idle_since + peer_timing.TICK
         try:
             while not self._stop:
-                events = self._sel.select(timeout=0.5)
+                timeout = 0.5 if self.lateness is None else max(0.0, tick - time.monotonic())
+                events = self._sel.select(timeout=timeout)
                 for key, mask in events:
                     if key.data is None:
                         self._accept()
@@ -135,6 +146,8 @@ class LoopbackHub:
                     for client in list(self._channels.get(channel, ())):
                         self._drop(client, "disconnected by fault injection")
                 now = time.monotonic()
+                if self.lateness is not None and now >= tick:
+                    tick = self._timing_tick(tick, now)
                 for client in [c for c in self._clients.values() if c.channel is None]:
                     if now > client.hello_deadline:
                         self._drop(client, "no hello within %.0f s" % HELLO_TIMEOUT)
@@ -160,6 +173,18 @@ class LoopbackHub:
             pass
 
     # ----------------------------------------------------------------- internals
+    def _timing_tick(self, tick: float, now: float) -> float:
+        """One timer tick: how late it came; the report to every channel when due. Returns the next tick."""
+        self.lateness.woke(now - tick, now)
+        if self.lateness.due(now):
+            record = wire.encode_frame(can.Message(arbitration_id=peer_timing.HUB_COB_ID,
+                                                   data=self.lateness.report(now), is_extended_id=False))
+            for dest in [c for c in self._clients.values() if c.hub_reports and c.channel is not None]:
+                if len(dest.outbuf) + len(record) <= self.max_backlog:
+                    dest.outbuf += record
+                    self._flush(dest)
+        return now + peer_timing.TICK
+
     def _accept(self) -> None:
         while True:
             try:
@@ -248,6 +273,7 @@ class LoopbackHub:
             return False
         client.channel = channel
         client.receive_own = bool(options & wire.OPT_RECEIVE_OWN)
+        client.hub_reports = bool(options & wire.OPT_HUB_REPORTS)
         self._channels.setdefault(channel, []).append(client)
         client.outbuf += wire.encode_welcome(client.cid)
         self._flush(client)
@@ -353,7 +379,7 @@ def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = F
         log.warning("hub bound to all interfaces (%r): any host that reaches this machine can "
                     "inject CAN frames", host)
     try:
-        hub = LoopbackHub(host, port, idle_exit=idle_exit)
+        hub = LoopbackHub(host, port, idle_exit=idle_exit, timing_reports=True)
     except OSError as exc:
         if exc.errno == errno.EADDRINUSE:
             if quiet_if_running:

@@ -121,12 +121,13 @@ class LoopbackBus(can.BusABC):
     def __init__(self, channel: str = "default", host: str | None = None, port: int | None = None,
                  receive_own_messages: bool = False, autostart: bool | None = None,
                  reconnect_timeout: float = 5.0, connect_timeout: float = CONNECT_TIMEOUT,
-                 **kwargs):
+                 hub_reports: bool = False, **kwargs):
         dh, dp = default_hub_address()
         self.host = host or dh
         self.port = int(port or dp)
         self.hub_channel = str(channel)
         self.receive_own_messages = receive_own_messages
+        self.hub_reports = hub_reports      # also receive the hub's own timing reports
         self.autostart = _autostart_enabled(autostart) and _is_loopback(self.host)
         self.reconnect_timeout = reconnect_timeout
         self.connect_timeout = connect_timeout
@@ -158,7 +159,7 @@ class LoopbackBus(can.BusABC):
 
     def _handshake(self, sock: socket.socket) -> socket.socket:
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        sock.sendall(wire.encode_hello(self.hub_channel, self.receive_own_messages))
+        sock.sendall(wire.encode_hello(self.hub_channel, self.receive_own_messages, self.hub_reports))
         # wait for the welcome record: proves the peer is a hub speaking our version
         buf = bytearray()
         deadline = time.monotonic() + self.connect_timeout

@@ -25,6 +25,7 @@ T_HELLO = 2
 T_WELCOME = 3
 
 OPT_RECEIVE_OWN = 0x01
+OPT_HUB_REPORTS = 0x02    # the client wants the hub's own timing reports (base/canopen/peer_timing.py)
 
 F_EXTENDED = 0x01
 F_REMOTE = 0x02
@@ -145,11 +146,12 @@ def decode_stream(buf: bytearray, timestamp: float, channel: str | None) -> list
     return out
 
 
-def encode_hello(channel: str, receive_own: bool) -> bytes:
+def encode_hello(channel: str, receive_own: bool, hub_reports: bool = False) -> bytes:
     name = channel.encode("utf-8")
     if not name or len(name) > MAX_CHANNEL_NAME:
         raise ValueError(f"loopback channel name must be 1..{MAX_CHANNEL_NAME} bytes")
-    body = bytes([T_HELLO]) + MAGIC + bytes([VERSION, OPT_RECEIVE_OWN if receive_own else 0]) + name
+    body = bytes([T_HELLO]) + MAGIC + bytes([VERSION, (OPT_RECEIVE_OWN if receive_own else 0)
+                                                  | (OPT_HUB_REPORTS if hub_reports else 0)]) + name
     return bytes([len(body)]) + body
 
 

@@ -222,7 +222,7 @@ class Daemon:
                              {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
                               for name, h in network.health.items()})
         if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
-            summary = self.node_timing.summary()
+            summary = self.node_timing_summary()
             if summary.level != self._reported_level:
                 self._reported_level = summary.level
                 self.core._event(m.time, "nodes", summary.message)
@@ -305,8 +305,14 @@ class Daemon:
             "network": self.hardware.statistics(),
             # per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded
             "bringup": self.hardware.bringup_report(),
-            "nodes": self.node_timing.summary().as_dict(),   # are the simulator/hub/bus answering in time
+            "nodes": self.node_timing_summary().as_dict(),   # are the simulator/hub/bus answering in time
         }
+
+    def node_timing_summary(self):
+        """The daemon's view of the nodes' timing, with the simulator's and hub's own reports
+        (real-time clock only: in lockstep nobody waits for anybody's timer)."""
+        lockstep = self.options.clock == "lockstep"
+        return self.node_timing.summary(None if lockstep else self.hardware.peers.reports(), time.monotonic())
 
     def _session_closed(self, session: Session) -> None:
         pass  # the control lease is keyed, not tied to a connection (see leases.py)

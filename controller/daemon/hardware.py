@@ -13,11 +13,13 @@ from typing import Sequence
 
 import numpy as np
 
+from spacearm.base.canopen.codes import TPDO_BASE
 from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
 from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
+from spacearm.drivers.peer_timing import PeerTimingListener
 
 # The drives' own position limits (607Dh) sit this far outside the arm file's limits, beyond
 # the controller's supervision margin, so the controller always stops first and the drive
@@ -60,6 +62,9 @@ class CanopenHardware:
 
     def __init__(self, bus: str, bus_config: BusConfig, lockstep: bool, realtime_budget: float = 0.005):
         self.network = ArmNetwork(bus, bus_config)
+        # the simulator's and hub's own lateness (not on a COB-ID a device's PDOs use)
+        self.peers = PeerTimingListener(self.network.network, device_cob_ids={
+            base + node.node_id for node in bus_config.nodes for base in TPDO_BASE})
         self.lockstep = lockstep
         self.realtime_budget = realtime_budget
         self._enabled = False

@@ -9,6 +9,11 @@ from the last command. Sign convention: the sensor reports the wrench ON the end
 so X_d = X0 + dX moves the tool the way the contact pushes it (the paper's X0 - dX with the
 opposite sensor sign). The first `tare_cycles` cycles hold still and average the
 gravity-compensated reading as the sensor bias (a software tare, out of contact).
+
+`rate` (0..1, set by whoever pauses the task) scales the task's own progress: the insertion
+step, the timer of a timed task and the stop counters. The admittance runs on at full rate, so
+a paused contact keeps regulating its force (it holds the reference, not a rigid position) and
+resumes with the same admittance state: no jump in force or in the commanded motion.
 """
 from __future__ import annotations
 
@@ -99,6 +104,7 @@ class ImpedanceMode(ModeBase):
         self.last_dx = np.zeros(6)
         self.peaks = ContactPeaks()
         self._failure: Finding | None = None
+        self.rate = 1.0                      # of the task's progress (pause/resume ramps); 0: held
 
     # ---- Mode (update() in ModeBase) -----------------------------------------------------------------
     def _next_setpoint(self, t: float, m: Measurement) -> JointSetpoint:
@@ -121,7 +127,8 @@ class ImpedanceMode(ModeBase):
         dx = np.zeros(6)
         adm = self.admittance.update(w - self.params.vector("desired_wrench"))
         dx[self.impedance_axes] = adm[self.impedance_axes]
-        self._advance(w)
+        if self.rate > 0.0:
+            self._advance(w)
         if self.task.axes[2] == "step":
             dx[2] = np.sign(self.task.step) * self.travelled
         self.last_dx = dx
@@ -168,7 +175,7 @@ class ImpedanceMode(ModeBase):
 
     def _advance(self, w: np.ndarray) -> None:
         task = self.task
-        self.elapsed += self.params.period
+        self.elapsed += self.params.period * self.rate
         if self.stopped:
             self.settled += 1
             return
@@ -188,7 +195,8 @@ class ImpedanceMode(ModeBase):
             return
         self.above = 0
         self._lateral_history.clear()
-        if self.travelled + abs(task.step) > task.travel + 1e-12:
+        step = abs(task.step) * self.rate
+        if self.travelled + step > task.travel + 1e-12:
             if task.stop == "distance":
                 self.travelled = task.travel
                 self.stopped = True
@@ -196,7 +204,7 @@ class ImpedanceMode(ModeBase):
                 self._failure = Finding(FindingCode.CONTACT_MISSING, f"{self.name}: no contact force above "
                                         f"{self.params.insert_force} N within {1e3 * task.travel:.0f} mm")
             return
-        self.travelled += abs(task.step)
+        self.travelled += step
 
     def _sliding(self) -> bool:
         """The admittance still moves the part sideways: net motion over the last

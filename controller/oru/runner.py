@@ -160,6 +160,8 @@ class OruTaskRunner(ModeBase):
         period = self.ctx.impedance.period * self.rate
         if self.state not in ("running", "pausing", "resuming") or self._failure is not None or period <= 0.0:
             self._last_dt = 0.0
+            if self.state == "paused" and self._failure is None:
+                return self._hold_contact(m)
             return ModeOutput(hold(self.q_last))
         if self.index >= len(self.steps):
             self.state = "done"
@@ -174,7 +176,7 @@ class OruTaskRunner(ModeBase):
         if self.clock < self._hold_until:
             self.clock += period
             return ModeOutput(hold(self.q_last))
-        out = step.update(self.clock, m)
+        out = step.update(self.clock, m, self.rate) if isinstance(step, ContactStep) else step.update(self.clock, m)
         self._step_progress = out.progress
         if self._last_dt > 0.05 * self.ctx.impedance.period:   # path speed per clock second, for the next ramp
             # at most the velocity limits (a path is planned within them; a step change of
@@ -194,6 +196,22 @@ class OruTaskRunner(ModeBase):
         self.clock += period
         self._last_dt = period        # the clock step between this setpoint and the next
         return out
+
+    def _hold_contact(self, m: Measurement) -> ModeOutput:
+        """Paused: hold the last target; in a contact step the impedance holds its reference
+        instead (its admittance keeps regulating the force, the task does not progress), so the
+        contact force and the commanded motion carry on smoothly through pause and resume."""
+        step = self.steps[self.index] if self.index < len(self.steps) else None
+        if not (isinstance(step, ContactStep) and self._begun):
+            return ModeOutput(hold(self.q_last))
+        out = step.update(self.clock, m, 0.0)
+        if out.failure is not None:           # e.g. the force limit: the flow fails as when running
+            self._failure = out.failure
+            self.state = "failed"
+            self._record(step, m, "failed")
+            return out
+        self.q_last = out.setpoint.q.copy()
+        return ModeOutput(out.setpoint, out.end_effector)   # finishing waits for the resume
 
     def _vision_failure(self, step, failure: Finding, m: Measurement) -> None:
         """Hold, then retry the approach, or pause the flow once the retries are used up."""

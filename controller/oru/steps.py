@@ -141,5 +141,7 @@ class ContactStep(Step):
         super().begin(q, t)
         self.mode = ImpedanceMode(self.model, self.params, self.task_of(), self.q_hold, self.title)
 
-    def update(self, t: float, m: Measurement) -> ModeOutput:
+    def update(self, t: float, m: Measurement, rate: float = 1.0) -> ModeOutput:
+        """`rate`: the runner clock's rate; 0 while paused (the admittance holds the contact)."""
+        self.mode.rate = rate
         return self._follow(self.mode, t, m)

@@ -31,7 +31,7 @@ def test_sim_bad_bus_spec_and_bad_config_are_one_line_errors(tmp_path):
     bad = tmp_path / "bus.toml"
     bad.write_text('[[nodes]]\nname = "j"\nnode_id = 300\ndevice = "joint_drive"\n')
     result = CliRunner().invoke(app(), ["sim", "--bus", "virtual:x", "--bus-config", str(bad), "--duration", "0.1"])
-    assert result.exit_code == 2 and "nodes[0].node_id" in result.output and "Traceback" not in result.output
+    assert result.exit_code == 2 and "nodes #1.node_id" in result.output and "Traceback" not in result.output
 
 
 def test_sim_with_a_missing_eds_is_a_one_line_error(tmp_path):

@@ -70,10 +70,10 @@ def test_bus_config_errors_name_file_and_key(tmp_path):
     with pytest.raises(ConfigError, match=r"bad.toml: .*node_id 1 used by both 'a' and 'b'"):
         load_toml_model(p, BusConfig)
     p.write_text('[[nodes]]\nname = "a"\nnode_id = 200\ndevice = "joint_drive"\n')
-    with pytest.raises(ConfigError, match=r"nodes\[0\]\.node_id"):
+    with pytest.raises(ConfigError, match=r"nodes #1\.node_id"):
         load_toml_model(p, BusConfig)
     p.write_text('[[nodes]]\nname = "a"\nnode_id = 2\ndevice = "gripper"\n')
-    with pytest.raises(ConfigError, match=r"nodes\[0\]\.device"):
+    with pytest.raises(ConfigError, match=r"nodes #1\.device"):
         load_toml_model(p, BusConfig)
     p.write_text('[[nodes]]\nname = "a"\nnode_id = 2\ndevice = "ft_sensor"\n[nodes.joint]\nlower = 0\n')
     with pytest.raises(ConfigError, match=r"\[joint\] settings given for a ft_sensor node"):

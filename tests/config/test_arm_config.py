@@ -47,12 +47,12 @@ def write_variant(tmp_path: Path, old: str, new: str) -> Path:
 @pytest.mark.parametrize(
     ("old", "new", "expected"),
     [
-        ("a = 0.560", "a = 560", "joints[3].a: out of range: allowed range [-30, 30] m (got 560)"),
+        ("a = 0.560", "a = 560", "joints #4.a: out of range: allowed range [-30, 30] m (got 560)"),
         ('convention = "modified"', 'convention = "sideways"', "arm.convention"),
-        ("d = 0.17885", "d = 0.17885\nlenght = 2", "joints[1].lenght: unknown key"),
-        ("d = -0.174", 'd = "long"', "joints[3].d: Input should be a valid number"),
-        ("home = 1.5707963267948966", "home = 6.0", "joints[1]: home (6.0) must lie within limits"),
-        ("velocity = 0.17453292519943295", "velocity = -1", "joints[0].limits.velocity: out of range: allowed range (0, 10] rad/s"),
+        ("d = 0.17885", "d = 0.17885\nlenght = 2", "joints #2.lenght: unknown key"),
+        ("d = -0.174", 'd = "long"', "joints #4.d: Input should be a valid number"),
+        ("home = 1.5707963267948966", "home = 6.0", "joints #2: home (6.0) must lie within limits"),
+        ("velocity = 0.17453292519943295", "velocity = -1", "joints #1.limits.velocity: out of range: allowed range (0, 10] rad/s"),
         ('name = "elbow_pitch"', 'name = "shoulder_yaw"', "joint names must be unique; repeated: shoulder_yaw"),
     ],
 )
@@ -67,7 +67,7 @@ def test_bad_arm_file_names_file_key_and_allowed_range(tmp_path, old, new, expec
 def test_lower_limit_above_upper_is_rejected(tmp_path):
     path = write_variant(tmp_path, "lower = -3.0543261909900767, upper = 3.0543261909900767",
                          "lower = 3.0, upper = -3.0")
-    with pytest.raises(ConfigError, match=r"joints\[0\]\.limits: lower \(3.0\) must be less than upper"):
+    with pytest.raises(ConfigError, match=r"joints #1\.limits: lower \(3.0\) must be less than upper"):
         load_arm_config(path)
 
 
@@ -90,4 +90,4 @@ def test_cli_reports_bad_file_in_one_line_without_traceback(tmp_path):
                             capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
-    assert result.stderr.strip() == f"error[bad_config]: {path}: joints[3].a: out of range: allowed range [-30, 30] m (got 560)"
+    assert result.stderr.strip() == f"error[bad_config]: {path}: joints #4.a: out of range: allowed range [-30, 30] m (got 560)"

@@ -68,8 +68,18 @@ def test_pause_and_resume_stay_within_the_acceleration_limits(kind):
     paused_at = len(history) - 2
     assert runner.pause() == "pausing"        # the daemon calls it inside the cycle; here we are the cycle
     run_until(rig, lambda: runner.state == "paused", history)
+    step = runner.steps[runner.index]
+    progress = (getattr(step.mode, "travelled", None), getattr(step.mode, "elapsed", None))
     still = [cycle(rig) for _ in range(40)]
-    assert np.allclose(still[0], still[-1])                    # paused: holding
+    if kind == "contact":
+        # paused in contact: the task holds (no insertion progress, its timer stopped) while the
+        # admittance keeps regulating the force, so the command moves only with the sensor noise
+        assert (step.mode.travelled, step.mode.elapsed) == progress
+        drift = float(np.max(np.abs(np.array(still) - still[0])))
+        print(f"contact: paused drift {drift:.2e} rad")
+        assert drift < 2e-3
+    else:
+        assert np.allclose(still[0], still[-1])                # paused: holding
     history += still
     assert runner.resume() == "resuming"
     run_until(rig, lambda: runner.state == "running", history)
@@ -80,11 +90,13 @@ def test_pause_and_resume_stay_within_the_acceleration_limits(kind):
     acceleration = np.diff(velocity, axis=0) / PERIOD
     assert np.all(np.abs(velocity) <= V_MAX * 1.001)
     worst = float(np.max(np.abs(acceleration) / A_MAX))
-    # Within the limits with margin, or (an impedance step reacting to its sensor) within a bound
-    # of the step's own noise-driven accelerations just before the pause. Measured in contact:
-    # 1.5-2.1 x the step's own (its admittance state resumes against fresh sensor noise), so the
-    # bound is 2.5 x; the jump this guards against (a 0.1 rad/s step in one cycle) is 250 rad/s^2.
-    assert worst <= max(1.5, (2.5 if kind == "contact" else 1.2) * own_worst), \
+    # Within the limits with margin, or (an impedance step reacting to its sensor) within 1.2 x
+    # the step's own noise-driven accelerations just before the pause. In contact the admittance
+    # runs on through the pause and only the task's progress ramps (controller/impedance/mode.py):
+    # 0.78-1.03 x measured over four noise seeds. Before, the insertion stopped and restarted at
+    # full step within one cycle and the admittance froze: 1.5-2.1 x. The jump this also guards
+    # against (a 0.1 rad/s step in one cycle) is 250 rad/s^2.
+    assert worst <= max(1.5, 1.2 * own_worst), \
         f"acceleration {worst:.2f} x the limit around pause/resume (the step's own: {own_worst:.2f})"
 
 

@@ -101,6 +101,11 @@ function renderStatus(s) {
     late.classList.toggle("hidden", !nodes.level || nodes.level === "ok");
     setText(late, nodes.level && nodes.level !== "ok" ? "NODES LATE: " + nodes.message : "");
   }
+  const peers = Object.values(nodes.peers || {}), own = $("peer-timing");   // the simulator's/hub's own reports
+  if (own) {
+    setText(own, peers.map(p => p.message).join("; "));
+    own.classList.toggle("late", peers.some(p => p.level !== "ok"));
+  }
   const banner = $("stopreason");
   if (banner.classList.contains("hidden") === !!s.stop_reason) banner.classList.toggle("hidden", !s.stop_reason);
   setText(banner, s.stop_reason ? "PROTECTIVE STOP: " + s.stop_reason + " (reset, then enable)" : "");

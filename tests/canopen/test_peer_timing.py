@@ -1,0 +1,88 @@
+"""The simulator's and the hub's own lateness report: the frame round-trips, a late wake is
+reported at once (after the inhibit time), an on-time producer once per event-timer period,
+and the simulator sends its report on the bus where the master's listener receives it."""
+from __future__ import annotations
+
+import time
+import uuid
+
+import canopen
+
+from spacearm.base.canopen import peer_timing
+from spacearm.base.canopen.peer_timing import LatenessMeter, decode
+from spacearm.drivers.peer_timing import PeerTimingListener
+from spacearm.firmware_sim.runner import start_simulator
+
+
+def test_report_round_trips_and_starts_a_new_interval():
+    meter = LatenessMeter(period=1.0, inhibit=0.1, late_wake=0.005)
+    meter.woke(0.001, 10.0)
+    meter.woke(0.300, 10.2)
+    report = decode(meter.report(10.2))
+    assert (report.late, report.wakes) == (1, 2) and abs(report.max_lateness - 0.300) < 1e-4
+    assert report.policy in ("normal", "SCHED_FIFO", "SCHED_RR")
+    assert decode(meter.report(11.2)) == peer_timing.TimingReport(0, 0.0, 0, report.policy, report.priority)
+
+
+def test_late_wake_is_reported_after_the_inhibit_time_on_time_wakes_once_a_period():
+    meter = LatenessMeter(period=1.0, inhibit=0.1, late_wake=0.005)
+    meter.woke(0.0, 0.0)
+    assert not meter.due(0.5) and meter.due(1.0)
+    meter.report(1.0)
+    meter.woke(0.2, 1.05)                      # a late wake: an event
+    assert not meter.due(1.09) and meter.due(1.1)
+
+
+def test_lateness_saturates_and_short_frames_are_not_reports():
+    meter = LatenessMeter()
+    meter.woke(10.0, 0.0)
+    assert decode(meter.report(1.0)).max_lateness == 0xFFFF * 1e-4
+    assert decode(b"\x00" * 7) is None
+
+
+def test_simulator_publishes_its_own_timing_to_the_master():
+    bus = f"virtual:peer-{uuid.uuid4().hex[:8]}"
+    network = canopen.Network()
+    listener = PeerTimingListener(network)
+    network.connect(interface="virtual", channel=bus.split(":", 1)[1])
+    sim = start_simulator(bus)
+    sim.lateness.period = 0.2
+    try:
+        deadline = time.monotonic() + 5.0
+        while not listener.reports()["simulator"] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        (received, report), *_ = listener.reports()["simulator"]
+        assert report.wakes > 0 and report.scheduling
+        assert listener.reports()["hub"] == []          # no hub on a virtual bus
+    finally:
+        sim.stop()
+        network.disconnect()
+
+
+def test_hub_reports_go_only_to_clients_that_ask_for_them():
+    from spacearm.base.transport.hub import LoopbackHub
+    from spacearm.base.transport.loopback import LoopbackBus
+
+    hub = LoopbackHub("127.0.0.1", 0, timing_reports=True)
+    hub.lateness.period = 0.2
+    hub.start()
+    master = LoopbackBus("peer", "127.0.0.1", hub.port, hub_reports=True, autostart=False)
+    node = LoopbackBus("peer", "127.0.0.1", hub.port, autostart=False)
+    try:
+        deadline, got = time.monotonic() + 5.0, None
+        while got is None and time.monotonic() < deadline:
+            msg = master.recv(0.2)
+            if msg is not None and msg.arbitration_id == peer_timing.HUB_COB_ID:
+                got = decode(bytes(msg.data))
+        assert got is not None and got.wakes > 0      # the hub's timer ticks every 10 ms
+        assert node.recv(0.5) is None                 # a node on the same channel never sees them
+    finally:
+        master.shutdown()
+        node.shutdown()
+        hub.stop()
+
+
+def test_a_device_on_a_report_cob_id_is_not_taken_for_a_report():
+    network = canopen.Network()
+    PeerTimingListener(network, device_cob_ids={peer_timing.HUB_COB_ID})
+    assert peer_timing.SIMULATOR_COB_ID in network.subscribers and peer_timing.HUB_COB_ID not in network.subscribers
