@@ -12,7 +12,7 @@ import typer
 
 from spacearm.console.errors import EXIT_USAGE, friendly_errors
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
-from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged
+from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged, on_arm_drives
 from spacearm.offline.diagnosis.column_spec import parse_columns
 from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_recording
 from spacearm.offline.diagnosis.report import write_report
@@ -47,10 +47,13 @@ def register(app: typer.Typer) -> None:
                                                                   "with this plant (standing in for the arm) and "
                                                                   "diagnose it."),
                  arm: Path = typer.Option(Path("configs/arm/oru_testbed_6dof.toml"),
-                                          help="Arm file whose limits bound the designed experiment."),
+                                          help="The recorded arm's file: its drive limits ([joints.drive]) and "
+                                               "joint limits drive the replay and bound the designed experiment."),
+                 bus: Path = typer.Option(None, help="Bus file of the recorded arm's drives (scaling, rated "
+                                                     "torque); default: the test bed's."),
                  as_json: bool = typer.Option(False, "--json", help="Print the JSON summary.")) -> None:
         """Locate, name and fit the physics the nominal simulator leaves out; show the fit improve."""
-        nominal_config = load_plant_config(nominal)
+        nominal_config = on_arm_drives(load_plant_config(nominal), arm, bus)
         try:
             if rate is not None and not (0.0 < rate <= 1e5):
                 raise RecordingFormatError(f"--rate {rate}: expected a rate in Hz between 0 and 100000")
