@@ -1,0 +1,100 @@
+"""`spacearm diagnose --run`: a simulator hides Coulomb friction on joint 3 (configs/plant/effects/
+coulomb_joint3.toml); a recording at one speed one way cannot tell Coulomb from viscous friction;
+the designed experiment runs on the daemon (separate processes on the loopback CAN hub, over the
+API, under the console's control lease), the daemon records it, and the re-diagnosis of that
+recording names the true law. Without a daemon, or with the lease held by another console, it
+refuses with one line and moves nothing."""
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hil_tests.conftest import ROOT, child_env
+from hil_tests.harness import free_port
+
+pytestmark = pytest.mark.hil
+RESOLVER_QUANTUM = math.radians(25 / 3600)
+PLANT = "configs/plant/effects/coulomb_joint3.toml"   # nominal test bed + 4 N m Coulomb on joint 3
+
+
+def spacearm(env: dict, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "spacearm.console.main", *args], capture_output=True, text=True,
+                          cwd=ROOT, env=env, timeout=timeout)
+
+
+def ok(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 0, result.stdout + result.stderr
+    return result.stdout
+
+
+@pytest.fixture
+def stack(loopback_hub, launch, tmp_path):
+    bus = loopback_hub.spec(f"diagnose-run-{os.getpid()}-{time.monotonic_ns()}")
+    launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--control-node", "126", "--rt-priority", "50"],
+           bus_spec=bus, ready="nodes ready")
+    api = f"tcp:127.0.0.1:{free_port()}"
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
+            "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)
+    env = child_env({"SPACEARM_LEASE_DIR": str(tmp_path / "operator"), "SPACEARM_API": api})
+    return {"api": api, "env": env, "tmp": tmp_path}
+
+
+def test_diagnose_run_settles_coulomb_against_viscous_on_the_daemon(stack):
+    env, tmp = stack["env"], stack["tmp"]
+    ok(spacearm(env, "enable"))
+    first = tmp / "ramp.mcap"
+    ok(spacearm(env, "record", "start", str(first)))
+    ok(spacearm(env, "jog", "3", "0.5", "--speed", "0.3"))     # one way at one speed: 0.052 rad/s, ~10 s
+    ok(spacearm(env, "record", "stop"))
+
+    # another console holds the lease: the experiment is refused in one line, nothing moves
+    other = dict(env, SPACEARM_LEASE_DIR=str(tmp / "other"))
+    ok(spacearm(env, "control", "release"))
+    ok(spacearm(other, "control", "take"))
+    held = json.loads(ok(spacearm(env, "status", "--json")))
+    refused = spacearm(env, "diagnose", str(first), "--run", "--report", str(tmp / "refused"))
+    assert refused.returncode == 1 and refused.stderr.startswith("error[lease_held]:"), refused.stderr
+    assert len(refused.stderr.strip().splitlines()) == 1 and "Traceback" not in refused.stderr
+    after = json.loads(ok(spacearm(env, "status", "--json")))
+    assert after["motions_finished"] == held["motions_finished"] and after["mode"] == held["mode"]
+    assert [j["q_cmd"] for j in after["joints"]] == pytest.approx([j["q_cmd"] for j in held["joints"]],
+                                                                   abs=2 * RESOLVER_QUANTUM)
+    ok(spacearm(other, "control", "release"))
+
+    res = spacearm(env, "diagnose", str(first), "--run", "--report", str(tmp / "d"), "--json")
+    out = json.loads(ok(res))
+    assert out["findings"][0]["joint"] == 3 and out["findings"][0]["equally_good"]     # ambiguous at one speed
+    experiment = out["experiment"]
+    assert experiment["joints"] == [3] and "daemon" in experiment["ran_on"]
+    recorded = tmp / "d" / "experiment.mcap"
+    assert recorded.is_file() and str(recorded) in experiment["ran_on"]
+    assert experiment["verdict_after"].startswith("joint 3: Coulomb friction"), experiment["verdict_after"]
+    assert "equally well" not in experiment["verdict_after"]
+    status = json.loads(ok(spacearm(env, "status", "--json")))
+    assert status["state"] == "enabled" and status["recording"] is not None    # the daemon records on
+
+
+def test_diagnose_run_without_a_daemon_refuses_in_one_line(tmp_path):
+    rec = ROOT / "tests" / "diagnosis"
+    env = child_env({"SPACEARM_LEASE_DIR": str(tmp_path / "operator")})
+    from spacearm.offline.diagnosis.record import record_direct
+    from spacearm.offline.diagnosis.trajectory import Trajectory
+    from spacearm.firmware_sim.plant import load_plant_config
+    import numpy as np
+    t = np.arange(0.0, 12.0, 0.02)
+    q = np.repeat(np.array([[0.0, 1.5707963267948966, -1.5707963267948966, 0.0, -1.5707963267948966, 0.0]]),
+                  len(t), axis=0)
+    q[:, 2] += np.clip((t - 1.0) * 0.05, 0.0, None)
+    record_direct(load_plant_config(PLANT), Trajectory(t, q), tmp_path / "ramp.csv")
+    res = spacearm(env, "diagnose", str(tmp_path / "ramp.csv"), "--run", "--api", f"tcp:127.0.0.1:{free_port()}",
+                   "--report", str(tmp_path / "d"))
+    assert res.returncode == 1 and res.stderr.startswith("error[no_connection]: cannot reach the daemon"), res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1
+    assert rec.is_dir()
