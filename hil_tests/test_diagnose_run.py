@@ -1,5 +1,6 @@
-"""`spacearm diagnose --run`: a simulator hides Coulomb friction on joint 3 (configs/plant/effects/
-coulomb_joint3.toml); a recording at one speed one way cannot tell Coulomb from viscous friction;
+"""`spacearm diagnose --run`: a simulator hides viscous friction on joint 3 (the example effect plant
+with viscous instead of Coulomb friction); a recording at one speed one way cannot tell viscous
+from Coulomb friction;
 the designed experiment runs on the daemon (separate processes on the loopback CAN hub, over the
 API, under the console's control lease), the daemon records it, and the re-diagnosis of that
 recording names the true law. Without a daemon, or with the lease held by another console, it
@@ -21,7 +22,17 @@ from hil_tests.harness import free_port
 
 pytestmark = pytest.mark.hil
 RESOLVER_QUANTUM = math.radians(25 / 3600)
-PLANT = "configs/plant/effects/coulomb_joint3.toml"   # nominal test bed + 4 N m Coulomb on joint 3
+EXAMPLE = ROOT / "configs/plant/effects/coulomb_joint3.toml"   # nominal test bed + 4 N m Coulomb on joint 3
+VISCOUS = 80.0     # N m s/rad: 4.2 N m of drag at the recording's 0.052 rad/s, as much as the Coulomb
+
+
+def viscous_plant(folder: Path) -> Path:
+    """The example plant with the same drag as viscous friction (joint 3 is the one with Coulomb)."""
+    text = EXAMPLE.read_text()
+    assert text.count("coulomb_friction = 4.0") == 1
+    path = folder / "viscous_joint3.toml"
+    path.write_text(text.replace("coulomb_friction = 4.0", f"viscous_friction = {VISCOUS}"))
+    return path
 
 
 def spacearm(env: dict, *args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -37,7 +48,7 @@ def ok(result: subprocess.CompletedProcess) -> str:
 @pytest.fixture
 def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"diagnose-run-{os.getpid()}-{time.monotonic_ns()}")
-    launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--control-node", "126", "--rt-priority", "50"],
+    launch(["-m", "spacearm.console.main", "sim", "--plant", str(viscous_plant(tmp_path)), "--control-node", "126", "--rt-priority", "50"],
            bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
@@ -46,7 +57,7 @@ def stack(loopback_hub, launch, tmp_path):
     return {"api": api, "env": env, "tmp": tmp_path}
 
 
-def test_diagnose_run_settles_coulomb_against_viscous_on_the_daemon(stack):
+def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack):
     env, tmp = stack["env"], stack["tmp"]
     ok(spacearm(env, "enable"))
     first = tmp / "ramp.mcap"
@@ -68,6 +79,7 @@ def test_diagnose_run_settles_coulomb_against_viscous_on_the_daemon(stack):
                                                                    abs=2 * RESOLVER_QUANTUM)
     ok(spacearm(other, "control", "release"))
 
+    ok(spacearm(env, "record", "start"))        # the daemon's own recording goes on after the experiment
     res = spacearm(env, "diagnose", str(first), "--run", "--report", str(tmp / "d"), "--json")
     out = json.loads(ok(res))
     assert out["findings"][0]["joint"] == 3 and out["findings"][0]["equally_good"]     # ambiguous at one speed
@@ -75,10 +87,10 @@ def test_diagnose_run_settles_coulomb_against_viscous_on_the_daemon(stack):
     assert experiment["joints"] == [3] and "daemon" in experiment["ran_on"]
     recorded = tmp / "d" / "experiment.mcap"
     assert recorded.is_file() and str(recorded) in experiment["ran_on"]
-    assert experiment["verdict_after"].startswith("joint 3: Coulomb friction"), experiment["verdict_after"]
-    assert "equally well" not in experiment["verdict_after"]
+    after = experiment["verdict_after"]
+    assert after.startswith("joint 3: viscous friction") and "equally well" not in after, after
     status = json.loads(ok(spacearm(env, "status", "--json")))
-    assert status["state"] == "enabled" and status["recording"] is not None    # the daemon records on
+    assert status["state"] == "enabled" and status["recording"]["path"] != str(recorded)   # the daemon records on
 
 
 def test_diagnose_run_without_a_daemon_refuses_in_one_line(tmp_path):
@@ -92,7 +104,7 @@ def test_diagnose_run_without_a_daemon_refuses_in_one_line(tmp_path):
     q = np.repeat(np.array([[0.0, 1.5707963267948966, -1.5707963267948966, 0.0, -1.5707963267948966, 0.0]]),
                   len(t), axis=0)
     q[:, 2] += np.clip((t - 1.0) * 0.05, 0.0, None)
-    record_direct(load_plant_config(PLANT), Trajectory(t, q), tmp_path / "ramp.csv")
+    record_direct(load_plant_config(EXAMPLE), Trajectory(t, q), tmp_path / "ramp.csv")
     res = spacearm(env, "diagnose", str(tmp_path / "ramp.csv"), "--run", "--api", f"tcp:127.0.0.1:{free_port()}",
                    "--report", str(tmp_path / "d"))
     assert res.returncode == 1 and res.stderr.startswith("error[no_connection]: cannot reach the daemon"), res.stderr

@@ -13,6 +13,7 @@ import typer
 from spacearm.console.commands.operate import API_OPTION, TOKEN_OPTION
 from spacearm.console.errors import EXIT_USAGE, friendly_errors
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
+from spacearm.offline.diagnosis.command_timing import align_commands
 from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged, on_arm_drives
 from spacearm.offline.diagnosis.column_spec import parse_columns
 from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_recording
@@ -86,6 +87,9 @@ def register(app: typer.Typer) -> None:
         except RecordingFormatError as exc:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
+        timing_note = None
+        if real.suffix == ".mcap" and traces is None:
+            table, timing_note = align_commands(table, nominal_config)
         try:
             with _progress_bar() as progress:
                 result = run_diagnosis(table, nominal_config, traces, progress)
@@ -95,13 +99,17 @@ def register(app: typer.Typer) -> None:
             raise SystemExit(1) from None
         result.timings["read_s"] = read_s
         data = write_report(result, report, real.name, nominal_config)
+        if timing_note:
+            data["command_timing"] = timing_note
         if experiment is not None or experiment_plant is not None or run:
-            runner = _on_daemon(api, token) if run else _on_plant(experiment_plant)
+            runner = _on_daemon(api, token, nominal_config) if run else _on_plant(experiment_plant)
             data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
                                              runner, report)
         if as_json:
             print(json.dumps(data, indent=2))
             return
+        if timing_note:
+            print(timing_note)
         print(result.verdict)
         for c in result.channels:
             if c.significant:
@@ -169,13 +177,14 @@ def _on_plant(plant: Path | None):
     return run
 
 
-def _on_daemon(api: str, token: str | None):
+def _on_daemon(api: str, token: str | None, nominal):
     """Runs the experiment on the daemon at `api`, which records it (console/experiment_run.py)."""
     def run(joints, limits, traj, arm_name, n_joints, report):
         from spacearm.console.experiment_run import run_experiment
         report.mkdir(parents=True, exist_ok=True)
         path = run_experiment(joints, limits, arm_name, n_joints, report / "experiment.mcap", api, token)
         recording, _ = read_recording(path)
+        recording, _ = align_commands(recording, nominal)
         return recording, f"run on the daemon at {api}, recorded to {path}"
     return run
 
