@@ -63,3 +63,25 @@ def test_a_motion_faster_than_the_test_beds_drives_replays_at_its_own_speed():
     assert on_arm.following_error_window == pytest.approx(min(j.drive.following_error
                                                              for j in load_arm_config(UR10).joints))
     assert on_arm.following_error_max > 0.0
+
+
+def test_record_sim_direct_runs_a_seven_joint_arm_on_its_own_drives(tmp_path):
+    """`record-sim --direct` takes the joint count and the drives from --arm (it read 6 joints and
+    the test bed's drives for every arm): Panda joint 1 at 1.5 rad/s, above the test bed's 1 rad/s."""
+    import subprocess
+    import sys
+    from spacearm.offline.diagnosis.recording_io import read_table
+    t = DT * np.arange(100)
+    q = np.zeros((100, 7))
+    q[:, 3] = -1.5
+    q[:, 0] = np.minimum(1.5 * t, 1.2)
+    np.savetxt(tmp_path / "t.csv", np.column_stack([t, q]), delimiter=",", comments="",
+               header="t," + ",".join(f"q_cmd_{i}" for i in range(1, 8)))
+    out = subprocess.run([sys.executable, "-m", "spacearm.console.main", "record-sim", "--plant",
+                          "configs/plant/panda_nominal.toml", "--arm", "configs/arm/panda.toml", "--bus-config",
+                          "configs/bus/panda.toml", "--trajectory", str(tmp_path / "t.csv"), "--out",
+                          str(tmp_path / "r.csv"), "--direct"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    table = read_table(tmp_path / "r.csv")
+    assert table.q.shape[1] == 7
+    assert np.max(np.abs(np.diff(table.q[:, 0]))) / DT > 1.3       # moved faster than the test bed's drives allow
