@@ -71,6 +71,8 @@ def register(app: typer.Typer) -> None:
             if dry_run:
                 print("\n".join(lines))
                 return
+            if urdf is not None and run:
+                raise RecordingFormatError("--run re-diagnoses with the simulator's replay, not --urdf: drop one")
             if urdf is not None:
                 _diagnose_arm(table, urdf, heldout_from, report, real.name, as_json, experiment)
                 return
@@ -102,7 +104,7 @@ def register(app: typer.Typer) -> None:
         if timing_note:
             data["command_timing"] = timing_note
         if experiment is not None or experiment_plant is not None or run:
-            runner = _on_daemon(api, token, nominal_config) if run else _on_plant(experiment_plant)
+            runner = _on_daemon(api, token, nominal_config) if run else _on_plant(experiment_plant, arm, bus)
             data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
                                              runner, report)
         if as_json:
@@ -166,14 +168,15 @@ def _experiment(result, table, nominal_config, arm: Path, out: Path, runner, rep
     return info
 
 
-def _on_plant(plant: Path | None):
-    """Runs the experiment through record-sim's direct path with a plant standing in for the arm."""
+def _on_plant(plant: Path | None, arm: Path, bus: Path | None):
+    """Runs the experiment through record-sim's direct path with a plant standing in for the arm
+    (on the arm's drives)."""
     if plant is None:
         return None
 
     def run(joints, limits, traj, arm_name, n_joints, report):
         from spacearm.offline.diagnosis.record import record_direct
-        return record_direct(load_plant_config(plant), traj, None), plant.name
+        return record_direct(on_arm_drives(load_plant_config(plant), arm, bus), traj, None), plant.name
     return run
 
 
