@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from hil_tests.conftest import ROOT, child_env
-from hil_tests.harness import free_port
+from hil_tests.harness import free_port, patient_bus
 
 pytestmark = pytest.mark.hil
 LOAD_STOP_CODES = ("heartbeat_lost", "pdo_missing")     # as in test_web_console.py
@@ -49,10 +49,11 @@ def ok(result: subprocess.CompletedProcess) -> str:
 @pytest.fixture
 def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"diagnose-run-{os.getpid()}-{time.monotonic_ns()}")
-    launch(["-m", "spacearm.console.main", "sim", "--plant", str(viscous_plant(tmp_path)), "--control-node", "126", "--rt-priority", "50"],
-           bus_spec=bus, ready="nodes ready")
+    bus_config = str(patient_bus(tmp_path / "bus.toml"))     # supervision is not under test here
+    launch(["-m", "spacearm.console.main", "sim", "--plant", str(viscous_plant(tmp_path)), "--control-node", "126",
+            "--rt-priority", "50", "--bus-config", bus_config], bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
-    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
+    launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--bus-config", bus_config,
             "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     env = child_env({"SPACEARM_LEASE_DIR": str(tmp_path / "operator"), "SPACEARM_API": api})
     return {"api": api, "env": env, "tmp": tmp_path}
