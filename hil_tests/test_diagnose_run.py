@@ -24,11 +24,11 @@ pytestmark = pytest.mark.hil
 LOAD_STOP_CODES = ("heartbeat_lost", "pdo_missing")     # as in test_web_console.py
 RESOLVER_QUANTUM = math.radians(25 / 3600)
 EXAMPLE = ROOT / "configs/plant/effects/coulomb_joint3.toml"   # nominal test bed + 4 N m Coulomb on joint 3
-VISCOUS = 80.0     # N m s/rad: 4.2 N m of drag at the recording's 0.052 rad/s, as much as the Coulomb
+VISCOUS = 200.0    # N m s/rad: 10.5 N m of drag at the recording's 0.052 rad/s, twice the servo's torque chatter
 
 
 def viscous_plant(folder: Path) -> Path:
-    """The example plant with the same drag as viscous friction (joint 3 is the one with Coulomb)."""
+    """The example plant with viscous friction where it has Coulomb friction (joint 3)."""
     text = EXAMPLE.read_text()
     assert text.count("coulomb_friction = 4.0") == 1
     path = folder / "viscous_joint3.toml"
@@ -59,13 +59,26 @@ def stack(loopback_hub, launch, tmp_path):
     return {"api": api, "env": env, "tmp": tmp_path}
 
 
-def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack):
+def record_ramp(api: str, path: Path) -> None:
+    """Joint 3 one way at one speed (0.052 rad/s, 0.8 rad, ~16 s), recorded from just before the
+    move to just after it: this process's calls take milliseconds, where a console command
+    started per step would let the lockstep daemon record seconds of rest around the motion."""
+    from spacearm.console.client import ApiClient
+    from spacearm.console.commands.operate import _wait_for_motion
+    from spacearm.console.control import controlled_call
+    with ApiClient(api) as client:
+        controlled_call(client, "record.start", path=str(path))
+        motion = controlled_call(client, "jog", joint=3, delta=0.8, speed=0.3)
+        _wait_for_motion(client, motion["motion"], as_json=True)
+        controlled_call(client, "record.stop")
+
+
+def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack, monkeypatch):
     env, tmp = stack["env"], stack["tmp"]
     ok(spacearm(env, "enable"))
     first = tmp / "ramp.mcap"
-    ok(spacearm(env, "record", "start", str(first)))
-    ok(spacearm(env, "jog", "3", "0.5", "--speed", "0.3"))     # one way at one speed: 0.052 rad/s, ~10 s
-    ok(spacearm(env, "record", "stop"))
+    monkeypatch.setenv("SPACEARM_LEASE_DIR", env["SPACEARM_LEASE_DIR"])    # this process is the same operator
+    record_ramp(stack["api"], first)
 
     # another console holds the lease: the experiment is refused in one line, nothing moves
     other = dict(env, SPACEARM_LEASE_DIR=str(tmp / "other"))
