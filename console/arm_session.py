@@ -40,15 +40,22 @@ class DaemonArm:
                 raise CommandFailed(f"arm not enabled within {timeout:.0f} s")
             time.sleep(0.02)
 
-    def move_to(self, q: np.ndarray) -> np.ndarray:
-        """Jerk-limited joint move to q, then settle; returns the measured joint angles."""
-        started = _controlled_call(self.client, "move_joints", q=[float(v) for v in q], speed=self.speed)
+    def move_to(self, q: np.ndarray, speed: float | None = None) -> np.ndarray:
+        """Jerk-limited joint move to q (at `speed`, a fraction of the joint limits; default the
+        arm's), then settle; returns the measured joint angles."""
+        started = _controlled_call(self.client, "move_joints", q=[float(v) for v in q],
+                                   speed=self.speed if speed is None else speed)
         status = _wait_for_motion(self.client, started["motion"], as_json=True)
-        cycles = int(np.ceil(self.settle / status["period"]))
-        until = status["cycle"] + cycles
+        return self.q(self.hold(self.settle, status))
+
+    def hold(self, seconds: float, status: dict | None = None) -> dict:
+        """Wait while the arm stands still for `seconds` of control cycles (the same in real
+        time and in lockstep); fails if the arm leaves the enabled state meanwhile."""
+        status = status or self.status()
+        until = status["cycle"] + int(np.ceil(seconds / status["period"]))
         while status["cycle"] < until:
-            time.sleep(min(0.02, self.settle / 10))
+            time.sleep(min(0.02, max(seconds, 1e-3) / 10))
             status = self.status()
             if status["state"] != "enabled":
                 raise CommandFailed(f"arm {status['state']} while settling: {status.get('stop_reason')}")
-        return self.q(status)
+        return status

@@ -26,6 +26,7 @@ from spacearm.base.kinematics.model import KinematicModel
 from spacearm.firmware_sim.plant import load_plant_config
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.test_daemon_console import free_port
+from hil_tests.harness import patient_bus
 
 pytestmark = [pytest.mark.hil]
 PLANT = ROOT / "configs/plant/oru_testbed_errors.toml"
@@ -39,16 +40,6 @@ def fast_copy(arm: Path, out: Path, factor: float = 2.0) -> Path:
     text = arm.read_text()
     for key in ("velocity", "acceleration", "jerk"):
         text = re.sub(rf"{key} = ([0-9.eE+-]+)", lambda m, k=key: f"{k} = {factor * float(m.group(1))!r}", text)
-    out.write_text(text)
-    return out
-
-
-def patient_bus(out: Path) -> Path:
-    """The arm's bus with slower heartbeats (loss after 1 s instead of 0.25 s): the simulator
-    renders the camera in its own process, and on a loaded 2-core machine a render can starve
-    the nodes' heartbeat threads for a few hundred ms. Supervision is not under test here."""
-    text = (ROOT / "configs/bus/arm.toml").read_text().replace("heartbeat_period = 0.1", "heartbeat_period = 0.4")
-    text = text.replace("[bus]\n", "[bus]\nmaster_heartbeat_timeout = 1.5\nlockstep_timeout = 2.0\n", 1)
     out.write_text(text)
     return out
 

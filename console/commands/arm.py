@@ -61,7 +61,14 @@ def register(app: typer.Typer) -> None:
         if bus is not None:
             _write(bus, dump_toml(bus_for_arm(drive_specs(config), DEFAULT_BUS_CONFIG)))
             print(f"{bus}: {len(config.joints)} joint drives + the template's other devices")
+        bare = [] if config.links else _without_inertial(urdf, base, tip)
+        if bare:
+            print(f"note: {urdf}: no <inertial> on {', '.join(bare)}: no [[links]] written, so the arm cannot run "
+                  "the rigid-body plant")
         if plant is not None:
+            if bare:
+                raise CommandFailed(f"--plant: {urdf}: no <inertial> on {', '.join(bare)}; the rigid-body plant "
+                                    "needs one on every moving link")
             if out is None:
                 raise CommandFailed("--plant needs --out (the plant file refers to the arm file)")
             if not math.isfinite(gravity) or abs(gravity) > 100.0:
@@ -70,6 +77,13 @@ def register(app: typer.Typer) -> None:
             print(f"{plant}: nominal plant, gravity {gravity} m/s^2")
 
     app.add_typer(arm_app, name="arm")
+
+
+def _without_inertial(urdf: Path, base: str, tip: str) -> list[str]:
+    """The moving links (named with the joint that moves them) the URDF gives no inertial."""
+    from spacearm.base.kinematics.urdf import read_chain
+    chain = read_chain(urdf, base, tip)
+    return [f"link {j.child!r} (joint {j.name!r})" for j, body in zip(chain.joints, chain.bodies) if body is None]
 
 
 def _write(path: Path, text: str) -> None:

@@ -10,9 +10,11 @@ from pathlib import Path
 import numpy as np
 import typer
 
+from spacearm.console.commands.operate import API_OPTION, TOKEN_OPTION
 from spacearm.console.errors import EXIT_USAGE, friendly_errors
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
-from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged
+from spacearm.offline.diagnosis.command_timing import align_commands
+from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged, on_arm_drives
 from spacearm.offline.diagnosis.column_spec import parse_columns
 from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_recording
 from spacearm.offline.diagnosis.report import write_report
@@ -46,11 +48,18 @@ def register(app: typer.Typer) -> None:
                  experiment_plant: Path = typer.Option(None, help="Run the designed experiment through record-sim "
                                                                   "with this plant (standing in for the arm) and "
                                                                   "diagnose it."),
+                 run: bool = typer.Option(False, "--run", help="Run the designed experiment on the running "
+                                                               "daemon (--api; it needs the control lease and an "
+                                                               "enabled arm), fetch its recording and diagnose it."),
+                 api: str = API_OPTION, token: str = TOKEN_OPTION,
                  arm: Path = typer.Option(Path("configs/arm/oru_testbed_6dof.toml"),
-                                          help="Arm file whose limits bound the designed experiment."),
+                                          help="The recorded arm's file: its drive limits (joints.drive table) and "
+                                               "joint limits drive the replay and bound the designed experiment."),
+                 bus: Path = typer.Option(None, help="Bus file of the recorded arm's drives (scaling, rated "
+                                                     "torque); default: the test bed's."),
                  as_json: bool = typer.Option(False, "--json", help="Print the JSON summary.")) -> None:
         """Locate, name and fit the physics the nominal simulator leaves out; show the fit improve."""
-        nominal_config = load_plant_config(nominal)
+        nominal_config = on_arm_drives(load_plant_config(nominal), arm, bus)
         try:
             if rate is not None and not (0.0 < rate <= 1e5):
                 raise RecordingFormatError(f"--rate {rate}: expected a rate in Hz between 0 and 100000")
@@ -62,9 +71,14 @@ def register(app: typer.Typer) -> None:
             if dry_run:
                 print("\n".join(lines))
                 return
+            if urdf is not None and run:
+                raise RecordingFormatError("--run re-diagnoses with the simulator's replay, not --urdf: drop one")
             if urdf is not None:
                 _diagnose_arm(table, urdf, heldout_from, report, real.name, as_json, experiment)
                 return
+            if run:
+                from spacearm.console.experiment_run import take_control
+                take_control(api, token)
             traces = None
             if sim is not None:
                 s, _ = read_recording(sim, specs, command, period)
@@ -75,6 +89,9 @@ def register(app: typer.Typer) -> None:
         except RecordingFormatError as exc:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
+        timing_note = None
+        if real.suffix == ".mcap" and traces is None:
+            table, timing_note = align_commands(table, nominal_config)
         try:
             with _progress_bar() as progress:
                 result = run_diagnosis(table, nominal_config, traces, progress)
@@ -84,12 +101,17 @@ def register(app: typer.Typer) -> None:
             raise SystemExit(1) from None
         result.timings["read_s"] = read_s
         data = write_report(result, report, real.name, nominal_config)
-        if experiment is not None or experiment_plant is not None:
+        if timing_note:
+            data["command_timing"] = timing_note
+        if experiment is not None or experiment_plant is not None or run:
+            runner = _on_daemon(api, token, nominal_config) if run else _on_plant(experiment_plant, arm, bus)
             data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
-                                             experiment_plant, report)
+                                             runner, report)
         if as_json:
             print(json.dumps(data, indent=2))
             return
+        if timing_note:
+            print(timing_note)
         print(result.verdict)
         for c in result.channels:
             if c.significant:
@@ -114,32 +136,60 @@ def _progress_bar():
         yield lambda stage, done: bar.update(task, completed=done, description=stage)
 
 
-def _experiment(result, table, nominal_config, arm: Path, out: Path, plant: Path | None, report: Path) -> dict:
-    """Design (and, with a stand-in plant, run and diagnose) the experiment that settles the
-    ambiguous findings (spacearm.offline.diagnosis.experiment)."""
+def _experiment(result, table, nominal_config, arm: Path, out: Path, runner, report: Path) -> dict:
+    """Design the experiment that settles the ambiguous findings (spacearm.offline.diagnosis.
+    experiment) and, with a runner (a stand-in plant, or the daemon with --run), run it and
+    diagnose its recording."""
+    from spacearm.base.config.arm import load_arm_config
     from spacearm.offline.diagnosis.experiment import design_experiment, joints_to_excite, limits_from_arm
     from spacearm.offline.diagnosis.honesty import MIN_TRAVEL
-    from spacearm.offline.diagnosis.record import record_direct
     from spacearm.offline.diagnosis.trajectory import save_trajectory
     joints = joints_to_excite(result, table.q, MIN_TRAVEL)
     if not joints:
         return {"joints": [], "lines": ["experiment: nothing ambiguous or unexcited, none needed"]}
-    traj = design_experiment(joints, table.q[-1], limits_from_arm(arm, table.n_joints), table.dt)
+    limits = limits_from_arm(arm, table.n_joints)
+    traj = design_experiment(joints, table.q[-1], limits, table.dt)
     out.parent.mkdir(parents=True, exist_ok=True)
     save_trajectory(out, traj.t, traj.q)
     lines = [f"experiment: joints {[j + 1 for j in joints]}, {traj.duration:.0f} s, three speeds both ways with "
              f"dwells, within {arm.name}'s limits: {out}"]
     info = {"joints": [j + 1 for j in joints], "trajectory": str(out), "duration_s": traj.duration}
-    if plant is None:
+    if runner is None:
         lines.append(f"  run it: spacearm record-sim --plant PLANT --trajectory {out} --out exp.csv, "
-                     "then spacearm diagnose exp.csv")
+                     "then spacearm diagnose exp.csv (or diagnose --run on the daemon)")
     else:
-        second = run_diagnosis(record_direct(load_plant_config(plant), traj, None), nominal_config)
+        recording, where = runner(joints, limits, traj, load_arm_config(arm).arm.name, table.n_joints, report)
+        second = run_diagnosis(recording, nominal_config)
         write_report(second, report / "experiment", out.name, nominal_config)
-        lines.append(f"  after the experiment ({plant.name}): {second.verdict}")
+        lines.append(f"  after the experiment ({where}): {second.verdict}")
         info["verdict_after"] = second.verdict
+        info["ran_on"] = where
     info["lines"] = lines
     return info
+
+
+def _on_plant(plant: Path | None, arm: Path, bus: Path | None):
+    """Runs the experiment through record-sim's direct path with a plant standing in for the arm
+    (on the arm's drives)."""
+    if plant is None:
+        return None
+
+    def run(joints, limits, traj, arm_name, n_joints, report):
+        from spacearm.offline.diagnosis.record import record_direct
+        return record_direct(on_arm_drives(load_plant_config(plant), arm, bus), traj, None), plant.name
+    return run
+
+
+def _on_daemon(api: str, token: str | None, nominal):
+    """Runs the experiment on the daemon at `api`, which records it (console/experiment_run.py)."""
+    def run(joints, limits, traj, arm_name, n_joints, report):
+        from spacearm.console.experiment_run import run_experiment
+        report.mkdir(parents=True, exist_ok=True)
+        path = run_experiment(joints, limits, arm_name, n_joints, report / "experiment.mcap", api, token)
+        recording, _ = read_recording(path)
+        recording, _ = align_commands(recording, nominal)
+        return recording, f"run on the daemon at {api}, recorded to {path}"
+    return run
 
 
 def _diagnose_arm(table, urdf: Path, heldout_from: float | None, report: Path, source: str, as_json: bool,

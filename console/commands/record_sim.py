@@ -7,6 +7,8 @@ from pathlib import Path
 import typer
 
 from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
+from spacearm.base.config.arm import load_arm_config
+from spacearm.offline.diagnosis.direct_sim import on_arm_drives
 from spacearm.offline.diagnosis.record import DEFAULT_ARM, RecordSimError, record_can, record_direct
 from spacearm.offline.diagnosis.trajectory import TrajectoryError, load_trajectory
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
@@ -29,7 +31,7 @@ def register(app: typer.Typer) -> None:
             print(f"error: --out {out}: must end in .mcap or .csv", file=sys.stderr)
             raise SystemExit(EXIT_USAGE)
         try:
-            traj = load_trajectory(trajectory, n_joints=6)
+            traj = load_trajectory(trajectory, n_joints=len(load_arm_config(arm).joints))
         except TrajectoryError as exc:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
@@ -37,7 +39,8 @@ def register(app: typer.Typer) -> None:
             if direct:
                 if out.suffix != ".csv":
                     raise CommandFailed("--direct writes the wide CSV only")
-                table = record_direct(config, traj, out, hold_cycles=0)
+                # the arm's drives, as the daemon configures them at bring-up on the CAN path
+                table = record_direct(on_arm_drives(config, arm, bus_config), traj, out, hold_cycles=0)
                 rows = len(table.t)
             else:
                 record_can(config, traj, out, arm, bus_config)

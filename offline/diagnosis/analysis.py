@@ -28,7 +28,7 @@ import numpy as np
 
 from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
                                             by_name)
-from spacearm.offline.diagnosis.direct_sim import SimTraces, joint_settings, simulate
+from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
@@ -282,7 +282,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     # a joint that did not move excited nothing: no finding there (its fits are noise)
     active = [j for j in range(n) if moved(table.q[:, j], quiet.dq[:, j])]
     alternatives: dict[int, list[ChannelFit]] = {}
-    settings = joint_settings(n=n)
+    settings = drive_settings(nominal, n)
     quanta = ([(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
                for j in range(n)], [settings[j].rated_joint_torque / 1000.0 for j in range(n)])   # 6077h: per mille
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active)

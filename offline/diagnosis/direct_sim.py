@@ -7,18 +7,25 @@ the daemon: the target written in cycle k-1 is latched at SYNC k, the plant adva
 period, and what the drives report after it is the measurement of row k.
 ``tests/diagnosis/test_direct_vs_can.py`` checks both paths give the same recording.
 
-Torque limit, position limits and the velocity clamp are the bus configuration's; drive
-faults (following error) are not modelled here: a replay that would fault says so through
-``SimTraces.following_error_max``.
+Torque limit, position limits and the velocity clamp are the drives': the bus file's, or, for
+a plant made with ``on_arm_drives``, the arm file's ``[joints.drive]`` and joint limits applied
+to them exactly as the daemon applies them at bring-up (``with_drive_limits``). Drive faults
+(following error) are not modelled here: a replay that would fault says so through
+``SimTraces.following_error_max``, beside the arm's window.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-import numpy as np
+from pathlib import Path
 
-from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSettings, load_bus_config
+import numpy as np
+from pydantic import Field
+
+from spacearm.base.config.arm import load_arm_config
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSettings, NodeConfig, load_bus_config
+from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
 from spacearm.firmware_sim.plant import JointModel, Plant, PlantConfig
 
@@ -40,7 +47,8 @@ class SimTraces:
     dq: np.ndarray
     tau: np.ndarray         # joint side, N m
     wrench: np.ndarray      # (N, 6)
-    following_error_max: float = 0.0
+    following_error_max: float = 0.0     # rad, largest |reference - position| over the replay
+    following_error_window: float = math.inf   # rad, the arm's smallest window (supervision), if known
 
 
 def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = None) -> list[JointSettings]:
@@ -49,6 +57,34 @@ def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = No
     config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config or DEFAULT_BUS_CONFIG)
     settings = [node.joint or JointSettings() for node in config.joints] or [JointSettings()]
     return settings + [settings[-1]] * max(0, (n or 0) - len(settings))
+
+
+class ArmPlant(PlantConfig):
+    """A plant file's physics on one arm's drives, as the diagnosis replays it: the drive
+    settings carry the arm file's velocity and torque limits and joint limits. Every copy of
+    it (``model_copy``: each fitted variant) keeps them; they are not written to plant files."""
+    drives: list[JointSettings] = Field(default_factory=list, exclude=True)
+    following_error: list[float] = Field(default_factory=list, exclude=True)
+
+
+def on_arm_drives(plant: PlantConfig, arm_file: str | Path, bus_config: BusConfig | str | None = None) -> ArmPlant:
+    """`plant` driven by the arm's drives: the bus file's drive model (scaling, rated torque),
+    one drive per arm joint, limited by the arm file as the daemon's bring-up limits them."""
+    arm = load_arm_config(arm_file)
+    n = len(arm.joints)
+    padded = BusConfig(nodes=[NodeConfig(name=f"joint_{i + 1}", node_id=i + 1, device="joint_drive", joint=s)
+                              for i, s in enumerate(joint_settings(bus_config, n)[:n])])
+    limited = with_drive_limits(padded, [j.limits.lower for j in arm.joints], [j.limits.upper for j in arm.joints],
+                                [j.drive for j in arm.joints])
+    return ArmPlant(**dict(plant), drives=[node.joint for node in limited.joints],
+                    following_error=[j.drive.following_error for j in arm.joints])
+
+
+def drive_settings(config: PlantConfig, n: int) -> list[JointSettings]:
+    """The drive settings a replay of `config` uses for n joints (the arm's, if it carries them)."""
+    if isinstance(config, ArmPlant) and config.drives:
+        return config.drives + [config.drives[-1]] * max(0, n - len(config.drives))
+    return joint_settings(n=n)
 
 
 class _CspDrive:
@@ -99,9 +135,11 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
     rows, n = q_cmd.shape
     index = list(range(n)) if joints is None else list(joints)
-    settings = settings or joint_settings(n=n)
+    settings = settings or drive_settings(config, n)
     if len(settings) < n:
         settings = list(settings) + [settings[-1]] * (n - len(settings))
+    if limits is None and isinstance(config, ArmPlant):
+        limits = [(s.lower, s.upper) for s in settings]     # 607Dh, as the daemon configures it
     params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
     start = q_cmd[0] if q0 is None else np.asarray(q0, float)
     params = [p.model_copy(update={"initial_position": float(start[i])}) for i, p in zip(index, params)]
@@ -128,10 +166,12 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         except (OverflowError, ValueError) as exc:     # round() of an infinite or NaN state
             raise SimulationDiverged(f"the simulated plant diverges at t = {t0 + dt * (r + 1):.3g} s "
                                      f"({type(exc).__name__})") from None
-            fe = max(fe, abs(drive.q_ref - drive.joint.q_measured))
+        fe = max([fe] + [abs(drive.q_ref - drive.joint.q_measured) for drive in drives])
         w = plant.ft_reading()
         wrench[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
         wrench[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
         previous, previous_v = cols[r], vel[r]
     t = t0 + dt * np.arange(1, rows + 1)
-    return SimTraces(t, cols.copy(), q, dq, tau, wrench, fe)
+    window = min((config.following_error[i] for i in index if i < len(config.following_error)), default=math.inf) \
+        if isinstance(config, ArmPlant) else math.inf
+    return SimTraces(t, cols.copy(), q, dq, tau, wrench, fe, window)

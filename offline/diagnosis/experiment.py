@@ -6,6 +6,9 @@ sign change shows; several speeds, so viscous friction's growth shows), with a d
 before every start (so stiction's break-away shows). The other joints hold still.
 
     traj = design_experiment(joints, q_start, limits_from_arm(arm_file, n))
+
+The same experiment as a list of moves (``experiment_moves``) is what ``diagnose --run``
+sends to a running daemon: each a joint move at a fraction of the joint limits after a dwell.
 """
 from __future__ import annotations
 
@@ -64,27 +67,46 @@ def _move(distance: float, v: float, a: float, dt: float) -> np.ndarray:
     return math.copysign(1.0, distance) * s
 
 
-def design_experiment(joints: list[int], q_start: np.ndarray, limits: list[JointLimit], dt: float = 0.02
-                      ) -> Trajectory:
-    """The excitation trajectory (from q_start, back to it) for the given 0-based joints."""
-    q = np.asarray(q_start, float)
-    rows = [q.copy()]
-    hold = int(round(DWELL / dt))
+@dataclass
+class ExperimentMove:
+    """One move of the experiment: after `dwell` s at rest, joint `joint` (0-based) goes to
+    `target` (all joints, rad) at `speed`, a fraction of that joint's velocity limit."""
+    joint: int
+    target: np.ndarray
+    speed: float
+    dwell: float = DWELL
+
+
+def experiment_moves(joints: list[int], q_start: np.ndarray, limits: list[JointLimit]) -> list[ExperimentMove]:
+    """Each given joint in turn, out and back at each speed; the arm ends where it started."""
+    q = np.asarray(q_start, float).copy()
+    moves = []
     for j in joints:
         lim = limits[j]
         room_up, room_down = lim.upper - q[j], q[j] - lim.lower
         stroke = min(STROKE, 0.9 * max(room_up, room_down))
         sign = 1.0 if room_up >= room_down else -1.0
-        v_max, a_max = SPEED_MARGIN * lim.velocity, ACCELERATION_SHARE * lim.acceleration
         for fraction in SPEED_FRACTIONS:
             for direction in (sign, -sign):       # out and back: both directions at this speed
-                rows += [rows[-1].copy() for _ in range(hold)]
-                base = rows[-1].copy()
-                for s in _move(direction * stroke, fraction * v_max, a_max, dt)[1:]:
-                    p = base.copy()
-                    p[j] = base[j] + s
-                    rows.append(p)
-    rows += [rows[-1].copy() for _ in range(hold)]
+                q[j] += direction * stroke
+                moves.append(ExperimentMove(j, q.copy(), fraction * SPEED_MARGIN))
+    return moves
+
+
+def design_experiment(joints: list[int], q_start: np.ndarray, limits: list[JointLimit], dt: float = 0.02
+                      ) -> Trajectory:
+    """The excitation trajectory (from q_start, back to it) for the given 0-based joints:
+    the moves of `experiment_moves` as trapezoids, with a dwell before each and at the end."""
+    rows = [np.asarray(q_start, float).copy()]
+    for move in experiment_moves(joints, q_start, limits):
+        rows += [rows[-1].copy() for _ in range(int(round(move.dwell / dt)))]
+        base, lim = rows[-1].copy(), limits[move.joint]
+        for s in _move(move.target[move.joint] - base[move.joint], move.speed * lim.velocity,
+                       ACCELERATION_SHARE * lim.acceleration, dt)[1:]:
+            p = base.copy()
+            p[move.joint] = base[move.joint] + s
+            rows.append(p)
+    rows += [rows[-1].copy() for _ in range(int(round(DWELL / dt)))]
     q_all = np.array(rows)
     return Trajectory(dt * np.arange(len(q_all)), q_all)
 

@@ -136,3 +136,17 @@ def test_command_writes_arm_bus_and_plant_files(tmp_path) -> None:
     from spacearm.firmware_sim.plant import load_plant_config
     assert [n.name for n in load_bus_config(bus).joints] == [f"joint_{i}" for i in range(1, 9)]
     assert load_plant_config(plant).rigid_body.gravity == (0.0, 0.0, -9.81)
+
+
+def test_missing_inertials_are_named_and_refused_for_a_plant(tmp_path) -> None:
+    """ROBOT's links have no <inertial>: the import says which, and a plant (rigid-body dynamics) is refused."""
+    path = tmp_path / "r.urdf"
+    path.write_text(ROBOT.format(kind="revolute", limit='<limit lower="-1" upper="1" velocity="1" effort="1"/>'))
+    run = lambda *extra: subprocess.run([sys.executable, "-m", "spacearm.console.main", "arm", "import", str(path),
+                                         "--base", "a", "--tip", "c", "--out", str(tmp_path / "r.toml"), *extra],
+                                        capture_output=True, text=True, cwd=REPO)
+    out = run()
+    assert out.returncode == 0 and "no <inertial> on link 'b' (joint 'j1'), link 'c' (joint 'j2')" in out.stdout
+    refused = run("--plant", str(tmp_path / "p.toml"))
+    assert refused.returncode == 1 and refused.stderr.count("\n") == 1 and "link 'b' (joint 'j1')" in refused.stderr
+    assert not (tmp_path / "p.toml").exists()
