@@ -116,7 +116,8 @@ def register(app: typer.Typer) -> None:
             print(json.dumps({"trial": r.trial_id, "seed": r.seed, "matches": r.matches,
                               "parameters_equal": r.parameters_equal, "stored_version": r.stored_version,
                               "replay_version": r.replay_version,
-                              "figures": {f.name: [f.stored, f.replayed] for f in r.figures}}))
+                              "figures": {f.name: [f.stored, f.replayed] for f in r.figures},
+                              "differing": r.differing}))
         else:
             table = Table(title=f"replay {r.trial_id} (seed {r.seed})")
             for col in ("figure", "stored", "replayed", "equal"):
@@ -128,6 +129,8 @@ def register(app: typer.Typer) -> None:
             Console().print(table)
             note = "" if r.stored_version == r.replay_version else \
                 f" (stored by {r.stored_version}, replayed with {r.replay_version})"
+            if r.differing:
+                print(f"series/labels that differ: {', '.join(r.differing)}")
             print(("replay matches" if r.matches else "replay DIFFERS") + note)
         if not r.matches:
             raise SystemExit(1)

@@ -26,6 +26,8 @@ class TrialOutcome:
     failure: str | None                    # why it failed (None when it succeeded)
     figures: dict[str, float] = field(default_factory=dict)   # deterministic given the seed
     timings: dict[str, float] = field(default_factory=dict)   # wall-clock figures: never compared
+    series: dict[str, list[float]] = field(default_factory=dict)   # arrays a study pools (deterministic)
+    labels: dict[str, str] = field(default_factory=dict)      # words a benchmark's table groups by
 
 
 @dataclass(frozen=True)
