@@ -82,11 +82,10 @@ def _toml_list(values) -> str:
     return json.dumps(list(values))
 
 
-def _rows(text: str, results: Path, scheduler: str | None, workers: int | None, resume: bool,
-          quiet: bool) -> list[dict]:
+def _rows(text: str, results: Path, scheduler: str | None, workers: int | None, resume: bool) -> list[dict]:
     """Run (or resume) one campaign; the rows of its finished trials. A broken trial stops the study."""
     campaign = campaign_from_text(text, f"calibrate study ({results})")
-    run_with_progress(campaign, results, scheduler, workers, resume, quiet=quiet)
+    run_with_progress(campaign, results, scheduler, workers, resume)      # the bar goes to stderr
     rows = ResultStore(results).rows()
     broken = [r["trial_id"] for r in rows if r["error"]]
     if broken:
@@ -100,10 +99,10 @@ def _unique(values) -> list[float]:
 
 
 def run_study(which: str, runs: int, seed: int, out: Path | None, results: Path, scheduler: str | None,
-              workers: int | None, resume: bool, quiet: bool, postures: int = 60) -> tuple[str, dict]:
+              workers: int | None, resume: bool, postures: int = 60) -> tuple[str, dict]:
     if which == "laser-ranger":
         rows = _rows(LASER.format(seed=seed, runs=runs, cases=_toml_list(S.LASER_CASES)), results,
-                     scheduler, workers, resume, quiet)
+                     scheduler, workers, resume)
         return S.laser_tables(rows, seed, S.LASER_CASES)
     if which == "ekf":
         noise = EKF_NOISE.format(seed=seed, trials=len(NOISE_LEVELS) * runs,
@@ -113,11 +112,11 @@ def run_study(which: str, runs: int, seed: int, out: Path | None, results: Path,
         counts = EKF_CONFIGURATIONS.format(seed=seed, trials=len(S.EKF_COUNTS) * runs,
                                            counts=_toml_list(S.EKF_COUNTS), methods=_toml_list(S.EKF_CURVES),
                                            validation_seed=S.FIG8_VALIDATION_SEED + seed)
-        noise_rows = _rows(noise, results / "noise_levels", scheduler, workers, resume, quiet)
-        count_rows = _rows(counts, results / "configurations", scheduler, workers, resume, quiet)
+        noise_rows = _rows(noise, results / "noise_levels", scheduler, workers, resume)
+        count_rows = _rows(counts, results / "configurations", scheduler, workers, resume)
         return S.ekf_tables(noise_rows, count_rows, out)
     rows = _rows(MODEL.format(model=which, seed=seed, runs=runs, postures=postures), results,
-                 scheduler, workers, resume, quiet)
+                 scheduler, workers, resume)
     return S.model_tables(which, rows)
 
 
@@ -147,7 +146,7 @@ def register_study(cal: typer.Typer) -> None:
         runs = runs or DEFAULT_RUNS.get(which, 20)
         results = results or Path("runs/calibration_studies") / f"{which}-seed{seed}-runs{runs}"
         text, head = run_study(which, runs, seed, out if which == "ekf" else None, results, scheduler, workers,
-                               resume, as_json, postures)
+                               resume, postures)
         head["results"] = str(results)
         print(text, file=sys.stderr if as_json else sys.stdout)
         if as_json:
