@@ -1,9 +1,10 @@
 """Trial kinds: what one trial of a campaign runs, as a function of (parameters, options, seed).
 
-Each kind calls the same trial functions the benchmarks loop over (bench/bench_oru.py's
-ContactTrials.run, one run of a calibration study (controller/calibration/study_trials), the checkout scenario), so a campaign
-and a benchmark measure the same thing. A trial returns a TrialOutcome; an exception is not a
-failed trial but a broken one (the runner retries it, then records it as an error).
+Each kind calls the same trial functions the benchmarks and studies use (bench/bench_oru.py's
+ContactTrials.run, one run of a calibration study in controller/calibration/study_trials,
+bench_diagnosis's run_case, the checkout scenario), so a campaign and a benchmark measure the
+same thing. A trial returns a TrialOutcome; an exception is not a failed trial but a broken one
+(the runner retries it, then records it as an error).
 """
 from __future__ import annotations
 
@@ -14,7 +15,6 @@ import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
-
 
 from spacearm.base.paths import REPO_ROOT
 
