@@ -130,7 +130,7 @@ def register_study(cal: typer.Typer) -> None:
               postures: int = typer.Option(60, min=10, max=5000, help="Measurement models: postures per fit."),
               out: Path = typer.Option(Path("calibration_plots"), help="Folder for PNG plots (ekf)."),
               results: Path = typer.Option(None, help="Result directory (default runs/calibration_studies/"
-                                                      "WHICH-seedS-runsN)."),
+                                                      "WHICH-seedS-runsN[-posturesP])."),
               resume: bool = typer.Option(True, help="Reuse the finished trials in RESULTS (--no-resume: "
                                                      "refuse a directory that has some)."),
               scheduler: str = typer.Option(None, help="tcp://HOST:PORT of a running Dask scheduler "
@@ -144,7 +144,8 @@ def register_study(cal: typer.Typer) -> None:
             raise CommandFailed(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
         check_scheduler(scheduler)
         runs = runs or DEFAULT_RUNS.get(which, 20)
-        results = results or Path("runs/calibration_studies") / f"{which}-seed{seed}-runs{runs}"
+        model_size = f"-postures{postures}" if which in S.MODELS else ""
+        results = results or Path("runs/calibration_studies") / f"{which}-seed{seed}-runs{runs}{model_size}"
         text, head = run_study(which, runs, seed, out if which == "ekf" else None, results, scheduler, workers,
                                resume, postures)
         head["results"] = str(results)
