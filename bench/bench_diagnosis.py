@@ -397,7 +397,11 @@ def main(argv: list[str] | None = None) -> dict:
           "(2 cores shared with other jobs: timings are under load)")
     print(f"cases   : {args.cases} x {args.duration:.0f} s at 50 Hz, seed {args.seed}, direct simulation path, "
           f"one campaign trial each (kind diagnosis, results {results})")
-    scores, rows, summary = run_cases(args, args.keep, results)
+    from spacearm.offline.campaign.store import StoreError
+    try:
+        scores, rows, summary = run_cases(args, args.keep, results)
+    except StoreError as exc:                 # e.g. a finished campaign in --results without --resume
+        raise SystemExit(f"error: {exc}") from None
     table(scores)
     gen = [r["w_generation_time"] for r in rows if r.get("w_generation_time") is not None]
     analysis = [r["w_analysis_time"] for r in rows if r.get("w_analysis_time") is not None]
