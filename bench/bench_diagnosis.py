@@ -339,21 +339,6 @@ def table(scores: list[Score]) -> None:
         print(f"{'no effect (false alarm)':<22}{len(nulls):>6}{'':>6}{f'{fa}/{len(nulls)} {100 * fa / len(nulls):.0f}%':>18}")
 
 
-CAMPAIGN = """[campaign]
-name = "bench_diagnosis"
-kind = "diagnosis"
-seed = {seed}
-trials = {cases}
-
-[levels.effects]
-values = {mix}
-
-[options]
-duration = {duration!r}
-keep = "{keep}"
-"""
-
-
 def score_from_row(row: dict) -> Score:
     """A campaign result row (kind `diagnosis`) back as the Score the table counts."""
     effects = [e for e in (row.get("l_effect_names") or "").split(",") if e]
@@ -366,11 +351,11 @@ def score_from_row(row: dict) -> Score:
 def run_cases(args, keep: Path | None, results: Path) -> tuple[list[Score], list[dict], object]:
     """The cases as a campaign (kind `diagnosis`) on Dask: one trial per case, Parquet rows."""
     from spacearm.offline.campaign.runner import run_campaign
-    from spacearm.offline.campaign.schema import campaign_from_text
+    from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
     from spacearm.offline.campaign.store import ResultStore
 
-    text = CAMPAIGN.format(seed=args.seed, cases=args.cases, mix=list(CASE_MIX), duration=float(args.duration),
-                           keep=str(keep.resolve()) if keep else "")
+    text = campaign_text("bench_diagnosis", "diagnosis", args.seed, args.cases, levels={"effects": list(CASE_MIX)},
+                         options={"duration": float(args.duration), "keep": str(keep.resolve()) if keep else ""})
     campaign = campaign_from_text(text, "bench/bench_diagnosis.py")
     summary = run_campaign(campaign, results, args.scheduler, args.workers, args.resume)
     rows = ResultStore(results).rows()

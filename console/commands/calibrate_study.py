@@ -18,69 +18,11 @@ from spacearm.console.commands.campaign import check_scheduler, run_with_progres
 from spacearm.console.errors import CommandFailed, friendly_errors
 from spacearm.controller.calibration import studies as S
 from spacearm.controller.calibration.study_ekf import NOISE_LEVELS
-from spacearm.offline.campaign.schema import campaign_from_text
+from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
 from spacearm.offline.campaign.store import ResultStore
 
 STUDIES = ("laser-ranger", "ekf", *S.MODELS)
 DEFAULT_RUNS = {"laser-ranger": 20, "ekf": 10}        # the measurement models: 20
-
-LASER = """[campaign]
-name = "study_laser_ranger"
-kind = "calibration_laser"
-seed = {seed}
-trials = {runs}
-
-[options]
-configurations = {cases}
-methods = ["lm", "lse"]
-"""
-
-EKF_NOISE = """[campaign]
-name = "study_ekf_noise_levels"
-kind = "calibration_ekf"
-seed = {seed}
-trials = {trials}
-
-[levels.sigma_position]         # m: the paper's four noise levels are the cross of these two
-values = {positions}
-
-[levels.sigma_rotation]         # rad
-values = {rotations}
-
-[options]
-methods = {methods}
-per_posture = {per_posture}
-"""
-
-EKF_CONFIGURATIONS = """[campaign]
-name = "study_ekf_configurations"
-kind = "calibration_ekf"
-seed = {seed}
-trials = {trials}
-
-[levels.configurations]
-values = {counts}
-
-[options]
-methods = {methods}
-validation_seed = {validation_seed}
-"""
-
-MODEL = """[campaign]
-name = "study_{model}"
-kind = "calibration_model"
-seed = {seed}
-trials = {runs}
-
-[options]
-model = "{model}"
-postures = {postures}
-"""
-
-
-def _toml_list(values) -> str:
-    return json.dumps(list(values))
-
 
 def _rows(text: str, results: Path, scheduler: str | None, workers: int | None, resume: bool) -> list[dict]:
     """Run (or resume) one campaign; the rows of its finished trials. A broken trial stops the study."""
@@ -101,23 +43,25 @@ def _unique(values) -> list[float]:
 def run_study(which: str, runs: int, seed: int, out: Path | None, results: Path, scheduler: str | None,
               workers: int | None, resume: bool, postures: int = 60) -> tuple[str, dict]:
     if which == "laser-ranger":
-        rows = _rows(LASER.format(seed=seed, runs=runs, cases=_toml_list(S.LASER_CASES)), results,
-                     scheduler, workers, resume)
-        return S.laser_tables(rows, seed, S.LASER_CASES)
+        text = campaign_text("study_laser_ranger", "calibration_laser", seed, runs,
+                             options={"configurations": list(S.LASER_CASES), "methods": ["lm", "lse"]})
+        return S.laser_tables(_rows(text, results, scheduler, workers, resume), seed, S.LASER_CASES)
     if which == "ekf":
-        noise = EKF_NOISE.format(seed=seed, trials=len(NOISE_LEVELS) * runs,
-                                 positions=_toml_list(_unique(sp for sp, _ in NOISE_LEVELS)),
-                                 rotations=_toml_list(_unique(sr for _, sr in NOISE_LEVELS)),
-                                 methods=_toml_list(S.EKF_METHODS), per_posture=str(out is not None).lower())
-        counts = EKF_CONFIGURATIONS.format(seed=seed, trials=len(S.EKF_COUNTS) * runs,
-                                           counts=_toml_list(S.EKF_COUNTS), methods=_toml_list(S.EKF_CURVES),
-                                           validation_seed=S.FIG8_VALIDATION_SEED + seed)
+        # the paper's four noise levels are the cross of two position and two rotation sigmas
+        noise = campaign_text("study_ekf_noise_levels", "calibration_ekf", seed, len(NOISE_LEVELS) * runs,
+                              levels={"sigma_position": _unique(sp for sp, _ in NOISE_LEVELS),
+                                      "sigma_rotation": _unique(sr for _, sr in NOISE_LEVELS)},
+                              options={"methods": list(S.EKF_METHODS), "per_posture": out is not None})
+        counts = campaign_text("study_ekf_configurations", "calibration_ekf", seed, len(S.EKF_COUNTS) * runs,
+                               levels={"configurations": list(S.EKF_COUNTS)},
+                               options={"methods": list(S.EKF_CURVES),
+                                        "validation_seed": S.FIG8_VALIDATION_SEED + seed})
         noise_rows = _rows(noise, results / "noise_levels", scheduler, workers, resume)
         count_rows = _rows(counts, results / "configurations", scheduler, workers, resume)
         return S.ekf_tables(noise_rows, count_rows, out)
-    rows = _rows(MODEL.format(model=which, seed=seed, runs=runs, postures=postures), results,
-                 scheduler, workers, resume)
-    return S.model_tables(which, rows)
+    text = campaign_text(f"study_{which}", "calibration_model", seed, runs,
+                         options={"model": which, "postures": postures})
+    return S.model_tables(which, _rows(text, results, scheduler, workers, resume))
 
 
 def register_study(cal: typer.Typer) -> None:

@@ -149,6 +149,21 @@ def load_campaign(path: str | Path) -> Campaign:
     return Campaign(spec, Path(path).read_text(), str(path))
 
 
+def campaign_text(name: str, kind: str, seed: int, trials: int, levels: dict[str, list] | None = None,
+                  options: dict[str, Any] | None = None) -> str:
+    """A campaign file written by a program (a study, a benchmark): header, levels, options.
+    Values are written as JSON, which TOML reads alike for strings, numbers, booleans and lists."""
+    import json
+
+    lines = ["[campaign]", f"name = {json.dumps(name)}", f"kind = {json.dumps(kind)}", f"seed = {int(seed)}",
+             f"trials = {int(trials)}"]
+    for factor, values in (levels or {}).items():
+        lines += ["", f"[levels.{factor}]", f"values = {json.dumps(list(values))}"]
+    if options:
+        lines += ["", "[options]"] + [f"{key} = {json.dumps(value)}" for key, value in options.items()]
+    return "\n".join(lines) + "\n"
+
+
 def campaign_from_text(text: str, path: str = "<stored campaign>") -> Campaign:
     """The campaign kept in a result directory (replay needs no file of its own)."""
     import tomllib

@@ -96,3 +96,13 @@ def test_bad_levels_name_the_key(tmp_path, extra, key):
     with pytest.raises(ConfigError) as err:
         load_campaign(path)
     assert key in str(err.value)
+
+
+def test_a_campaign_written_by_a_program_reads_back_as_written():
+    from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
+    text = campaign_text("study", "calibration_ekf", 3, 8, levels={"configurations": [10, 20]},
+                         options={"methods": ["lse", "lm"], "per_posture": True, "validation_seed": 7})
+    c = campaign_from_text(text)
+    assert (c.name, c.kind, c.spec.campaign.seed, c.spec.campaign.trials) == ("study", "calibration_ekf", 3, 8)
+    assert [c.parameters(i)["configurations"] for i in range(3)] == [10.0, 20.0, 10.0]
+    assert c.spec.options == {"methods": ["lse", "lm"], "per_posture": True, "validation_seed": 7}
