@@ -1,6 +1,12 @@
 """Sim-vs-real diagnosis on concealed effects: generator, scorer, table by effect type.
 
     .venv/bin/python bench/bench_diagnosis.py [--cases 60] [--duration 60] [--seed 0] [--no-timing]
+                                              [--workers N | --scheduler tcp://H:P] [--results DIR --resume]
+
+Each case is one trial of a campaign (kind `diagnosis`, offline/campaign/kind_diagnosis.py) run
+on Dask: `run_case(effects, seed, ...)` below is the per-case entry point, the case types follow
+CASE_MIX in turn (the campaign's [levels.effects]) and each case draws everything else from its
+own trial seed; the table is printed from the campaign's Parquet rows.
 
 The generator draws hidden plants (none, one or two effects from the catalogue, random joint
 or F/T axis, random size from clearly visible down to below the noise), random trajectories
@@ -209,30 +215,50 @@ def visibility(nominal: PlantConfig, truth_plant: PlantConfig, traj: Trajectory,
     return float(np.sqrt(np.mean(d ** 2)) / noise[name])
 
 
-def generate(cases: int, duration: float, seed: int, rec_dir: Path, truth_dir: Path) -> list[Path]:
-    """Write recordings (rec_dir/*.csv) and truths (truth_dir/*.json); returns the recordings."""
+CASE_TYPES = {0: "none", 1: "one", 2: "two"}     # hidden effects per case
+CASE_MIX = (1, 1, 1, 2, 0)                        # the bench's cases in turn: 60 % one, 20 % two, 20 % none
+
+
+def generate_case(effects: int, duration: float, seed: int, name: str, rec_dir: Path, truth_dir: Path) -> Path:
+    """One hidden plant + random trajectory + noisy recording (rec_dir/NAME.csv) and its truth
+    (truth_dir/NAME.json), all drawn from `seed`; returns the recording."""
+    if effects not in CASE_TYPES:
+        raise ValueError(f"effects per case: expected 0, 1 or 2, got {effects!r}")
     rng = np.random.default_rng(seed)
     nominal = load_plant_config(NOMINAL)
-    paths = []
-    for k in range(cases):
-        kind = ["one", "one", "one", "two", "none"][k % 5]
-        traj_kind, traj = random_trajectory(rng, duration)
-        noise = ChannelNoise(nominal, traj, seed * 1000 + k)
-        used: set = set()
-        effects = [] if kind == "none" else list(rng.choice(EFFECTS, size=1 if kind == "one" else 2, replace=False))
-        truths = [draw_effect(rng, e, used, duration, traj, noise) for e in effects]
-        plant = apply_truth(nominal, truths)
-        for tr in truths:
-            tr.visibility = visibility(nominal, apply_truth(nominal, [tr]), traj, tr, noise)
-        name = f"case{k:03d}"
-        path = rec_dir / f"{name}.csv"
-        record_direct(noisy(plant, seed * 1000 + k + 1), traj, path, hold_cycles=0)
-        case = Case(name, kind, traj_kind, truths)
-        (truth_dir / f"{name}.json").write_text(json.dumps({
-            "name": name, "kind": kind, "trajectory": traj_kind,
-            "truths": [vars(t) for t in case.truths]}, indent=1))
-        paths.append(path)
-    return paths
+    traj_kind, traj = random_trajectory(rng, duration)
+    noise = ChannelNoise(nominal, traj, seed * 1000)
+    used: set = set()
+    drawn = list(rng.choice(EFFECTS, size=effects, replace=False)) if effects else []
+    truths = [draw_effect(rng, e, used, duration, traj, noise) for e in drawn]
+    plant = apply_truth(nominal, truths)
+    for tr in truths:
+        tr.visibility = visibility(nominal, apply_truth(nominal, [tr]), traj, tr, noise)
+    path = rec_dir / f"{name}.csv"
+    record_direct(noisy(plant, seed * 1000 + 1), traj, path, hold_cycles=0)
+    case = Case(name, CASE_TYPES[effects], traj_kind, truths)
+    (truth_dir / f"{name}.json").write_text(json.dumps({
+        "name": name, "kind": case.kind, "trajectory": traj_kind,
+        "truths": [vars(t) for t in case.truths]}, indent=1))
+    return path
+
+
+def run_case(effects: int, seed: int, duration: float, work: Path, name: str) -> tuple["Score", dict[str, float]]:
+    """The per-case entry point (campaign kind `diagnosis`): generate one case into
+    work/{recordings,truth}, diagnose the recording alone into work/reports/NAME, score it
+    against the truth. Returns the score and the wall times of generation and analysis (s)."""
+    dirs = [work / d for d in ("recordings", "truth", "reports")]
+    for d in dirs:
+        d.mkdir(parents=True, exist_ok=True)
+    rec_dir, truth_dir, rep_dir = dirs
+    t0 = time.perf_counter()
+    path = generate_case(effects, duration, seed, name, rec_dir, truth_dir)
+    t1 = time.perf_counter()
+    nominal = load_plant_config(NOMINAL)             # the tool's side: the recording only
+    summary = write_report(diagnose(read_table(path), nominal), rep_dir / name, path.name, nominal)
+    t2 = time.perf_counter()
+    score = score_case(summary, json.loads((truth_dir / f"{name}.json").read_text()))   # the scorer's side
+    return score, {"generation_time": t1 - t0, "analysis_time": t2 - t1}
 
 
 # ------------------------------------------------------------------ scorer
@@ -313,6 +339,29 @@ def table(scores: list[Score]) -> None:
         print(f"{'no effect (false alarm)':<22}{len(nulls):>6}{'':>6}{f'{fa}/{len(nulls)} {100 * fa / len(nulls):.0f}%':>18}")
 
 
+def score_from_row(row: dict) -> Score:
+    """A campaign result row (kind `diagnosis`) back as the Score the table counts."""
+    effects = [e for e in (row.get("l_effect_names") or "").split(",") if e]
+    return Score(row["trial_id"], row.get("l_case_type") or "?", effects, bool(row.get("f_visible")),
+                 bool(row.get("f_named_first")), bool(row.get("f_false_alarm")),
+                 [bool(p) for p in row.get("s_param_ok") or []], list(row.get("s_rms_reduction") or []),
+                 row.get("l_answer") or "", row.get("l_why") or (row.get("error") or ""))
+
+
+def run_cases(args, keep: Path | None, results: Path) -> tuple[list[Score], list[dict], object]:
+    """The cases as a campaign (kind `diagnosis`) on Dask: one trial per case, Parquet rows."""
+    from spacearm.offline.campaign.runner import run_campaign
+    from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
+    from spacearm.offline.campaign.store import ResultStore
+
+    text = campaign_text("bench_diagnosis", "diagnosis", args.seed, args.cases, levels={"effects": list(CASE_MIX)},
+                         options={"duration": float(args.duration), "keep": str(keep.resolve()) if keep else ""})
+    campaign = campaign_from_text(text, "bench/bench_diagnosis.py")
+    summary = run_campaign(campaign, results, args.scheduler, args.workers, args.resume)
+    rows = ResultStore(results).rows()
+    return [score_from_row(r) for r in rows], rows, summary
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", type=int, default=60)
@@ -320,36 +369,43 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--no-timing", action="store_true", help="skip the 5-minute timing case")
     ap.add_argument("--keep", type=Path, default=None, help="keep recordings/truths/reports here")
+    ap.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
+    ap.add_argument("--scheduler", default=None, help="tcp://HOST:PORT of a running Dask scheduler")
+    ap.add_argument("--results", type=Path, default=None, help="campaign result directory (default: KEEP/campaign "
+                                                                "or a temporary one)")
+    ap.add_argument("--resume", action="store_true", help="continue the campaign in --results")
     args = ap.parse_args(argv)
     work = tempfile.TemporaryDirectory()
     base = args.keep or Path(work.name)
-    rec_dir, truth_dir, rep_dir = base / "recordings", base / "truth", base / "reports"
-    for d in (rec_dir, truth_dir, rep_dir):
-        d.mkdir(parents=True, exist_ok=True)
+    results = args.results or base / "campaign"
     print(f"machine : {platform.platform()} | {platform.machine()} | python {platform.python_version()} "
           "(2 cores shared with other jobs: timings are under load)")
-    print(f"cases   : {args.cases} x {args.duration:.0f} s at 50 Hz, seed {args.seed}, direct simulation path")
-    t0 = time.perf_counter()
-    paths = generate(args.cases, args.duration, args.seed, rec_dir, truth_dir)
-    gen_s = time.perf_counter() - t0
-    nominal = load_plant_config(NOMINAL)
-    summaries, analysis_times = {}, []
-    for path in paths:                       # the tool's side: recordings only
-        t1 = time.perf_counter()
-        result = diagnose(read_table(path), nominal)
-        summaries[path.stem] = write_report(result, rep_dir / path.stem, path.name, nominal)
-        analysis_times.append(time.perf_counter() - t1)
-    scores = [score_case(summaries[p.stem], json.loads((truth_dir / f"{p.stem}.json").read_text()))  # scorer
-              for p in paths]
+    print(f"cases   : {args.cases} x {args.duration:.0f} s at 50 Hz, seed {args.seed}, direct simulation path, "
+          f"one campaign trial each (kind diagnosis, results {results})")
+    from spacearm.offline.campaign.store import StoreError
+    try:
+        scores, rows, summary = run_cases(args, args.keep, results)
+    except StoreError as exc:                 # e.g. a finished campaign in --results without --resume
+        raise SystemExit(f"error: {exc}") from None
     table(scores)
-    print(f"\ngeneration {gen_s:.0f} s; analysis per {args.duration:.0f} s recording: median "
-          f"{np.median(analysis_times):.1f} s, max {max(analysis_times):.1f} s (incl. plots and report)")
+    gen = [r["w_generation_time"] for r in rows if r.get("w_generation_time") is not None]
+    analysis = [r["w_analysis_time"] for r in rows if r.get("w_analysis_time") is not None]
+    broken = [r["trial_id"] for r in rows if r["error"]]
+    print(f"\ncampaign: {summary.ran} cases in {summary.wall_time:.0f} s on {summary.workers} workers "
+          f"({summary.scheduler}); {summary.skipped} done before; {len(broken)} broken {broken or ''}")
+    if analysis:
+        print(f"generation per case median {np.median(gen):.1f} s; analysis per {args.duration:.0f} s recording: "
+              f"median {np.median(analysis):.1f} s, max {max(analysis):.1f} s (incl. plots and report)")
     misses = [s for s in scores if (s.kind != "none" and not s.named) or s.false_alarm]
     if misses:
         print("\nmisses:")
         for s in misses:
             print(f"  {s.name} [{s.kind}{', >=2x' if s.visible else ', <2x noise'}] {s.why or 'false alarm'}"
                   f"\n      tool said: {s.answer}")
+    nominal = load_plant_config(NOMINAL)
+    rec_dir, rep_dir = base / "recordings", base / "reports"
+    for d in (rec_dir, rep_dir):
+        d.mkdir(parents=True, exist_ok=True)
     out = {"scores": [vars(s) for s in scores]}
     if not args.no_timing:
         rng = np.random.default_rng(args.seed + 99)

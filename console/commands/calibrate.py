@@ -14,7 +14,6 @@ from spacearm.base.paths import CONFIGS
 from spacearm.console.client import DEFAULT_API
 from spacearm.console.errors import CommandFailed, friendly_errors
 
-STUDIES = ("laser-ranger", "ekf")
 DEFAULT_BOARD = CONFIGS / "calibration" / "board.toml"
 DEFAULT_MOUNT = CONFIGS / "vision" / "mount.toml"
 
@@ -32,24 +31,8 @@ def register(app: typer.Typer) -> None:
     cal = typer.Typer(help="Kinematic calibration: paper studies, data fits, real FR3 data.",
                       no_args_is_help=True)
 
-    @cal.command("study")
-    @friendly_errors
-    def study(which: str = typer.Argument(..., help="laser-ranger | ekf"),
-              runs: int = typer.Option(0, help="Monte-Carlo runs (default 20 laser, 10 ekf)."),
-              seed: int = typer.Option(0, help="First seed."),
-              out: Path = typer.Option(Path("calibration_plots"), help="Folder for PNG plots (ekf)."),
-              as_json: bool = typer.Option(False, "--json", help="Also print the headline numbers as JSON.")) -> None:
-        """Reproduce a paper's simulation study and print our tables beside the paper's."""
-        from spacearm.controller.calibration.studies import ekf_study, laser_study
-        if which not in STUDIES:
-            raise CommandFailed(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
-        if which == "laser-ranger":
-            text, head = laser_study(runs=runs or 20, seed0=seed)
-        else:
-            text, head = ekf_study(runs=runs or 10, seed0=seed, out_dir=out)
-        print(text)
-        if as_json:
-            print(json.dumps(head, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+    from spacearm.console.commands.calibrate_study import register_study
+    register_study(cal)
 
     from spacearm.console.commands.calibrate_fit import register_fit
     register_fit(cal)

@@ -22,8 +22,8 @@ from spacearm.base.paths import CONFIGS
 from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
 from spacearm.offline.campaign.replay import replay as replay_trial
 from spacearm.offline.campaign.report import summarise, write_report
-from spacearm.offline.campaign.runner import run_campaign
-from spacearm.offline.campaign.schema import load_campaign
+from spacearm.offline.campaign.runner import RunSummary, run_campaign
+from spacearm.offline.campaign.schema import Campaign, load_campaign
 from spacearm.offline.campaign.store import ResultStore, StoreError
 
 SCHEDULER = re.compile(r"^tcp://[^\s/:]+:\d{1,5}$|^tcp://\[[0-9a-fA-F:]+\]:\d{1,5}$")
@@ -55,28 +55,10 @@ def register(app: typer.Typer) -> None:
             report: bool = typer.Option(True, help="Write RESULTS/report/ at the end."),
             as_json: bool = typer.Option(False, "--json", help="Print the run summary as JSON.")) -> None:
         """Run (or resume) a campaign; progress on stderr, a summary table at the end."""
-        if scheduler is not None and not SCHEDULER.match(scheduler):
-            print(f"error: --scheduler: expected tcp://HOST:PORT, got {scheduler!r}", file=sys.stderr)
-            raise SystemExit(EXIT_USAGE)
+        check_scheduler(scheduler)
         spec = load_campaign(_campaign_path(campaign))
         results = results or Path("runs/campaigns") / spec.name
-        err = Console(stderr=True)
-        columns = (TextColumn(f"{spec.name}"), BarColumn(), MofNCompleteColumn(),
-                   TextColumn("failed {task.fields[failed]}, broken {task.fields[errors]}"),
-                   TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
-        try:
-            ResultStore(results).open_for(spec, resume)    # refuse a wrong directory before any output
-            with Progress(*columns, console=err, disable=as_json) as progress:
-                bar = progress.add_task("trials", total=spec.spec.campaign.trials, failed=0, errors=0)
-
-                def on_progress(done: int, failed: int, errors: int, total: int) -> None:
-                    progress.update(bar, completed=done, failed=failed, errors=errors)
-
-                summary = run_campaign(spec, results, scheduler, workers, resume, limit, on_progress)
-        except StoreError as exc:
-            raise CommandFailed(str(exc)) from None
-        except OSError as exc:    # scheduler unreachable (distributed raises OSError on a timeout)
-            raise CommandFailed(f"Dask scheduler {scheduler or 'LocalCluster'}: {exc}") from None
+        summary = run_with_progress(spec, results, scheduler, workers, resume, limit, quiet=as_json)
         store = ResultStore(summary.results)
         report_path = write_report(store) if report else None
         if as_json:
@@ -116,7 +98,8 @@ def register(app: typer.Typer) -> None:
             print(json.dumps({"trial": r.trial_id, "seed": r.seed, "matches": r.matches,
                               "parameters_equal": r.parameters_equal, "stored_version": r.stored_version,
                               "replay_version": r.replay_version,
-                              "figures": {f.name: [f.stored, f.replayed] for f in r.figures}}))
+                              "figures": {f.name: [f.stored, f.replayed] for f in r.figures},
+                              "differing": r.differing}))
         else:
             table = Table(title=f"replay {r.trial_id} (seed {r.seed})")
             for col in ("figure", "stored", "replayed", "equal"):
@@ -128,11 +111,43 @@ def register(app: typer.Typer) -> None:
             Console().print(table)
             note = "" if r.stored_version == r.replay_version else \
                 f" (stored by {r.stored_version}, replayed with {r.replay_version})"
+            if r.differing:
+                print(f"series/labels that differ: {', '.join(r.differing)}")
             print(("replay matches" if r.matches else "replay DIFFERS") + note)
         if not r.matches:
             raise SystemExit(1)
 
     app.add_typer(camp, name="campaign")
+
+
+def check_scheduler(scheduler: str | None) -> None:
+    """A usage error (exit 2, one line) unless None or tcp://HOST:PORT."""
+    if scheduler is not None and not SCHEDULER.match(scheduler):
+        print(f"error: --scheduler: expected tcp://HOST:PORT, got {scheduler!r}", file=sys.stderr)
+        raise SystemExit(EXIT_USAGE)
+
+
+def run_with_progress(spec: Campaign, results: Path, scheduler: str | None = None, workers: int | None = None,
+                      resume: bool = False, limit: int | None = None, quiet: bool = False) -> RunSummary:
+    """run_campaign with a progress bar on stderr (trials done, failed, broken, ETA); a result
+    directory that cannot be used or an unreachable scheduler is one line (CommandFailed)."""
+    err = Console(stderr=True)
+    columns = (TextColumn(f"{spec.name}"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("failed {task.fields[failed]}, broken {task.fields[errors]}"),
+               TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
+    try:
+        ResultStore(results).open_for(spec, resume)    # refuse a wrong directory before any output
+        with Progress(*columns, console=err, disable=quiet) as progress:
+            bar = progress.add_task("trials", total=spec.spec.campaign.trials, failed=0, errors=0)
+
+            def on_progress(done: int, failed: int, errors: int, total: int) -> None:
+                progress.update(bar, completed=done, failed=failed, errors=errors)
+
+            return run_campaign(spec, results, scheduler, workers, resume, limit, on_progress)
+    except StoreError as exc:
+        raise CommandFailed(str(exc)) from None
+    except OSError as exc:    # scheduler unreachable (distributed raises OSError on a timeout)
+        raise CommandFailed(f"Dask scheduler {scheduler or 'LocalCluster'}: {exc}") from None
 
 
 def _print_summary(store: ResultStore) -> None:

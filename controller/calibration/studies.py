@@ -1,24 +1,55 @@
-"""Monte-Carlo study drivers: run, aggregate, and format tables beside the papers' numbers.
+"""The calibration studies' tables beside the papers' numbers, pooled from trial rows.
 
-Each function returns the printable text plus a dict of the measured headline numbers, so the
-console, the benchmark and tests share them.
+A study is a campaign of trials (study_trials.py: one seeded run each); `spacearm calibrate
+study` runs them on the campaign runner and hands the finished rows here. A row is the campaign's
+Parquet row as a dict: parameters `p_*`, figures `f_*`, series `s_*`, timings `w_*`. Each table
+function returns the printable text plus a dict of the headline numbers (console, bench, tests).
+
+`laser_study` / `ekf_study` run the same trials one after another in this process and print the
+same tables (bench/bench_calibration.py's small sizes, where starting a cluster is not worth it).
 """
 from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
 from spacearm.controller.calibration import study_ekf as E
 from spacearm.controller.calibration import study_laser as L
+from spacearm.controller.calibration import study_models as M
 from spacearm.controller.calibration.plots import box_panels, error_vs_configs
-from spacearm.controller.calibration.validation import mean_stats
+from spacearm.controller.calibration.study_trials import (EKF_METHODS, EKF_TABLE4, LASER_COLUMNS, TrialNumbers,
+                                                          ekf_trial, laser_block, laser_trial)
+
+Row = dict[str, Any]
+LASER_CASES = (50, 100)
+EKF_COUNTS = (10, 20, 40, 60, 80, 100, 150, 200)
+EKF_CURVES = ("lse", "ekf", "lm")          # Figure 8's methods
+FIG8_VALIDATION_SEED = 10_000              # + the study seed: Figure 8's shared validation postures
+
+
+def as_row(numbers: TrialNumbers, parameters: dict[str, float]) -> Row:
+    """A trial run in this process, shaped like a campaign row."""
+    row: Row = {f"p_{k}": v for k, v in parameters.items()}
+    row.update({f"f_{k}": v for k, v in numbers.figures.items()})
+    row.update({f"s_{k}": v for k, v in numbers.series.items()})
+    row.update({f"w_{k}": v for k, v in numbers.timings.items()})
+    return row
+
+
+def _series(rows: Iterable[Row], name: str) -> np.ndarray:
+    return np.array([r[f"s_{name}"] for r in rows], dtype=float)
+
+
+def _at(rows: list[Row], **params: float) -> list[Row]:
+    return [r for r in rows if all(np.isclose(r[f"p_{k}"], v, rtol=1e-9) for k, v in params.items())]
 
 
 # ------------------------------------------------------------------------------- laser ranger
-def laser_study(runs: int = 20, seed0: int = 0, cases=(50, 100), n_random: int = 10_000,
-                progress=None) -> tuple[str, dict]:
+def laser_tables(rows: list[Row], seed0: int = 0, cases=LASER_CASES, n_random: int = 10_000) -> tuple[str, dict]:
+    """Table 5 (mean over the trials) beside the paper's, the noise-free recovery and the selection check."""
     t0 = time.perf_counter()
     st = L.setup()
     lines = ["Laser-ranger identification study (Table 1 arm, Table 2 errors, plane y + 4.6 z - 0.69 = 0,",
@@ -29,22 +60,10 @@ def laser_study(runs: int = 20, seed0: int = 0, cases=(50, 100), n_random: int =
     est = clean[0].fits["lm"].estimate
     worst = max(abs(est[n] - st.errors.get(n, 0.0)) for n in est)
     lines.append(f"noise-free recovery: max |identified - true| over {len(est)} parameters = {worst:.2e} (SI)")
-    nominal, per_case = [], {m: {"lm": [], "lse": []} for m in cases}
-    o3 = {m: [] for m in cases}
-    for k in range(runs):
-        nom, rr = L.run_once(st, seed0 + k, cases=cases)
-        nominal.append(nom)
-        for r in rr:
-            o3[r.m].append(r.O3)
-            for meth, s in r.stats.items():
-                per_case[r.m][meth].append(s)
-        if progress:
-            progress(k + 1, runs)
-    blocks = {"nominal": mean_stats(nominal)}
-    for m in cases:
-        for meth in ("lm", "lse"):
-            blocks[f"{m}/{meth}"] = mean_stats(per_case[m][meth])
-    lines += ["", f"Validation errors, mean over {runs} Monte-Carlo runs (ours) | paper Table 5",
+    keys = [("nominal", laser_block("nominal"))] + [(f"{m}/{meth}", laser_block(m, meth))
+                                                    for m in cases for meth in ("lm", "lse")]
+    blocks = {key: {c: _series(rows, f"{prefix}_{c}").mean(axis=0) for c in LASER_COLUMNS} for key, prefix in keys}
+    lines += ["", f"Validation errors, mean over {len(rows)} Monte-Carlo runs (ours) | paper Table 5",
               f"{'case':<12}{'ax':<3}{'RMS pos mm':>22}{'RMS ori mrad':>22}{'max pos mm':>22}{'max ori mrad':>22}"]
     for key, b in blocks.items():
         paper_key = "nominal" if key == "nominal" else key.split("/")[0]
@@ -52,14 +71,15 @@ def laser_study(runs: int = 20, seed0: int = 0, cases=(50, 100), n_random: int =
         label = key if key == "nominal" else f"{key.split('/')[0]} cfg {key.split('/')[1].upper()}"
         for ax in range(3):
             cells = []
-            for col in ("rms_pos", "rms_rot", "max_pos", "max_rot"):
+            for col in LASER_COLUMNS:
                 ours = b[col][ax] * 1e3
                 p = paper[col][ax] if paper else float("nan")
                 cells.append(f"{ours:9.4f} | {p:8.4f}")
             lines.append(f"{label if ax == 0 else '':<12}{'xyz'[ax]:<3}" + "".join(f"{c:>22}" for c in cells))
+    o3 = _series(rows, "O3").mean(axis=0)
     lines.append("")
     lines.append("O3 of the selected sets (mean): " + ", ".join(
-        f"{m} configs {np.mean(o3[m]):.3f}" for m in cases) + "  (paper: 0.048 / 0.180, its own units)")
+        f"{m} configs {v:.3f}" for m, v in zip(cases, o3)) + "  (paper: 0.048 / 0.180, its own units)")
     bench = [L.selection_benchmark(st, m, seed=seed0, n_random=n_random) for m in cases]
     for b in bench:
         lines.append(f"selection m={b['m']}: greedy+exchange O3 {b['selected_O3']:.4f} in {b['seconds']:.2f} s "
@@ -67,35 +87,47 @@ def laser_study(runs: int = 20, seed0: int = 0, cases=(50, 100), n_random: int =
                      f"(median {b['random_median_O3']:.4f}); ratio {b['ratio']:.3f}")
         lines.append("    indices of the selected set: " + ", ".join(f"{k} {v:.4g}" for k, v in b["indices"].items()))
     headline = {
-        "noise_free_max_error": worst,
+        "runs": len(rows), "noise_free_max_error": worst,
         "rms_pos_mm": {m: (blocks[f"{m}/lm"]["rms_pos"] * 1e3).tolist() for m in cases},
         "max_pos_mm": {m: (blocks[f"{m}/lm"]["max_pos"] * 1e3).tolist() for m in cases},
         "rms_rot_mrad": {m: (blocks[f"{m}/lm"]["rms_rot"] * 1e3).tolist() for m in cases},
-        "selection": bench, "seconds": time.perf_counter() - t0}
-    lines.append(f"({runs} runs in {headline['seconds']:.1f} s)")
+        "selection": bench, "tables_seconds": time.perf_counter() - t0}
     return "\n".join(lines), headline
+
+
+def laser_study(runs: int = 20, seed0: int = 0, cases=LASER_CASES, n_random: int = 10_000,
+                progress: Callable | None = None) -> tuple[str, dict]:
+    """The study's trials one after another in this process (seeds seed0, seed0 + 1, ...)."""
+    t0 = time.perf_counter()
+    rows = []
+    for k in range(runs):
+        rows.append(as_row(laser_trial(seed0 + k, cases=cases, methods=("lm", "lse")), {}))
+        if progress:
+            progress(k + 1, runs)
+    text, head = laser_tables(rows, seed0, cases, n_random)
+    head["seconds"] = time.perf_counter() - t0
+    return text + f"\n({runs} runs in {head['seconds']:.1f} s)", head
 
 
 # ------------------------------------------------------------------------------------ EKF
 METHOD_LABEL = {"lse": "LSE", "ekf": "EKF (paper P0,Q,R)", "ekf_cov": "EKF (cov-tuned)",
                 "lm": "LM full-cov MAP", "ekf_default": "EKF (default tuning)"}
+TABLE4_LEVEL = E.NOISE_LEVELS[3]           # 0.3 mm / 0.5 deg
 
 
-def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None,
-              counts=(10, 20, 40, 60, 80, 100, 150, 200), count_reps: int = 10,
-              progress=None) -> tuple[str, dict]:
-    t0 = time.perf_counter()
-    st = E.setup()
-    methods = ("lse", "ekf", "ekf_default", "ekf_cov", "lm")
+def _table4(rows: list[Row], key: str) -> dict[str, float]:
+    return dict(zip(EKF_TABLE4, _series(rows, f"{key}_table4").mean(axis=0)))
+
+
+def ekf_tables(noise_rows: list[Row], count_rows: list[Row], out_dir: Path | None = None) -> tuple[str, dict]:
+    """Table 4 (the 0.3 mm / 0.5 deg level), Table 5 (every noise level) and Figure 8 (error vs
+    identification postures) beside the paper's; with out_dir, the box plots and the curve (PNG)."""
+    methods = EKF_METHODS
+    main = _at(noise_rows, sigma_position=TABLE4_LEVEL[0], sigma_rotation=TABLE4_LEVEL[1])
     lines = ["EKF vision calibration study (7-DOF SSRMS-type arm, Table 3 errors, control noise 0.01 deg,",
-             f"  50 identification / 200 validation postures, {runs} Monte-Carlo runs)", ""]
-    # ---- Table 4 at 0.3 mm / 0.5 deg
-    runs_main = [E.run_once(st, seed0 + k, methods=methods) for k in range(runs)]
-    if progress:
-        progress("table 4")
+             f"  50 identification / 200 validation postures, {len(main)} Monte-Carlo runs)", ""]
     keys = ("initial", *methods, "floor")
-    t4 = {k: {kk: np.mean([r.stats[k].table4()[kk] for r in runs_main])
-              for kk in runs_main[0].stats[k].table4()} for k in keys}
+    t4 = {k: _table4(main, k) for k in keys}
     lines += ["Table 4 (0.3 mm / 0.5 deg): ours (mean over runs) | paper; position mm, orientation deg",
               f"{'method':<22}" + "".join(f"{h:>22}" for h in ("pos avg", "pos extreme", "X avg", "Y avg", "Z avg", "X extreme"))]
     paper_map = {"initial": "initial", "lse": "lse", "ekf": "ekf"}
@@ -118,75 +150,112 @@ def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None,
     lines.append("ratio to floor (mean position error): " + ", ".join(
         f"{METHOD_LABEL[k]} {v:.3f}" for k, v in ratios.items())
         + "   (paper: EKF 2.3335/~1.94 = 1.2, LSE 5.26/1.94 = 2.7)")
-    times = {k: float(np.mean([r.fits[k].elapsed for r in runs_main])) for k in methods}
+    times = {k: float(np.mean([r[f"w_{k}_fit_time"] for r in main])) for k in methods}
     lines.append("identification time (28 parameters, 50 postures): " + ", ".join(
         f"{METHOD_LABEL[k]} {v * 1e3:.1f} ms" for k, v in times.items()))
     # ---- Table 5: four noise levels
     lines += ["", "Table 5: mean position error after calibration, ours (avg / extremum) | paper (avg / extremum), mm",
               f"{'method':<22}" + "".join(f"{f'{sp * 1e3:g} mm/{np.degrees(sr):g} deg':>30}" for sp, sr in E.NOISE_LEVELS)]
-    t5: dict[str, list] = {k: [] for k in (*methods, "floor")}
-    by_level = []
-    for sp, sr in E.NOISE_LEVELS:
-        rs = [E.run_once(st, seed0 + k, sigma_p=sp, sigma_r=sr, methods=methods) for k in range(runs)]
-        by_level.append(rs)
-        for k in t5:
-            t5[k].append((np.mean([r.stats[k].pos_norm.mean() for r in rs]) * 1e3,
-                          np.mean([r.stats[k].pos_norm.max() for r in rs]) * 1e3))
-    if progress:
-        progress("table 5")
-    for k, vals in t5.items():
+    by_level = [_at(noise_rows, sigma_position=sp, sigma_rotation=sr) for sp, sr in E.NOISE_LEVELS]
+    for k in (*methods, "floor"):
         pap = E.PAPER_TABLE5.get(k)
         cells = []
-        for i, (a, e) in enumerate(vals):
+        for i, rs in enumerate(by_level):
+            t = _table4(rs, k)
             pa = f"{pap[i][0]:.3f}/{pap[i][1]:.3f}" if pap else "-"
-            cells.append(f"{a:.3f}/{e:.3f} | {pa}")
+            cells.append(f"{t['pos_mean'] * 1e3:.3f}/{t['pos_max'] * 1e3:.3f} | {pa}")
         lab = "floor (true params)" if k == "floor" else METHOD_LABEL[k]
         lines.append(f"{lab:<22}" + "".join(f"{c:>30}" for c in cells))
     # ---- Figure 8: error vs number of configurations
-    curves = {k: ([], []) for k in ("lse", "ekf", "lm")}
+    counts = sorted({int(r["p_configurations"]) for r in count_rows})
+    curves: dict[str, tuple[list, list]] = {k: ([], []) for k in EKF_CURVES}
     floors = []
-    Qv = E.nonsingular_configurations(st, 200, np.random.default_rng(10_000 + seed0))
     for n in counts:
-        rs = [E.run_once(st, 1000 * n + seed0 + k, n_ident=n, methods=("lse", "ekf", "lm"), Qv=Qv)
-              for k in range(count_reps)]
-        floors.append(np.mean([r.stats["floor"].pos_norm.mean() for r in rs]) * 1e3)
+        rs = _at(count_rows, configurations=n)
+        floors.append(float(np.mean([r["s_floor_table4"][0] for r in rs])) * 1e3)
         for k in curves:
-            v = np.array([r.stats[k].pos_norm.mean() for r in rs]) * 1e3
+            v = np.array([r[f"s_{k}_table4"][0] for r in rs]) * 1e3
             curves[k][0].append(v.mean())
             curves[k][1].append(v.std())
-    if progress:
-        progress("figure 8")
-    lines += ["", f"Figure 8: mean validation position error (mm) vs identification configurations ({count_reps} runs each)",
+    reps = len(count_rows) // max(len(counts), 1)
+    lines += ["", f"Figure 8: mean validation position error (mm) vs identification configurations ({reps} runs each)",
               f"{'configs':<10}" + "".join(f"{METHOD_LABEL[k]:>22}" for k in curves) + f"{'floor':>10}"]
     for i, n in enumerate(counts):
         lines.append(f"{n:<10}" + "".join(f"{curves[k][0][i]:>22.3f}" for k in curves) + f"{floors[i]:>10.3f}")
-    files = []
     if out_dir is not None:
-        out_dir = Path(out_dir)
-        f7 = {"position": {}, "X orientation": {}, "Y orientation": {}, "Z orientation": {}}
-        for k in ("initial", *methods, "floor"):
-            lab = METHOD_LABEL.get(k, k)
-            f7["position"][lab] = np.concatenate([r.stats[k].pos_norm for r in runs_main]) * 1e3
-            for i, ax in enumerate("XYZ"):
-                f7[f"{ax} orientation"][lab] = np.degrees(np.abs(np.concatenate([r.stats[k].rot[:, i] for r in runs_main])))
-        units = {"position": "mm", "X orientation": "deg", "Y orientation": "deg", "Z orientation": "deg"}
-        files.append(box_panels(out_dir / "ekf_fig7_boxplots.png", f7,
-                                "Validation errors at 0.3 mm / 0.5 deg (cf. EKF paper Fig. 7)", units))
-        f9 = {"position": {}, "X orientation": {}, "Y orientation": {}, "Z orientation": {}}
-        for (sp, sr), rs in zip(E.NOISE_LEVELS, by_level):
-            for k in ("lse", "ekf", "lm"):
-                lab = f"{k.upper()} {sp * 1e3:g}/{np.degrees(sr):g}"
-                f9["position"][lab] = np.concatenate([r.stats[k].pos_norm for r in rs]) * 1e3
-                for i, ax in enumerate("XYZ"):
-                    f9[f"{ax} orientation"][lab] = np.degrees(np.abs(np.concatenate([r.stats[k].rot[:, i] for r in rs])))
-        files.append(box_panels(out_dir / "ekf_fig9_noise_levels.png", f9,
-                                "Validation errors per noise level (mm / deg) (cf. EKF paper Fig. 9)", units))
-        files.append(error_vs_configs(out_dir / "ekf_fig8_configs.png", list(counts),
-                                      {METHOD_LABEL[k]: (np.array(v[0]), np.array(v[1])) for k, v in curves.items()},
-                                      float(np.mean(floors)), "Error vs number of configurations (cf. Fig. 8)"))
+        files = _ekf_plots(Path(out_dir), main, by_level, counts, curves, floors)
         lines += [""] + [f"wrote {f}" for f in files]
-    head = {"floor_mm": floor * 1e3, "ratios": ratios, "times_s": times,
-            "table4": {k: {kk: float(v) for kk, v in d.items()} for k, d in t4.items()},
-            "seconds": time.perf_counter() - t0}
-    lines.append(f"(study took {head['seconds']:.1f} s)")
+    head = {"runs": len(main), "floor_mm": floor * 1e3, "ratios": ratios, "times_s": times,
+            "table4": {k: {kk: float(v) for kk, v in d.items()} for k, d in t4.items()}}
     return "\n".join(lines), head
+
+
+def _posture_errors(rows: list[Row], key: str) -> dict[str, np.ndarray]:
+    """Per-posture validation errors of all trials pooled: position (mm) and |orientation| (deg) per axis."""
+    out = {"position": np.concatenate([r[f"s_{key}_pos_norm"] for r in rows]) * 1e3}
+    for ax in "xyz":
+        out[f"{ax.upper()} orientation"] = np.degrees(np.concatenate([r[f"s_{key}_rot_{ax}"] for r in rows]))
+    return out
+
+
+def _ekf_plots(out_dir: Path, main: list[Row], by_level: list[list[Row]], counts: list[int],
+               curves: dict, floors: list[float]) -> list[Path]:
+    units = {"position": "mm", "X orientation": "deg", "Y orientation": "deg", "Z orientation": "deg"}
+    f7: dict[str, dict[str, np.ndarray]] = {panel: {} for panel in units}
+    for k in ("initial", *EKF_METHODS, "floor"):
+        for panel, values in _posture_errors(main, k).items():
+            f7[panel][METHOD_LABEL.get(k, k)] = values
+    f9: dict[str, dict[str, np.ndarray]] = {panel: {} for panel in units}
+    for (sp, sr), rs in zip(E.NOISE_LEVELS, by_level):
+        for k in EKF_CURVES:
+            for panel, values in _posture_errors(rs, k).items():
+                f9[panel][f"{k.upper()} {sp * 1e3:g}/{np.degrees(sr):g}"] = values
+    return [box_panels(out_dir / "ekf_fig7_boxplots.png", f7,
+                       "Validation errors at 0.3 mm / 0.5 deg (cf. EKF paper Fig. 7)", units),
+            box_panels(out_dir / "ekf_fig9_noise_levels.png", f9,
+                       "Validation errors per noise level (mm / deg) (cf. EKF paper Fig. 9)", units),
+            error_vs_configs(out_dir / "ekf_fig8_configs.png", list(counts),
+                             {METHOD_LABEL[k]: (np.array(v[0]), np.array(v[1])) for k, v in curves.items()},
+                             float(np.mean(floors)), "Error vs number of configurations (cf. Fig. 8)")]
+
+
+def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None, counts=EKF_COUNTS,
+              count_reps: int = 10, progress: Callable | None = None) -> tuple[str, dict]:
+    """The study's trials one after another in this process, then the same tables."""
+    t0 = time.perf_counter()
+    noise_rows = [as_row(ekf_trial(seed0 + k, sp, sr, methods=EKF_METHODS, per_posture=out_dir is not None),
+                         {"sigma_position": sp, "sigma_rotation": sr})
+                  for sp, sr in E.NOISE_LEVELS for k in range(runs)]
+    if progress:
+        progress("tables 4 and 5")
+    count_rows = [as_row(ekf_trial(1000 * n + seed0 + k, configurations=n, methods=EKF_CURVES,
+                                   validation_seed=FIG8_VALIDATION_SEED + seed0), {"configurations": n})
+                  for n in counts for k in range(count_reps)]
+    if progress:
+        progress("figure 8")
+    text, head = ekf_tables(noise_rows, count_rows, out_dir)
+    head["seconds"] = time.perf_counter() - t0
+    return text + f"\n(study took {head['seconds']:.1f} s)", head
+
+
+# ------------------------------------------------------------------------ measurement models
+def model_tables(model: str, rows: list[Row]) -> tuple[str, dict]:
+    """Synthetic study of one measurement model: pooled validation error / Cramer-Rao floor."""
+    error = np.array([r["f_error"] for r in rows])
+    floor = np.array([r["f_floor"] for r in rows])
+    ratio = float(np.sqrt(np.mean(error ** 2) / np.mean(floor ** 2)))
+    plausible = int(sum(bool(r["f_plausible"]) for r in rows))
+    postures = sorted({int(r["p_postures"]) for r in rows if "p_postures" in r})
+    lines = [f"Measurement model '{model}': synthetic study with a known truth ({len(rows)} Monte-Carlo runs)",
+             f"  validation error RMS {np.sqrt(np.mean(error ** 2)) * 1e3:.4f} mm, Cramer-Rao floor "
+             f"{np.sqrt(np.mean(floor ** 2)) * 1e3:.4f} mm, error / floor {ratio:.3f} (1 = the data used fully)",
+             f"  per run error / floor: median {np.median(error / floor):.3f}, max {np.max(error / floor):.3f}; "
+             f"plausibility check passed {plausible}/{len(rows)}"]
+    head = {"model": model, "runs": len(rows), "error_to_floor": ratio, "plausible": plausible,
+            "error_rms_m": float(np.sqrt(np.mean(error ** 2))), "floor_rms_m": float(np.sqrt(np.mean(floor ** 2)))}
+    if postures:
+        head["postures"] = postures
+    return "\n".join(lines), head
+
+
+MODELS = M.MODELS

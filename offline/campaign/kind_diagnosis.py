@@ -1,10 +1,10 @@
 """Trial kind `diagnosis`: one concealed-effect case of bench/bench_diagnosis.py per trial.
 
-The case generator, the scorer and the diagnosis are the benchmark's own functions (the script
-is loaded from the clone, as tests/diagnosis does), called with the trial's seed: generate one
-hidden plant + trajectory + noisy recording, diagnose the recording alone, score against the
-truth. The bench's generator draws the case type from the case's position in its loop, so a
-single-case trial is always a one-effect case (effect type, joint and size random).
+The trial calls the benchmark's per-case entry point `run_case(effects, seed, duration, work,
+name)` (the script is loaded from the clone, as tests/diagnosis does): generate one hidden plant
++ trajectory + noisy recording from the seed, diagnose the recording alone, score against the
+truth. `effects` (0, 1 or 2 hidden effects) is the case type; the benchmark's mix is the
+campaign's `[levels.effects] values = [1, 1, 1, 2, 0]`. The bench prints its table from the rows.
 """
 from __future__ import annotations
 
@@ -25,38 +25,39 @@ def _bench():
 
 
 def run_diagnosis_case(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:
-    import json
-
-    from spacearm.firmware_sim.plant import load_plant_config
-    from spacearm.offline.diagnosis.analysis import diagnose
-    from spacearm.offline.diagnosis.recording_io import read_table
-    from spacearm.offline.diagnosis.report import write_report
-
     in_clone()
-    bench = _bench()
     opts = {**DIAGNOSIS.options, **options}
-    with tempfile.TemporaryDirectory(prefix="campaign_diag_") as tmp:
-        rec, truth_dir, rep = (Path(tmp) / d for d in ("recordings", "truth", "report"))
-        for d in (rec, truth_dir, rep):
-            d.mkdir()
-        # the bench multiplies its seed for the noise streams: keep it in numpy's int64 range
-        (path,) = bench.generate(1, float(opts["duration"]), seed % 2 ** 31, rec, truth_dir)
-        nominal = load_plant_config(bench.NOMINAL)
-        summary = write_report(diagnose(read_table(path), nominal), rep, path.name, nominal)
-        truth = json.loads((truth_dir / f"{path.stem}.json").read_text())
-    score = bench.score_case(summary, truth)
-    visibility = min((t["visibility"] for t in truth["truths"]), default=0.0)
-    figures = {"visibility": float(visibility), "named_first": float(score.named),
-               "false_alarm": float(score.false_alarm)}
+    effects = params.get("effects", 1.0)
+    if effects not in (0.0, 1.0, 2.0):
+        raise ValueError(f"parameter effects: expected 0, 1 or 2 hidden effects, got {effects!r}")
+    name = f"case{seed}"
+    if opts["keep"]:             # the bench's --keep: recordings, truths and reports side by side
+        score, times = _bench().run_case(int(effects), seed, float(opts["duration"]), Path(opts["keep"]), name)
+    else:
+        with tempfile.TemporaryDirectory(prefix="campaign_diag_") as tmp:
+            score, times = _bench().run_case(int(effects), seed, float(opts["duration"]), Path(tmp), name)
+    return case_outcome(score, times)
+
+
+def case_outcome(score, times: dict[str, float]) -> TrialOutcome:
+    """A bench_diagnosis Score as a trial: success = named first (no alarm on a case without effect)."""
+    figures = {"effects": float(len(score.effects)), "visible": float(score.visible),
+               "named_first": float(score.named), "false_alarm": float(score.false_alarm)}
     if score.param_ok:               # only where the effect was found and has a fitted parameter
         figures["parameter_within_15pct"] = float(all(score.param_ok))
     if score.rms_reduction:
         figures["rms_reduction"] = float(min(score.rms_reduction))
-    effects = ", ".join(score.effects) or "none"
-    failure = None if score.named else f"{effects} not named first ({score.why or score.answer})"
-    return TrialOutcome(bool(score.named), failure, figures)
+    if score.kind == "none":
+        failure = "false alarm" if score.false_alarm else None
+    else:
+        effects = ", ".join(score.effects)
+        failure = None if score.named else f"{effects} not named first ({score.why or score.answer})"
+    series = {"param_ok": [float(p) for p in score.param_ok], "rms_reduction": list(score.rms_reduction)}
+    labels = {"case_type": score.kind, "effect_names": ",".join(score.effects), "answer": score.answer,
+              "why": score.why}
+    return TrialOutcome(bool(score.named), failure, figures, dict(times), series, labels)
 
 
 DIAGNOSIS = TrialKind(
-    "diagnosis", run_diagnosis_case, (), {"duration": 20.0}, "false_alarm",
+    "diagnosis", run_diagnosis_case, ("effects",), {"duration": 20.0, "keep": ""}, "false_alarm",
     "sim-vs-real diagnosis on one concealed-effect case of bench_diagnosis (generator, tool, scorer)")

@@ -1,9 +1,10 @@
 """Trial kinds: what one trial of a campaign runs, as a function of (parameters, options, seed).
 
-Each kind calls the same trial functions the benchmarks loop over (bench/bench_oru.py's
-ContactTrials.run, the calibration studies' run_once, the checkout scenario), so a campaign
-and a benchmark measure the same thing. A trial returns a TrialOutcome; an exception is not a
-failed trial but a broken one (the runner retries it, then records it as an error).
+Each kind calls the same trial functions the benchmarks and studies use (bench/bench_oru.py's
+ContactTrials.run, one run of a calibration study in controller/calibration/study_trials,
+bench_diagnosis's run_case, the checkout scenario), so a campaign and a benchmark measure the
+same thing. A trial returns a TrialOutcome; an exception is not a failed trial but a broken one
+(the runner retries it, then records it as an error).
 """
 from __future__ import annotations
 
@@ -15,8 +16,6 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-import numpy as np
-
 from spacearm.base.paths import REPO_ROOT
 
 
@@ -26,6 +25,8 @@ class TrialOutcome:
     failure: str | None                    # why it failed (None when it succeeded)
     figures: dict[str, float] = field(default_factory=dict)   # deterministic given the seed
     timings: dict[str, float] = field(default_factory=dict)   # wall-clock figures: never compared
+    series: dict[str, list[float]] = field(default_factory=dict)   # arrays a study pools (deterministic)
+    labels: dict[str, str] = field(default_factory=dict)      # words a benchmark's table groups by
 
 
 @dataclass(frozen=True)
@@ -95,70 +96,6 @@ INSERTION = TrialKind(
     "peak_lateral_force", "ORU insertion (or capture) from a random start error, plant + impedance mode")
 
 
-# --- calibration studies (laser ranger, EKF) ---------------------------------------------------------
-
-@functools.lru_cache(maxsize=1)
-def _laser_setup():
-    from spacearm.controller.calibration.study_laser import setup
-    return setup()
-
-
-@functools.lru_cache(maxsize=1)
-def _ekf_setup():
-    from spacearm.controller.calibration.study_ekf import setup
-    return setup()
-
-
-def _norm(v) -> float:
-    return float(np.linalg.norm(v))
-
-
-def _calibration_outcome(before, after, min_reduction: float, extra: dict[str, float]) -> TrialOutcome:
-    pos_before, pos_after = _norm(before.rms_pos), _norm(after.rms_pos)
-    reduction = 1.0 - pos_after / pos_before if pos_before > 0 else 0.0
-    figures = {"position_rms_before": pos_before, "position_rms_after": pos_after,
-               "rotation_rms_after": _norm(after.rms_rot), "position_reduction": reduction, **extra}
-    ok = reduction >= min_reduction
-    failure = None if ok else f"position error reduced by {100 * reduction:.1f} % < {100 * min_reduction:.0f} %"
-    return TrialOutcome(ok, failure, figures)
-
-
-def run_calibration_laser(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:
-    in_clone()
-    from spacearm.controller.calibration.study_laser import run_once
-    opts = {**CALIBRATION_LASER.options, **options}
-    noise = params.get("noise", 0.2e-3)
-    before, runs = run_once(_laser_setup(), seed, cases=(int(opts["configurations"]),),
-                            n_candidates=int(opts["candidates"]), n_validation=int(opts["validation"]),
-                            noise=noise, methods=(opts["method"],))
-    run = runs[0]
-    return _calibration_outcome(before, run.stats[opts["method"]], float(opts["min_reduction"]),
-                                {"O3": float(run.O3), "noise": noise})
-
-
-CALIBRATION_LASER = TrialKind(
-    "calibration_laser", run_calibration_laser, ("noise",),
-    {"configurations": 50, "candidates": 101, "validation": 20, "method": "lm", "min_reduction": 0.9},
-    "position_rms_after", "laser-ranger identification (paper study): O3-optimal postures, LM fit, held-out check")
-
-
-def run_calibration_ekf(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:
-    in_clone()
-    from spacearm.controller.calibration.study_ekf import DEG, run_once
-    opts = {**CALIBRATION_EKF.options, **options}
-    sigma_p, sigma_r = params.get("sigma_position", 0.3e-3), params.get("sigma_rotation", 0.5 * DEG)
-    run = run_once(_ekf_setup(), seed, n_ident=int(opts["configurations"]), n_valid=int(opts["validation"]),
-                   sigma_p=sigma_p, sigma_r=sigma_r, methods=(opts["method"],))
-    return _calibration_outcome(run.stats["initial"], run.stats[opts["method"]], float(opts["min_reduction"]),
-                                {"sigma_position": sigma_p, "sigma_rotation": sigma_r})
-
-
-CALIBRATION_EKF = TrialKind(
-    "calibration_ekf", run_calibration_ekf, ("sigma_position", "sigma_rotation"),
-    {"configurations": 50, "validation": 200, "method": "ekf_cov", "min_reduction": 0.5},
-    "position_rms_after", "camera-pose identification (EKF paper study) per measurement model")
-
-
 # --- checkout soak: simulator + daemon in lockstep on a bus of the trial's own ----------------------
 
 def run_checkout_trial(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:
@@ -216,7 +153,8 @@ CHECKOUT = TrialKind(
 
 # kinds that load a benchmark's own stack from the clone live in modules of their own
 from spacearm.offline.campaign.kind_approach import APPROACH  # noqa: E402
+from spacearm.offline.campaign.kind_calibration import CALIBRATION_EKF, CALIBRATION_LASER, CALIBRATION_MODEL  # noqa: E402
 from spacearm.offline.campaign.kind_diagnosis import DIAGNOSIS  # noqa: E402
 
-KINDS: dict[str, TrialKind] = {k.name: k for k in (INSERTION, CALIBRATION_LASER, CALIBRATION_EKF, CHECKOUT,
-                                                   DIAGNOSIS, APPROACH)}
+KINDS: dict[str, TrialKind] = {k.name: k for k in (INSERTION, CALIBRATION_LASER, CALIBRATION_EKF, CALIBRATION_MODEL,
+                                                   CHECKOUT, DIAGNOSIS, APPROACH)}

@@ -38,11 +38,12 @@ class ReplayResult:
     success_stored: bool
     success_replayed: bool
     figures: list[FigureCheck] = field(default_factory=list)
+    differing: list[str] = field(default_factory=list)   # series and labels that differ
 
     @property
     def matches(self) -> bool:
         return (self.parameters_equal and self.success_stored == self.success_replayed
-                and all(f.equal for f in self.figures))
+                and all(f.equal for f in self.figures) and not self.differing)
 
 
 def replay(results: str | Path, trial: str) -> ReplayResult:
@@ -59,4 +60,18 @@ def replay(results: str | Path, trial: str) -> ReplayResult:
     checks = [FigureCheck(n, float(stored_figures.get(n, math.nan)), float(out["figures"].get(n, math.nan)),
                           atol.get(n, 0.0)) for n in names]
     return ReplayResult(trial, int(row["seed"]), row["code_version"], code_version(), params_equal,
-                        bool(row["success"]), out["success"], checks)
+                        bool(row["success"]), out["success"], checks, _differing(row, out, atol))
+
+
+def _differing(row: dict, out: dict, atol: dict[str, float]) -> list[str]:
+    """Series (to rounding, or the kind's tolerance) and labels (exactly) that differ."""
+    bad = []
+    stored = {k[2:]: v for k, v in row.items() if k.startswith("s_") and v is not None}
+    for name in sorted(set(stored) | set(out.get("series", {}))):
+        a, b = stored.get(name), out.get("series", {}).get(name)
+        if a is None or b is None or len(a) != len(b) or not all(
+                FigureCheck(name, x, y, atol.get(name, 0.0)).equal for x, y in zip(a, b)):
+            bad.append(name)
+    labels = {k[2:]: v for k, v in row.items() if k.startswith("l_") and v is not None}
+    bad += [k for k in sorted(set(labels) | set(out.get("labels", {}))) if labels.get(k) != out.get("labels", {}).get(k)]
+    return bad

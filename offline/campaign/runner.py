@@ -38,7 +38,8 @@ def execute_trial(task: TrialTask) -> dict[str, Any]:
     outcome = kind.run(task.parameters, task.options, task.seed)
     timings = {"task_wall_time": time.perf_counter() - started, **outcome.timings}
     return {"success": bool(outcome.success), "failure": outcome.failure, "figures": dict(outcome.figures),
-            "timings": timings, "worker": _worker_name(), "code_version": _worker_code_version()}
+            "series": {k: [float(x) for x in v] for k, v in outcome.series.items()},
+            "labels": {k: str(v) for k, v in outcome.labels.items()}, "timings": timings, "worker": _worker_name(), "code_version": _worker_code_version()}
 
 
 @functools.lru_cache(maxsize=1)
@@ -57,8 +58,8 @@ def _worker_name() -> str:
 
 
 def make_task(campaign: Campaign, index: int) -> TrialTask:
-    seed = campaign.trial_seed(index)
-    return TrialTask(campaign.kind, index, seed, campaign.draw(seed), dict(campaign.spec.options))
+    return TrialTask(campaign.kind, index, campaign.trial_seed(index), campaign.parameters(index),
+                     dict(campaign.spec.options))
 
 
 @dataclass
@@ -150,4 +151,5 @@ def _record(future, task: TrialTask, version: str, campaign_hash: str) -> TrialR
         error = f"{type(exc).__name__}: {exc}"
     return TrialRecord(trial_id(task.index), task.index, task.seed, out["success"], out["failure"], error,
                        task.parameters, out["figures"], out["timings"], out["worker"],
-                       out.get("code_version", version), campaign_hash, time.time())
+                       out.get("code_version", version), campaign_hash, time.time(),
+                       out.get("series", {}), out.get("labels", {}))

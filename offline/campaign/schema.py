@@ -12,11 +12,14 @@ drawn per trial and their ranges, and the fixed options of the trial kind.
     high = 0.008
     distribution = "disc_radius"  # uniform | disc_radius (sqrt of uniform: uniform over a disc) | log_uniform
 
+    [levels.effects]              # a designed factor instead of a draw: trial i takes
+    values = [1, 1, 1, 2, 0]      # values[i % 5] (several [levels.*]: their full cross, in turn)
+
     [options]                     # passed to every trial unchanged
     store = "airlock_empty"
 
-Every trial's seed comes from (campaign seed, trial index) alone, and its parameters from its
-seed alone, so one trial can be replayed without the others.
+Every trial's seed comes from (campaign seed, trial index) alone, its drawn parameters from its
+seed alone and its levels from its index alone, so one trial can be replayed without the others.
 """
 from __future__ import annotations
 
@@ -55,6 +58,11 @@ class ParameterRange(BaseModel):
         return self.low + u * (self.high - self.low)
 
 
+class Levels(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    values: list[float] = Field(min_length=1, max_length=10_000)
+
+
 class CampaignHeader(BaseModel):
     model_config = ConfigDict(extra="forbid")
     name: str = Field(min_length=1, max_length=80, pattern=r"^[A-Za-z0-9_.-]+$")
@@ -68,7 +76,15 @@ class CampaignFile(BaseModel):
     model_config = ConfigDict(extra="forbid")
     campaign: CampaignHeader
     parameters: dict[str, ParameterRange] = Field(default_factory=dict)
+    levels: dict[str, Levels] = Field(default_factory=dict)
     options: dict[str, Any] = Field(default_factory=dict)
+
+    @model_validator(mode="after")
+    def _drawn_or_designed(self) -> "CampaignFile":
+        both = sorted(set(self.parameters) & set(self.levels))
+        if both:
+            raise ValueError(f"{', '.join(both)}: both drawn ([parameters]) and designed ([levels])")
+        return self
 
 
 @dataclass(frozen=True)
@@ -96,6 +112,10 @@ class Campaign:
     def draw(self, seed: int) -> dict[str, float]:
         return draw_parameters(self.spec.parameters, seed)
 
+    def parameters(self, index: int) -> dict[str, float]:
+        """Trial `index`'s parameters: the drawn ones (from its seed) and its levels (from its index)."""
+        return {**self.draw(self.trial_seed(index)), **level_values(self.spec.levels, index)}
+
 
 def trial_seed(campaign_seed: int, index: int) -> int:
     """Independent stream per trial (numpy's SeedSequence), a function of (seed, index) only."""
@@ -105,6 +125,16 @@ def trial_seed(campaign_seed: int, index: int) -> int:
 def draw_parameters(ranges: dict[str, ParameterRange], seed: int) -> dict[str, float]:
     rng = np.random.default_rng(seed)
     return {name: ranges[name].draw(rng) for name in sorted(ranges)}
+
+
+def level_values(levels: dict[str, Levels], index: int) -> dict[str, float]:
+    """The full cross of the levels, in turn: the last name (sorted) changes fastest."""
+    out = {}
+    for name in sorted(levels, reverse=True):
+        values = levels[name].values
+        index, k = divmod(index, len(values))
+        out[name] = float(values[k])
+    return dict(sorted(out.items()))
 
 
 def trial_id(index: int) -> str:
@@ -117,6 +147,21 @@ def load_campaign(path: str | Path) -> Campaign:
     spec = load_toml_model(path, CampaignFile)
     _check_kind(spec, str(path))
     return Campaign(spec, Path(path).read_text(), str(path))
+
+
+def campaign_text(name: str, kind: str, seed: int, trials: int, levels: dict[str, list] | None = None,
+                  options: dict[str, Any] | None = None) -> str:
+    """A campaign file written by a program (a study, a benchmark): header, levels, options.
+    Values are written as JSON, which TOML reads alike for strings, numbers, booleans and lists."""
+    import json
+
+    lines = ["[campaign]", f"name = {json.dumps(name)}", f"kind = {json.dumps(kind)}", f"seed = {int(seed)}",
+             f"trials = {int(trials)}"]
+    for factor, values in (levels or {}).items():
+        lines += ["", f"[levels.{factor}]", f"values = {json.dumps(list(values))}"]
+    if options:
+        lines += ["", "[options]"] + [f"{key} = {json.dumps(value)}" for key, value in options.items()]
+    return "\n".join(lines) + "\n"
 
 
 def campaign_from_text(text: str, path: str = "<stored campaign>") -> Campaign:
@@ -146,10 +191,11 @@ def _check_kind(spec: CampaignFile, path: str) -> None:
     if kind is None:
         raise ConfigError(f"{path}: campaign.kind: unknown trial kind {spec.campaign.kind!r} "
                           f"(allowed: {', '.join(sorted(KINDS))})")
-    for name in spec.parameters:
-        if name not in kind.parameters:
-            raise ConfigError(f"{path}: parameters.{name}: not a parameter of kind {kind.name!r} "
-                              f"(allowed: {', '.join(kind.parameters) or 'none'})")
+    for table, names in (("parameters", spec.parameters), ("levels", spec.levels)):
+        for name in names:
+            if name not in kind.parameters:
+                raise ConfigError(f"{path}: {table}.{name}: not a parameter of kind {kind.name!r} "
+                                  f"(allowed: {', '.join(kind.parameters) or 'none'})")
     for name, value in spec.options.items():
         if name not in kind.options:
             raise ConfigError(f"{path}: options.{name}: not an option of kind {kind.name!r} "

@@ -14,7 +14,7 @@ import json
 import os
 import subprocess
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +62,8 @@ class TrialRecord:
     code_version: str
     campaign_hash: str
     finished_at: float
+    series: dict[str, list[float]] = field(default_factory=dict)   # per-trial arrays (e.g. per posture)
+    labels: dict[str, str] = field(default_factory=dict)           # words a table groups by
 
     def row(self) -> dict[str, Any]:
         row: dict[str, Any] = {"trial_id": self.trial_id, "index": self.index, "seed": self.seed,
@@ -69,6 +71,8 @@ class TrialRecord:
         row.update({f"p_{k}": float(v) for k, v in self.parameters.items()})
         row.update({f"f_{k}": float(v) for k, v in self.figures.items()})
         row.update({f"w_{k}": float(v) for k, v in self.timings.items()})
+        row.update({f"s_{k}": [float(x) for x in v] for k, v in self.series.items()})
+        row.update({f"l_{k}": str(v) for k, v in self.labels.items()})
         row.update({"worker": self.worker, "code_version": self.code_version,
                     "campaign_hash": self.campaign_hash, "finished_at": self.finished_at})
         return row
@@ -163,7 +167,8 @@ class ResultStore:
     def outcomes(self) -> dict[str, tuple]:
         """trial id -> (seed, success, parameters and figures): what equal seeds must reproduce
         (no timings, workers or dates), for comparing two runs of a campaign."""
-        return {r["trial_id"]: (r["seed"], r["success"], {k: v for k, v in r.items() if k[:2] in ("p_", "f_")})
+        return {r["trial_id"]: (r["seed"], r["success"],
+                                {k: v for k, v in r.items() if k[:2] in ("p_", "f_", "s_", "l_")})
                 for r in self.rows()}
 
     def row(self, trial_id: str) -> dict[str, Any]:

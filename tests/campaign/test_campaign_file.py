@@ -66,3 +66,43 @@ def test_wilson_interval_known_values():
     assert lo + hi == pytest.approx(1.0) and lo < 0.5 < hi
     assert wilson_interval(0, 0) == (0.0, 1.0)
     assert not math.isnan(wilson_interval(10, 10)[0])
+
+
+LEVELS = ('[campaign]\nname="x"\nkind="calibration_ekf"\nseed=1\ntrials=9\n'
+          '[levels.sigma_position]\nvalues=[1e-5, 3e-4]\n[levels.sigma_rotation]\nvalues=[0.1, 0.2, 0.3]\n')
+
+
+def test_levels_take_their_full_cross_in_turn_and_the_draws_stay_seeded(tmp_path):
+    path = tmp_path / "levels.toml"
+    path.write_text(LEVELS)
+    c = load_campaign(path)
+    cells = [(c.parameters(i)["sigma_position"], c.parameters(i)["sigma_rotation"]) for i in range(9)]
+    assert cells[:6] == [(1e-5, 0.1), (1e-5, 0.2), (1e-5, 0.3), (3e-4, 0.1), (3e-4, 0.2), (3e-4, 0.3)]
+    assert cells[6:] == cells[:3]                      # the cross starts again
+    path.write_text(LEVELS + '[parameters.configurations]\nlow=20\nhigh=60\n')
+    c = load_campaign(path)
+    assert c.parameters(4)["configurations"] == c.draw(c.trial_seed(4))["configurations"]
+    assert c.parameters(4)["sigma_rotation"] == 0.2
+
+
+@pytest.mark.parametrize("extra, key", [
+    ('[levels.speed]\nvalues=[1.0]\n', "levels.speed"),
+    ('[levels.configurations]\nvalues=[]\n', "levels.configurations"),
+    ('[levels.configurations]\nvalues=[10]\n[parameters.configurations]\nlow=1\nhigh=2\n', "configurations"),
+])
+def test_bad_levels_name_the_key(tmp_path, extra, key):
+    path = tmp_path / "bad.toml"
+    path.write_text('[campaign]\nname="x"\nkind="calibration_ekf"\nseed=1\ntrials=2\n' + extra)
+    with pytest.raises(ConfigError) as err:
+        load_campaign(path)
+    assert key in str(err.value)
+
+
+def test_a_campaign_written_by_a_program_reads_back_as_written():
+    from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
+    text = campaign_text("study", "calibration_ekf", 3, 8, levels={"configurations": [10, 20]},
+                         options={"methods": ["lse", "lm"], "per_posture": True, "validation_seed": 7})
+    c = campaign_from_text(text)
+    assert (c.name, c.kind, c.spec.campaign.seed, c.spec.campaign.trials) == ("study", "calibration_ekf", 3, 8)
+    assert [c.parameters(i)["configurations"] for i in range(3)] == [10.0, 20.0, 10.0]
+    assert c.spec.options == {"methods": ["lse", "lm"], "per_posture": True, "validation_seed": 7}
