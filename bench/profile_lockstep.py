@@ -35,6 +35,9 @@ sys.path.insert(0, str(ROOT))
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_daemon import process_cpu  # noqa: E402
+
 
 def profile_in_process(args) -> None:
     bus = f"virtual:profile-{time.monotonic_ns()}"
@@ -58,12 +61,6 @@ def profile_in_process(args) -> None:
           f"{1e3 * cpu / args.cycles:.2f} ms thread CPU per cycle (profiled), "
           f"{stats.total_calls / args.cycles:.0f} Python calls per cycle")
     stats.sort_stats("tottime").print_stats(args.top)
-
-
-def process_cpu(pid: int) -> float:
-    """CPU seconds (user + system, all threads) of a process so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def own_samples(raw: Path) -> tuple[Counter, int]:
