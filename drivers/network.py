@@ -43,7 +43,7 @@ from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffec
 from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from spacearm.base.transport import frame_sender, frames_sender, open_bus
+from spacearm.base.transport import bus_has_unread, frame_sender, frames_sender, open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -101,6 +101,7 @@ class NetworkStats:
     callback_errors: int = 0
     starved_checks: int = 0     # heartbeat checks made after this process was starved (excess excused)
     starved_time: float = 0.0   # s of starvation excused from heartbeat silence
+    backlog_checks: int = 0     # heartbeat checks put off because frames waited unread (receive path behind)
 
 
 class _Listener(can.Listener):
@@ -196,6 +197,7 @@ class ArmNetwork:
         self._excused: dict[str, float] = {}          # node -> starvation excused from its current silence
         self._excused_since: dict[str, float] = {}    # node -> last_heartbeat after the last excuse
         self._judge_after = 0.0    # monotonic: after starvation, loss is judged again from here
+        self._backlog_since: float | None = None   # monotonic: since when frames wait unread
 
     # ------------------------------------------------------------------ connection
     def connect(self) -> "ArmNetwork":
@@ -678,7 +680,9 @@ class ArmNetwork:
         heartbeat periods holds while this process runs. After a starved pass nothing is
         judged for one (longest) heartbeat period, time for live nodes to be heard again: a
         loss that happened while the controller was starved is declared at most one period
-        after the starvation ended (no controller can see anything while it is starved)."""
+        after the starvation ended (no controller can see anything while it is starved).
+        Likewise nothing is judged while frames wait unread (the receive thread starved while
+        this one ran), for at most one heartbeat period in a row (_receive_path_behind)."""
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         self._longest_heartbeat_period = max((cfg.heartbeat_period for cfg in self.config.nodes), default=0.0)
@@ -711,7 +715,7 @@ class ArmNetwork:
                     self._excuse(now, excess, factor)
                     self._judge_after = now + self._longest_heartbeat_period
                     continue
-                if now < self._judge_after:
+                if now < self._judge_after or self._receive_path_behind(now):
                     continue
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
@@ -723,6 +727,21 @@ class ArmNetwork:
                                     f"period {cfg.heartbeat_period:.3f} s)")
                         self._expected = None
                         self._cv.notify_all()
+
+    def _receive_path_behind(self, now: float) -> bool:
+        """Frames wait unread for this process: the receive thread was starved while this
+        timer ran (threads of one process are scheduled apart). A heartbeat may be among
+        them, so judging now would call a live node lost. Put off for at most one (longest)
+        heartbeat period in a row: a bus whose backlog never drains is judged anyway."""
+        if not bus_has_unread(self.network.bus):
+            self._backlog_since = None
+            return False
+        if self._backlog_since is None:
+            self._backlog_since = now
+        if now - self._backlog_since >= self._longest_heartbeat_period:
+            return False
+        self.stats.backlog_checks += 1
+        return True
 
     def _excuse(self, now: float, excess: float, factor: float) -> None:
         """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""

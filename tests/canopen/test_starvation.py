@@ -58,3 +58,22 @@ def test_excused_silence_is_capped_so_a_real_loss_is_declared_within_three_perio
         net._excuse(now, 1.0, factor)      # starved again in the same silence: nothing more
     assert h.last_heartbeat - (now - 0.26) == excused
     assert (now - 0.26) + excused + factor * period <= now - 0.26 + 3 * period   # loss bound kept
+
+
+def test_heartbeat_checks_wait_while_frames_wait_unread_but_not_longer_than_a_period(booted):
+    """The timer thread may run while the receive thread is starved (threads are scheduled
+    apart): with frames waiting unread, loss is not judged, for at most one heartbeat period."""
+    net: ArmNetwork = booted
+    period = max(cfg.heartbeat_period for cfg in net.config.nodes)
+    unread = [True]
+    net.network.bus.has_unread = lambda: unread[0]
+    checks = net.stats.backlog_checks
+    now = time.monotonic()
+    assert net._receive_path_behind(now)
+    assert net._receive_path_behind(now + 0.5 * period)
+    assert not net._receive_path_behind(now + period)       # a backlog that never drains is judged
+    assert net.stats.backlog_checks == checks + 2
+    unread[0] = False
+    assert not net._receive_path_behind(now + period)
+    unread[0] = True
+    assert net._receive_path_behind(now + period)            # a new backlog: put off again
