@@ -678,11 +678,9 @@ class ArmNetwork:
         declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
         heartbeat periods holds while this process runs. After a starved pass nothing is
-        judged for one (longest) heartbeat period, time for live nodes to be heard again: a
-        loss that happened while the controller was starved is declared at most one period
-        after the starvation ended (no controller can see anything while it is starved).
-        Likewise nothing is judged while frames wait unread (the receive thread starved while
-        this one ran), for at most one heartbeat period in a row (_receive_path_behind)."""
+        judged for one (longest) heartbeat period, time for live nodes to be heard again, and
+        likewise while frames wait unread (the receive thread starved while this one ran); a
+        silent node is still judged by 3 periods after its last heartbeat (_judge_losses)."""
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         self._longest_heartbeat_period = max((cfg.heartbeat_period for cfg in self.config.nodes), default=0.0)
@@ -706,27 +704,42 @@ class ArmNetwork:
             self._poll_guarded(now)
             with self._cv:
                 if excess > 0:
-                    # Starved: excuse the time, and judge again only once every node had one
-                    # heartbeat period of this process running to be heard: what waited
-                    # unread is delivered, and a producer starved beside us (the in-process
-                    # simulator) sends again. A fixed few ms raced the receive path and
-                    # turned starvation into "heartbeat lost" on a loaded machine.
+                    # Starved: excuse the time, and give every node up to one heartbeat
+                    # period of this process running to be heard again (what waited unread
+                    # is delivered, a producer starved beside us sends again), never past the
+                    # 3-period bound. A fixed few ms raced the receive path and turned
+                    # starvation into "heartbeat lost" on a loaded machine.
                     self.stats.starved_time += excess
                     self._excuse(now, excess, factor)
                     self._judge_after = now + self._longest_heartbeat_period
                     continue
-                if now < self._judge_after or self._receive_path_behind(now):
-                    continue
-                for cfg in self.config.nodes:
-                    h = self.health[cfg.name]
-                    if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
-                        h.alive = False
-                        d = self.drivers[cfg.name]
-                        self._event("heartbeat_lost", d,
-                                    f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
-                                    f"period {cfg.heartbeat_period:.3f} s)")
-                        self._expected = None
-                        self._cv.notify_all()
+                self._judge_losses(now, factor)
+
+    def _judge_losses(self, now: float, factor: float) -> None:
+        """Declare lost every live node silent for more than `factor` periods (under the
+        condition's lock). Right after starvation, or while frames wait unread, a silent node
+        is given until the latest moment that still keeps the bound of 3 heartbeat periods
+        from its last heartbeat: time for what waits to be read, never past the bound."""
+        defer = now < self._judge_after or self._receive_path_behind(now)
+        for cfg in self.config.nodes:
+            h = self.health[cfg.name]
+            if not (h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period):
+                continue
+            if defer and now < self._latest_judgement(cfg.name, cfg.heartbeat_period):
+                continue
+            h.alive = False
+            d = self.drivers[cfg.name]
+            self._event("heartbeat_lost", d, f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
+                                             f"period {cfg.heartbeat_period:.3f} s)")
+            self._expected = None
+            self._cv.notify_all()
+
+    def _latest_judgement(self, name: str, period: float) -> float:
+        """When a node's silence must be judged at the latest: 3 periods after the heartbeat
+        it was last heard with (before any starvation excused), less one timer pass."""
+        h = self.health[name]
+        excused = self._excused.get(name, 0.0) if self._excused_since.get(name) == h.last_heartbeat else 0.0
+        return h.last_heartbeat - excused + 3.0 * period - MONITOR_PERIOD
 
     def _receive_path_behind(self, now: float) -> bool:
         """Frames wait unread for this process: the receive thread was starved while this

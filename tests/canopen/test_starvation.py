@@ -77,3 +77,22 @@ def test_heartbeat_checks_wait_while_frames_wait_unread_but_not_longer_than_a_pe
     assert not net._receive_path_behind(now + period)
     unread[0] = True
     assert net._receive_path_behind(now + period)            # a new backlog: put off again
+
+
+def test_a_put_off_judgement_still_declares_a_loss_within_three_periods(booted):
+    net: ArmNetwork = booted
+    net._monitoring = False      # the test drives the check itself
+    time.sleep(0.02)
+    h = net.health["joint_1"]
+    period = net.config.node("joint_1").heartbeat_period
+    factor = net.config.bus.heartbeat_loss_factor
+    now = time.monotonic()
+    net._judge_after = now + 10.0                        # just starved: judgement put off
+    with net._cv:                                        # (the heartbeat handler takes this lock)
+        h.last_heartbeat = now - factor * period - 0.01  # past the loss factor, inside 3 periods
+        net._judge_losses(now, factor)
+        assert h.alive
+        h.last_heartbeat = now - 3 * period              # at the bound: declared, put off or not
+        net._judge_losses(now, factor)
+        assert not h.alive
+    assert [e.kind for e in net.poll_events() if e.node == "joint_1"] == ["heartbeat_lost"]
