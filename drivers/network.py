@@ -43,7 +43,7 @@ from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffec
 from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from spacearm.base.transport import bus_has_unread, frame_sender, frames_sender, open_bus
+from spacearm.base.transport import frame_sender, frames_sender, open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +101,6 @@ class NetworkStats:
     callback_errors: int = 0
     starved_checks: int = 0     # heartbeat checks made after this process was starved (excess excused)
     starved_time: float = 0.0   # s of starvation excused from heartbeat silence
-    backlog_checks: int = 0     # heartbeat checks put off because frames waited unread (receive path behind)
 
 
 class _Listener(can.Listener):
@@ -196,8 +195,6 @@ class ArmNetwork:
         self._monitor: threading.Thread | None = None
         self._excused: dict[str, float] = {}          # node -> starvation excused from its current silence
         self._excused_since: dict[str, float] = {}    # node -> last_heartbeat after the last excuse
-        self._judge_after = 0.0    # monotonic: after starvation, loss is judged again from here
-        self._backlog_since: float | None = None   # monotonic: since when frames wait unread
 
     # ------------------------------------------------------------------ connection
     def connect(self) -> "ArmNetwork":
@@ -677,13 +674,9 @@ class ArmNetwork:
         (informational) instead of `heartbeat_lost`. A node that really went silent is still
         declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
-        heartbeat periods holds while this process runs. After a starved pass nothing is
-        judged for one (longest) heartbeat period, time for live nodes to be heard again, and
-        likewise while frames wait unread (the receive thread starved while this one ran); a
-        silent node is still judged by 3 periods after its last heartbeat (_judge_losses)."""
+        heartbeat periods holds whatever the load."""
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
-        self._longest_heartbeat_period = max((cfg.heartbeat_period for cfg in self.config.nodes), default=0.0)
         hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id
         next_hb = time.monotonic()
         due = next_hb
@@ -704,57 +697,22 @@ class ArmNetwork:
             self._poll_guarded(now)
             with self._cv:
                 if excess > 0:
-                    # Starved: excuse the time, and give every node up to one heartbeat
-                    # period of this process running to be heard again (what waited unread
-                    # is delivered, a producer starved beside us sends again), never past the
-                    # 3-period bound. A fixed few ms raced the receive path and turned
-                    # starvation into "heartbeat lost" on a loaded machine.
+                    # Starved: excuse the time, and judge only at the next pass, once the
+                    # receive path has had the CPU to deliver what waited meanwhile.
                     self.stats.starved_time += excess
                     self._excuse(now, excess, factor)
-                    self._judge_after = now + self._longest_heartbeat_period
+                    due = now + RECHECK_AFTER_STARVED
                     continue
-                self._judge_losses(now, factor)
-
-    def _judge_losses(self, now: float, factor: float) -> None:
-        """Declare lost every live node silent for more than `factor` periods (under the
-        condition's lock). Right after starvation, or while frames wait unread, a silent node
-        is given until the latest moment that still keeps the bound of 3 heartbeat periods
-        from its last heartbeat: time for what waits to be read, never past the bound."""
-        defer = now < self._judge_after or self._receive_path_behind(now)
-        for cfg in self.config.nodes:
-            h = self.health[cfg.name]
-            if not (h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period):
-                continue
-            if defer and now < self._latest_judgement(cfg.name, cfg.heartbeat_period):
-                continue
-            h.alive = False
-            d = self.drivers[cfg.name]
-            self._event("heartbeat_lost", d, f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
-                                             f"period {cfg.heartbeat_period:.3f} s)")
-            self._expected = None
-            self._cv.notify_all()
-
-    def _latest_judgement(self, name: str, period: float) -> float:
-        """When a node's silence must be judged at the latest: 3 periods after the heartbeat
-        it was last heard with (before any starvation excused), less one timer pass."""
-        h = self.health[name]
-        excused = self._excused.get(name, 0.0) if self._excused_since.get(name) == h.last_heartbeat else 0.0
-        return h.last_heartbeat - excused + 3.0 * period - MONITOR_PERIOD
-
-    def _receive_path_behind(self, now: float) -> bool:
-        """Frames wait unread for this process: the receive thread was starved while this
-        timer ran (threads of one process are scheduled apart). A heartbeat may be among
-        them, so judging now would call a live node lost. Put off for at most one (longest)
-        heartbeat period in a row: a bus whose backlog never drains is judged anyway."""
-        if not bus_has_unread(self.network.bus):
-            self._backlog_since = None
-            return False
-        if self._backlog_since is None:
-            self._backlog_since = now
-        if now - self._backlog_since >= self._longest_heartbeat_period:
-            return False
-        self.stats.backlog_checks += 1
-        return True
+                for cfg in self.config.nodes:
+                    h = self.health[cfg.name]
+                    if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                        h.alive = False
+                        d = self.drivers[cfg.name]
+                        self._event("heartbeat_lost", d,
+                                    f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
+                                    f"period {cfg.heartbeat_period:.3f} s)")
+                        self._expected = None
+                        self._cv.notify_all()
 
     def _excuse(self, now: float, excess: float, factor: float) -> None:
         """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""
@@ -790,6 +748,7 @@ class ArmNetwork:
 MONITOR_PERIOD = 0.010      # s
 MONITOR_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020       # s
+RECHECK_AFTER_STARVED = 0.003  # s: a starved pass judges nothing; the next one comes this soon
 
 
 __all__ = ["ArmNetwork", "ArmState", "ArmCommand", "NodeHealth", "NetworkStats", "EeCommand", "State"]

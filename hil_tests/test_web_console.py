@@ -128,14 +128,14 @@ def send_until(page, done: str) -> None:
 def report_load(stack, record_property) -> dict:
     """What this machine's load did to the daemon during the test, as measured (no retry
     hides it): cycles whose missing data was excused as the controller's own lateness,
-    heartbeat checks put off for starvation or unread frames, TPDO waits that timed out, and
+    heartbeat checks made after starvation, TPDO waits that timed out, and
     the real-time cycle's overruns and period error (s). Printed and attached to the test
     report (junit properties)."""
     from spacearm.console.client import ApiClient
 
     status = ApiClient(stack["api"]).call("status")
     network, cycle = status["network"], status["stats"]
-    figures = {key: network.get(key) for key in ("late_cycles", "starved_checks", "backlog_checks", "tpdo_timeouts")}
+    figures = {key: network.get(key) for key in ("late_cycles", "starved_checks", "starved_time", "tpdo_timeouts")}
     figures |= {key: cycle.get(key) for key in ("overruns", "period_error_p99", "period_error_max", "execution_p99")}
     figures["load"] = round(os.getloadavg()[0], 2)
     for key, value in figures.items():

@@ -204,32 +204,6 @@ def frames_sender(bus: can.BusABC):
     return send
 
 
-def bus_has_unread(bus: can.BusABC) -> bool:
-    """Do received frames wait unread on `bus` (its receive path is behind)? For the loopback
-    bus its socket and buffers, for SocketCAN its socket, for the in-process bus its queue."""
-    has_unread = getattr(bus, "has_unread", None)
-    if has_unread is not None:
-        return has_unread()
-    sock = getattr(bus, "socket", None)
-    if sock is not None:
-        return socket_readable(sock)
-    queue = getattr(bus, "queue", None)
-    return queue is not None and not queue.empty()
-
-
-def socket_readable(sock) -> bool:
-    """A poll() of one socket without waiting (select() fails on descriptors >= 1024); a
-    poll object of its own, so it may run beside a thread blocked in another poll of it."""
-    import select
-
-    poller = select.poll()
-    try:
-        poller.register(sock, select.POLLIN)
-        return bool(poller.poll(0))
-    except (OSError, ValueError):   # closed meanwhile
-        return False
-
-
 _inline = threading.local()
 
 

@@ -34,7 +34,7 @@ import can
 
 from spacearm.base.runtime.child_process import REPO_ROOT, module_env
 
-from . import socket_readable, wire
+from . import wire
 from .hub import DEFAULT_HOST, DEFAULT_PORT
 
 log = logging.getLogger("spacearm.transport.loopback")
@@ -274,15 +274,6 @@ class LoopbackBus(can.BusABC):
                                                              channel=self.hub_channel, check=False))
             except Exception as exc:   # a receiver's bug must not end the receive thread
                 listener.on_error(exc)
-
-    def has_unread(self) -> bool:
-        """Frames received but not yet handed out, or bytes waiting in the socket."""
-        if self._pending:
-            return True
-        sock = self._sock
-        if sock is None:
-            return False
-        return socket_readable(sock)
 
     def send_frame(self, can_id: int, data: bytes) -> None:
         """Send a standard-ID data frame given as plain values (no can.Message)."""
