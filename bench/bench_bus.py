@@ -14,6 +14,13 @@ responder is another process, base/transport/peer.py):
 3. Computed bus load at 1 Mbit/s for the full PDO set at 50 Hz and 250 Hz (no transport
    involved: worst-case bit stuffing, see the assumption table printed).
 
+4. Supervision timing of the master (drivers/network.py) against the in-process simulator:
+   the worst free-running cycle call (read, write, SYNC, events: they never wait for process
+   data), how soon a silent node is declared lost (bound: 3 heartbeat periods), and how soon
+   the drives fault once the controller's heartbeat stops (consumer timeout 1016h). These
+   were wall-clock asserts of tests/canopen; the tests now check the behaviour, the time is
+   here (--supervision-runs, 0 skips it), printed with the machine load and CPU steal.
+
 socketcan runs only where vcan0 exists. --compare-can-remote also measures python-can-remote's
 websocket server (if that package is installed) on 127.0.0.1 for comparison.
 """
@@ -290,6 +297,76 @@ class CanRemoteServer:
             self.proc.kill()
 
 
+# ----------------------------------------------------------------------------- supervision
+def supervision_timing(runs: int) -> list[tuple[str, str, str, str, str]]:
+    """Rows for section 4: `runs` rounds of each measurement, the worst of them reported."""
+    import uuid
+
+    from hil_tests.harness import CpuSteal
+    from spacearm.base.canopen import od
+    from spacearm.drivers.network import ArmCommand, ArmNetwork
+    from spacearm.firmware_sim.runner import Simulator
+
+    calls, losses, consumer = [], [], []
+    steal, load = CpuSteal(), os.getloadavg()[0]
+    for _ in range(runs):
+        spec = f"virtual:supervision-{uuid.uuid4().hex[:8]}"
+        sim = Simulator(spec).start()
+        net = ArmNetwork(spec)
+        try:
+            net.boot()
+            net.enable_all()
+            q0 = net.read().joints[0].position
+            due = time.monotonic()
+            for k in range(50):                  # free running at 50 Hz
+                started = time.monotonic()
+                net.read()
+                net.write(ArmCommand(joint_positions=[q0 + 0.001 * k]))
+                net.send_sync()
+                net.poll_events()
+                calls.append(time.monotonic() - started)
+                due += 0.02
+                time.sleep(max(0.0, due - time.monotonic()))
+            for name in ("joint_1", "ft_sensor"):
+                period = net.config.node(name).heartbeat_period
+                net.poll_events()
+                started = time.monotonic()
+                sim.node(name).faults.silent = True
+                lost = []
+                while not lost and time.monotonic() < started + 5.0:
+                    time.sleep(0.002)
+                    lost = [e for e in net.poll_events() if e.kind == "heartbeat_lost" and e.node == name]
+                losses.append(((lost[0].time if lost else float("inf")) - started, period))
+                sim.node(name).faults.silent = False
+                while not net.read().nodes[name].alive and time.monotonic() < started + 10.0:
+                    time.sleep(0.01)
+            drives = [sim.node(i) for i in range(1, 7)]
+            timeout = (drives[0].get(od.CONSUMER_HEARTBEAT, 1) & 0xFFFF) / 1e3
+            net.close()
+            started = time.monotonic()
+            while (not all(d.error_code == od.EMCY_HEARTBEAT_ERROR for d in drives)
+                   and time.monotonic() < started + 5.0):
+                time.sleep(0.002)
+            consumer.append((time.monotonic() - started, timeout))
+        finally:
+            net.close()
+            sim.stop()
+    where = "(master)"
+    worst_loss, period = max(losses)
+    worst_consumer, timeout = max(consumer)
+    return [
+        (where, f"free-running cycle call (read+write+SYNC+events), {len(calls)} calls, median / worst",
+         f"{1e3 * statistics.median(calls):.3f} / {1e3 * max(calls):.3f} ms", "never waits", "figure"),
+        (where, f"silent node -> heartbeat_lost, worst of {len(losses)}",
+         f"{1e3 * worst_loss:.0f} ms", f"<= {3e3 * period:.0f} ms (3 periods)",
+         "PASS" if worst_loss <= 3 * period else "FAIL"),
+        (where, f"controller closed -> all 6 drives fault (its last heartbeat up to 1 period earlier), worst of {len(consumer)}",
+         f"{1e3 * worst_consumer:.0f} ms", f"consumer timeout {1e3 * timeout:.0f} ms", "figure"),
+        (where, "  machine load / host CPU steal during these",
+         f"{max(load, os.getloadavg()[0]):.1f} / {100 * steal.fraction():.1f} %", "", "reference"),
+    ]
+
+
 # ----------------------------------------------------------------------------- main
 def machine_info() -> list[str]:
     cpu = "?"
@@ -319,6 +396,7 @@ def main(argv=None) -> int:
     ap.add_argument("--compare-can-remote", action="store_true",
                     help="also measure python-can-remote (pip install python-can-remote)")
     ap.add_argument("--json", type=Path, help="also write the raw figures here")
+    ap.add_argument("--supervision-runs", type=int, default=3, help="rounds of section 4 (0: skip it)")
     args = ap.parse_args(argv)
 
     transports = [t for t in args.transports.split(",") if t and t != "none"] if args.transports else \
@@ -397,6 +475,10 @@ def main(argv=None) -> int:
             hub.stop()
         if remote:
             remote.stop()
+
+    if args.supervision_runs > 0:
+        print(f"[master] supervision timing: {args.supervision_runs} rounds ...", flush=True)
+        rows += supervision_timing(args.supervision_runs)
 
     for hz in (50, 250):
         bits, load, fps = bus_load(hz)

@@ -53,6 +53,9 @@ FAULTS = {
     "test_marker_lost_mid_approach_stops_within_lost_frames": ("marker lost mid-approach (core)", 8),
     "test_camera_stopping_mid_approach_stops_after_the_frame_timeout": ("camera stops mid-approach (core)", 503),
 }
+# tests whose injected fault is itself missing process data or heartbeats
+MISSING_DATA_FAULTS = {"test_heartbeat_loss_stops_the_arm", "test_bus_blackout_stops",
+                       "test_simulator_killed_mid_motion_stops", "test_node_restart_is_an_unexpected_bootup_and_stops"}
 # the fault name each test passes to wait_safe -> test name
 WAIT_NAMES = {
     "heartbeat lost": "test_heartbeat_loss_stops_the_arm", "EMCY / drive fault": "test_emcy_drive_fault_stops_the_arm",
@@ -105,22 +108,26 @@ def main() -> None:
     run_pytest(["tests/fuzz"], env, junit)
     fuzz_outcomes = outcomes(junit)
 
+    # Every stop counts where it happened: starvation of the controller is coded late_cycle
+    # and never stops the arm, so a stop for missing data or a lost heartbeat in a test that
+    # injected another fault is not excused here but listed as a finding.
     measured: dict[str, list[dict]] = defaultdict(list)
-    load_stops = 0
-    missing_data_faults = {"test_bus_blackout_stops", "test_simulator_killed_mid_motion_stops",
-                           "test_node_restart_is_an_unexpected_bootup_and_stops"}
+    findings: list[str] = []
+    late_cycles = starved_checks = 0
     if results_file.exists():
         for line in results_file.read_text().splitlines():
             r = json.loads(line)
             test = WAIT_NAMES.get(r["fault"], r["fault"])
-            if "no process data" in r["reason"] and test not in missing_data_faults:
-                load_stops += 1      # the loaded machine missed the real-time budget: not this fault
-                continue
             measured[test].append(r)
+            late_cycles += r.get("late_cycles", 0)
+            starved_checks += r.get("starved_checks", 0)
+            if r.get("code") in ("pdo_missing", "heartbeat_lost") and test not in MISSING_DATA_FAULTS:
+                findings.append(f"{FAULTS.get(test, (test,))[0]}: stopped [{r['code']}] {r['reason'][:90]}")
 
     print(f"reliability on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f} at the end), "
           f"python {platform.python_version()}, fault suite x{args.repeat}")
-    print(f"\n{'fault':<40} {'injected':>8} {'safe':>5} {'worst to stop':>22} {'worst to rest':>14} {'bound':>8}")
+    print(f"\n{'fault':<40} {'injected':>8} {'safe':>5} {'worst to stop':>22} {'worst to rest':>14} {'bound':>8} "
+          f"{'late cycles':>11}")
     total = survived = 0
     for test, (label, bound) in FAULTS.items():
         oks = fault_outcomes.get(test, [])
@@ -136,9 +143,15 @@ def main() -> None:
         stop_txt = f"{cyc:4d} cyc {stop * 1e3:7.0f} ms" if stop is not None else "-"
         rest_txt = f"{max(rest) * 1e3:8.0f} ms" if rest else "-"
         bound_txt = f"{bound} cyc" if bound else "-"
-        print(f"{label:<40} {len(oks):>8} {sum(oks):>5} {stop_txt:>22} {rest_txt:>14} {bound_txt:>8}")
+        late = sum(r.get("late_cycles", 0) for r in rs)
+        print(f"{label:<40} {len(oks):>8} {sum(oks):>5} {stop_txt:>22} {rest_txt:>14} {bound_txt:>8} {late:>11}")
     print(f"{'total':<40} {total:>8} {survived:>5}")
-    print(f"stops for missing process data with another fault injected (machine load): {load_stops}")
+    print(f"late cycles (the controller was starved; its missing data excused, no stop): {late_cycles} "
+          f"in {sum(len(v) for v in measured.values())} measured faults; starved heartbeat checks: {starved_checks}")
+    print(f"stops for missing data or a lost heartbeat in a test injecting another fault (findings, "
+          f"expected 0): {len(findings)}")
+    for finding in findings:
+        print(f"  {finding}")
 
     counts = json.loads(counts_file.read_text()) if counts_file.exists() else {}
     print(f"\n{'fuzz target':<40} {'cases':>8} {'crashes':>8}")

@@ -1,10 +1,18 @@
-"""Where one lockstep cycle's CPU goes: cProfile of N cycles (8 nodes, in-process bus).
+"""Where one lockstep cycle's CPU goes.
 
     .venv/bin/python bench/profile_lockstep.py [--cycles 1000] [--record] [--top 25]
+    .venv/bin/python bench/profile_lockstep.py --transport loopback [--cycles 3000] [--top 15]
 
-Prints CPU and Python calls per cycle, then the functions by own time (thread CPU clock, so
-waiting on a loaded machine does not show up as cost). Profiling slows every call: compare
-profiles with each other, and take the unprofiled figures from bench/bench_daemon.py.
+In-process bus (default): cProfile of N cycles (8 nodes), CPU and Python calls per cycle,
+then the functions by own time (thread CPU clock, so waiting on a loaded machine does not
+show up as cost).
+
+Loopback: the simulator runs in its own process and frames go through the hub, so the work
+is spread over threads of three processes; cProfile sees one thread only. py-spy (PyPI, the
+`profile` extra) samples the daemon process and the simulator process while the cycles run
+and this prints each process's functions by own samples (on-CPU only, every thread), plus
+the process CPU per cycle of both sides. Profiling slows every call: compare profiles with
+each other, and take the unprofiled figures from bench/bench_daemon.py.
 """
 from __future__ import annotations
 
@@ -12,23 +20,26 @@ import argparse
 import cProfile
 import os
 import pstats
+import shutil
+import signal
+import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "bench"))
+from bench_daemon import process_cpu  # noqa: E402
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--cycles", type=int, default=1000)
-    ap.add_argument("--record", action="store_true", help="record every cycle (MCAP and CAN trace) as the daemon does")
-    ap.add_argument("--top", type=int, default=25)
-    args = ap.parse_args()
+
+def profile_in_process(args) -> None:
     bus = f"virtual:profile-{time.monotonic_ns()}"
     sim = start_simulator(bus)
     record = Path(tempfile.mkdtemp(prefix="spacearm-profile-")) if args.record else None
@@ -50,6 +61,86 @@ def main() -> None:
           f"{1e3 * cpu / args.cycles:.2f} ms thread CPU per cycle (profiled), "
           f"{stats.total_calls / args.cycles:.0f} Python calls per cycle")
     stats.sort_stats("tottime").print_stats(args.top)
+
+
+def own_samples(raw: Path) -> tuple[Counter, int]:
+    """py-spy's raw (collapsed) stacks -> samples per innermost function, and the total."""
+    counts: Counter = Counter()
+    total = 0
+    for line in raw.read_text().splitlines():
+        stack, _, n = line.rpartition(" ")
+        if not stack or not n.isdigit():
+            continue
+        frame = stack.rsplit(";", 1)[-1]
+        name, _, where = frame.partition(" (")
+        where = where.rstrip(")").rsplit(":", 1)[0]
+        counts[f"{name} ({'/'.join(Path(where).parts[-2:])})"] += int(n)
+        total += int(n)
+    return counts, total
+
+
+def profile_loopback(args) -> None:
+    from spacearm.base.transport.hub import HubProcess
+
+    spy = shutil.which("py-spy") or str(Path(sys.executable).parent / "py-spy")
+    if not Path(spy).exists():
+        sys.exit("profile_lockstep: py-spy not found (pip install py-spy, the `profile` extra)")
+    hub = HubProcess()
+    bus = hub.spec(f"profile-{time.monotonic_ns()}")
+    sim = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", "sim", "--bus", bus], cwd=ROOT,
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    for line in sim.stdout:
+        if "nodes ready" in line:
+            break
+    out = Path(tempfile.mkdtemp(prefix="spacearm-profile-"))
+    record = out / "runs" if args.record else None
+    daemon = Daemon(DaemonOptions(bus=bus, clock="lockstep", period=0.02, api=None, record_dir=record))
+    spies = {}
+    try:
+        daemon.start()
+        daemon.run(max_cycles=50)
+        for name, pid in (("daemon", os.getpid()), ("simulator", sim.pid), ("hub", hub.proc.pid)):
+            spies[name] = subprocess.Popen([spy, "record", "--pid", str(pid), "--format", "raw", "--nonblocking",
+                                            "--rate", "500", "--output", str(out / f"{name}.txt")],
+                                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        time.sleep(1.0)       # py-spy attaches
+        cpu = {name: process_cpu(pid) for name, pid in (("daemon", os.getpid()), ("simulator", sim.pid),
+                                                         ("hub", hub.proc.pid))}
+        wall = time.monotonic()
+        daemon.run(max_cycles=args.cycles)
+        wall = time.monotonic() - wall
+        cpu = {name: process_cpu(pid) - cpu[name] for name, pid in (("daemon", os.getpid()), ("simulator", sim.pid),
+                                                                      ("hub", hub.proc.pid))}
+        for proc in spies.values():
+            proc.send_signal(signal.SIGINT)
+        for proc in spies.values():
+            proc.wait(30)
+    finally:
+        daemon.shutdown()
+        sim.terminate()
+        sim.wait(10)
+        hub.stop()
+    print(f"{args.cycles} lockstep cycles over the loopback hub, recording {'on' if args.record else 'off'}, "
+          f"load {os.getloadavg()[0]:.1f}: {1e3 * wall / args.cycles:.2f} ms wall per cycle (profiled, "
+          f"{0.02 * args.cycles / wall:.1f}x); process CPU per cycle: "
+          + ", ".join(f"{name} {1e3 * c / args.cycles:.3f} ms" for name, c in cpu.items()))
+    for name in spies:
+        counts, total = own_samples(out / f"{name}.txt")
+        print(f"\n{name}: {total} on-CPU samples, functions by own samples")
+        for func, n in counts.most_common(args.top):
+            print(f"  {100 * n / max(total, 1):5.1f} %  {func}")
+    shutil.rmtree(out, ignore_errors=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cycles", type=int, default=1000)
+    ap.add_argument("--record", action="store_true", help="record every cycle (MCAP and CAN trace) as the daemon does")
+    ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--transport", default="virtual", choices=["virtual", "loopback"],
+                    help="virtual: in-process bus, cProfile; loopback: simulator in its own process, py-spy")
+    args = ap.parse_args()
+    (profile_loopback if args.transport == "loopback" else profile_in_process)(args)
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffec
 from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.drivers.errors import BootError, DriverError, NetworkEvent, SdoError, SdoTimeoutError, emcy_text
-from spacearm.base.transport import frame_sender, open_bus
+from spacearm.base.transport import frame_sender, frames_sender, open_bus
 
 logger = logging.getLogger(__name__)
 
@@ -203,6 +203,7 @@ class ArmNetwork:
         self.network.bus = open_bus(self.bus_spec, hub_reports=True)   # the master hears the hub's lateness
         self.network.connect()
         self._send_frame = frame_sender(self.network.bus)
+        self._send_frames = frames_sender(self.network.bus)
         if hasattr(self.network.bus, "add_inline_listener"):
             # in-process bus: TPDOs are handled in the simulator's sending thread (see
             # drivers/transport); the library's Notifier stays for the queued fallback
@@ -438,8 +439,11 @@ class ArmNetwork:
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
                     frames += d.rpdo_frames()
-        for cob, data in frames:
-            self._send(cob, data)
+        if frames:
+            if not self._connected:
+                raise DriverError("the network is not connected: call boot() first")
+            with self.network.send_lock:
+                self._send_frames(frames)      # one write on the loopback bus
 
     def _send(self, can_id: int, data: bytes) -> None:
         """The cycle's frames (SYNC, RPDOs): plain values to the bus, no Message on the

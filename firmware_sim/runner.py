@@ -21,7 +21,7 @@ import can
 
 from spacearm.base.canopen import od, peer_timing
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from spacearm.base.transport import frame_sender, open_bus
+from spacearm.base.transport import frame_sender, frames_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
 from spacearm.firmware_sim.joint_drive import JointDriveNode
@@ -115,6 +115,10 @@ class Simulator:
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
         self._send_lock = threading.Lock()
+        # frames a SYNC's handling sends (TPDOs, a due heartbeat) are collected and written as
+        # one burst (one write on the loopback bus); only the thread handling the SYNC batches
+        self._batch: list[tuple[int, bytes]] | None = None
+        self._batch_thread: int | None = None
         self._sync_lock = threading.Lock()
         self._dirty = True
         self._rpdo_routes: dict[int, SimNode] = {}
@@ -126,6 +130,7 @@ class Simulator:
     def start(self) -> "Simulator":
         self.bus = open_bus(self.bus_spec)
         self._send_frame = frame_sender(self.bus)
+        self._send_frames = frames_sender(self.bus)
         listener = _Listener(self)
         self._notifier = can.Notifier(self.bus, [listener], timeout=0.1)
         if hasattr(self.bus, "add_inline_listener"):
@@ -187,11 +192,23 @@ class Simulator:
     def _send(self, can_id: int, data: bytes) -> None:
         if self.bus is None:
             return
+        if self._batch is not None and self._batch_thread == threading.get_ident():
+            self._batch.append((can_id, data))
+            return
         with self._send_lock:
             try:
                 self._send_frame(can_id, data)
             except can.CanError as exc:
                 logger.warning("simulator: send failed: %s", exc)
+
+    def _flush_batch(self) -> None:
+        frames, self._batch, self._batch_thread = self._batch, None, None
+        if frames and self.bus is not None:
+            with self._send_lock:
+                try:
+                    self._send_frames(frames)
+                except can.CanError as exc:
+                    logger.warning("simulator: send failed: %s", exc)
 
     def _mark_dirty(self) -> None:
         self._dirty = True
@@ -288,32 +305,40 @@ class Simulator:
 
     def _on_sync_locked(self) -> None:
         with self._sync_lock:
-            self.stats.syncs += 1
-            nodes = [n for n in self.nodes.values() if n.powered]
-            # one SYNC period of physics: the period the controller configured (1006h), else the
-            # bus config's
-            dt = self.dt
-            for node in nodes:
-                period = node.param(od.COMM_CYCLE_PERIOD)
-                if period > 0:
-                    dt = period / 1e6
-                    break
-            for node in nodes:
-                node.on_sync_begin(dt)
-            self.plant.step(dt)
-            if self.camera is not None:       # exposure snapshot only; rendering is on its own thread
-                self.camera.on_sync(self.stats.syncs)
-            for node in nodes:
-                node.on_sync_end(dt)
-            for node in nodes:
-                if not node.faults.silent:
-                    node.send_tpdos()
-            # A heartbeat that fell due is sent here too: the SYNC thread runs anyway, so a
-            # timer thread starved of the GIL does not delay it (whichever runs first sends).
-            now = time.monotonic()
-            for node in nodes:
-                if 0.0 < node.next_heartbeat <= now and node.nmt_state != od.NMT_STATE_BOOTUP:
-                    self._heartbeat_due(node, now)
+            self._batch, self._batch_thread = [], threading.get_ident()
+            try:
+                self._sync_step()
+            finally:
+                self._flush_batch()
+
+    def _sync_step(self) -> None:
+        """One SYNC under the SYNC lock: physics, then every node's TPDOs and due heartbeats."""
+        self.stats.syncs += 1
+        nodes = [n for n in self.nodes.values() if n.powered]
+        # one SYNC period of physics: the period the controller configured (1006h), else the
+        # bus config's
+        dt = self.dt
+        for node in nodes:
+            period = node.param(od.COMM_CYCLE_PERIOD)
+            if period > 0:
+                dt = period / 1e6
+                break
+        for node in nodes:
+            node.on_sync_begin(dt)
+        self.plant.step(dt)
+        if self.camera is not None:       # exposure snapshot only; rendering is on its own thread
+            self.camera.on_sync(self.stats.syncs)
+        for node in nodes:
+            node.on_sync_end(dt)
+        for node in nodes:
+            if not node.faults.silent:
+                node.send_tpdos()
+        # A heartbeat that fell due is sent here too: the SYNC thread runs anyway, so a
+        # timer thread starved of the GIL does not delay it (whichever runs first sends).
+        now = time.monotonic()
+        for node in nodes:
+            if 0.0 < node.next_heartbeat <= now and node.nmt_state != od.NMT_STATE_BOOTUP:
+                self._heartbeat_due(node, now)
 
     def _heartbeat_loop(self) -> None:
         """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers

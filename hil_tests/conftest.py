@@ -197,6 +197,9 @@ def open_test_bus():
             pass
 
 
+SIM_RT_PRIORITY = 50   # as the README runs `spacearm sim` (and the daemon's real-time cycle)
+
+
 def child_env(extra: dict | None = None) -> dict:
     env = module_env()
     env.setdefault("PYTHONUNBUFFERED", "1")
@@ -214,12 +217,21 @@ def launch(tmp_path):
     ``proc.log_paths``). If ``ready`` (a regex) is given, waits until it appears in the
     output, failing after ``timeout`` * time_scale seconds. Every process is terminated, then
     killed, at teardown.
+
+    A simulator (``spacearm.console.main sim``) runs at SCHED_FIFO SIM_RT_PRIORITY unless the
+    command names ``--rt-priority``: it stands in for drive firmware, which has its own CPU on
+    a real arm; at normal priority the CPU-bound neighbours (--cpu-load) starve its heartbeat
+    producer and the controller rightly declares the node lost (a false fault of the test
+    set-up, not of the stack).
     """
     procs: list[subprocess.Popen] = []
 
     def _launch(args, bus_spec: str | None = None, ready: str | None = None, timeout: float = 20.0,
                 env: dict | None = None):
-        cmd = [sys.executable, *map(str, args)]
+        args = [str(a) for a in args]
+        if args[:3] == ["-m", "spacearm.console.main", "sim"] and "--rt-priority" not in args:
+            args += ["--rt-priority", str(SIM_RT_PRIORITY)]
+        cmd = [sys.executable, *args]
         if bus_spec is not None:
             cmd += ["--bus", bus_spec]
         n = len(procs)

@@ -375,9 +375,12 @@ def record_result(r: SafeState) -> None:
     if not path:
         return
     with open(path, "a") as f:
-        f.write(json.dumps({"fault": r.fault, "reason": r.reason, "to_stop": r.to_stop,
-                            "cycles": r.executed_cycles,
-                            "to_rest": r.to_rest}) + "\n")
+        network = r.status.get("network") or {}
+        f.write(json.dumps({"fault": r.fault, "reason": r.reason, "code": (r.status.get("stop") or {}).get("code"),
+                            "to_stop": r.to_stop, "cycles": r.executed_cycles, "to_rest": r.to_rest,
+                            # the controller's own starvation during the test (excused, never a stop)
+                            "late_cycles": network.get("late_cycles", 0),
+                            "starved_checks": network.get("starved_checks", 0)}) + "\n")
 
 
 def assert_stays_still(stack: Stack, seconds: float = 0.4, settle: float = 0.3) -> None:

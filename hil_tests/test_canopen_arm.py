@@ -28,6 +28,19 @@ from spacearm.firmware_sim.runner import Simulator
 pytestmark = pytest.mark.hil
 
 
+@pytest.fixture(autouse=True)
+def master_at_daemon_priority():
+    """The master under test runs in this process, at SCHED_FIFO 50 as the daemon runs it
+    (`spacearm daemon --rt-priority 50`): its receive and timer threads, started from this
+    thread, inherit the policy (and so does the in-process simulator on the virtual bus).
+    At normal priority, CPU-bound neighbours starved them past the 3-period loss bound."""
+    from spacearm.base.runtime.priority import use_fifo, use_normal
+
+    use_fifo(50)
+    yield
+    use_normal()
+
+
 @dataclass
 class SimHandle:
     sim: Simulator | None      # in-process (virtual)

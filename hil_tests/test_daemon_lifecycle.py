@@ -43,15 +43,17 @@ def wait_for(proc: subprocess.Popen, text: str, timeout: float = 60.0) -> None:
 
 
 def test_no_node_answers_gives_one_line_naming_bus_and_nodes_within_the_boot_timeout():
-    started = time.monotonic()
+    # The daemon gives up when its boot timeout ends and says so; the wall time around that
+    # (interpreter start-up, imports) follows the machine's load (at load 19 it took 39 s), so
+    # the subprocess timeout only catches a hang.
     result = subprocess.run([sys.executable, "-m", "spacearm.console.main", "daemon", "--bus", "virtual:typo",
                              "--no-record", "--api", f"tcp:127.0.0.1:{free_port()}"],
-                            cwd=ROOT, env=child_env(None), capture_output=True, text=True, timeout=60)
+                            cwd=ROOT, env=child_env(None), capture_output=True, text=True, timeout=300)
     assert result.returncode == 1 and "Traceback" not in result.stderr
     [line] = [l for l in result.stderr.splitlines() if l.startswith("error")]
     assert line.startswith("error[boot_failed]: bus virtual:typo:")
+    assert "no boot-up message within 3.0 s" in line        # the configured boot timeout ended it
     assert "joint_1" in line and "ft_sensor" in line
-    assert time.monotonic() - started < 30          # boot timeout 3 s + start-up, not minutes
 
 
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])

@@ -126,6 +126,7 @@ class LoopbackBus(can.BusABC):
         self.host = host or dh
         self.port = int(port or dp)
         self.hub_channel = str(channel)
+        self.channel_id = self.hub_channel       # as the in-process bus names its channel (CAN trace lines)
         self.receive_own_messages = receive_own_messages
         self.hub_reports = hub_reports      # also receive the hub's own timing reports
         self.autostart = _autostart_enabled(autostart) and _is_loopback(self.host)
@@ -139,6 +140,11 @@ class LoopbackBus(can.BusABC):
         self._generation = 0
         self._inbuf = bytearray()
         self._pending: deque[can.Message] = deque()
+        self._poller: select.poll | None = None     # POLLIN on the current connection, made once
+        # inline listeners (add_inline_listener): standard data frames go to their on_frame in
+        # the receiving thread, as plain values, instead of becoming a can.Message
+        self._inline: list[tuple] = []
+        self._plain = None
         self._closed = False
         self.client_id: int | None = None
         self.reconnects = 0
@@ -220,7 +226,9 @@ class LoopbackBus(can.BusABC):
                 time.sleep(delay)
                 delay = min(delay * 2, 0.25)
                 continue
-            self._sock = sock
+            poller = select.poll()
+            poller.register(sock, select.POLLIN | select.POLLERR | select.POLLHUP)
+            self._sock, self._poller = sock, poller
             self._generation += 1
             if not first:
                 self.reconnects += 1
@@ -248,6 +256,42 @@ class LoopbackBus(can.BusABC):
             self._inbuf = bytearray()
             self._connect(first=False)
 
+    # ------------------------------------------------------------ hot path (base/transport)
+    def add_inline_listener(self, listener: can.Listener) -> None:
+        """Standard data frames for this bus go to listener.on_frame(can_id, data, timestamp)
+        in the thread that receives (the Notifier's), without a can.Message; other frames
+        still reach the Notifier. Same contract as the in-process bus's inline listeners."""
+        self._inline = self._inline + [(getattr(listener, "on_frame", None), listener)]
+        self._plain = self._deliver
+
+    def _deliver(self, can_id: int, data: bytes, timestamp: float) -> None:
+        for on_frame, listener in self._inline:
+            try:
+                if on_frame is not None:
+                    on_frame(can_id, data, timestamp)
+                else:
+                    listener.on_message_received(can.Message(timestamp=timestamp, arbitration_id=can_id,
+                                                             is_extended_id=False, data=data,
+                                                             channel=self.hub_channel, check=False))
+            except Exception as exc:   # a receiver's bug must not end the receive thread
+                listener.on_error(exc)
+
+    def send_frame(self, can_id: int, data: bytes) -> None:
+        """Send a standard-ID data frame given as plain values (no can.Message)."""
+        self.send_frames(((can_id, data),))
+
+    def send_frames(self, frames) -> None:
+        """Send standard-ID data frames [(can_id, data), ...] in one write: the hub forwards
+        them as one slice and each receiver wakes once for all of them."""
+        if self._closed:
+            raise can.CanOperationError(f"{self.channel_info}: bus is shut down")
+        encode = wire.encode_data_frame
+        try:
+            record = b"".join([encode(can_id, data) for can_id, data in frames])
+        except ValueError as exc:
+            raise can.CanOperationError(f"cannot send: {exc}") from exc
+        self._write(record, None)
+
     # ------------------------------------------------------------ BusABC
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         if self._closed:
@@ -256,6 +300,10 @@ class LoopbackBus(can.BusABC):
             record = wire.encode_frame(msg)
         except ValueError as exc:
             raise can.CanOperationError(f"cannot send {msg!r}: {exc}") from exc
+        self._write(record, timeout)
+
+    def _write(self, record: bytes, timeout: float | None) -> None:
+        """Write whole records, reconnecting once if the connection was lost."""
         deadline = None if timeout is None else time.monotonic() + timeout
         for attempt in (0, 1):
             with self._send_lock:
@@ -299,24 +347,28 @@ class LoopbackBus(can.BusABC):
             while True:
                 if self._closed:
                     raise can.CanOperationError(f"{self.channel_info}: bus is shut down")
-                sock, gen = self._sock, self._generation
+                sock, gen, poller = self._sock, self._generation, self._poller
                 if sock is None:
                     self._lost(gen, "not connected")
+                    continue
+                # wait first, then read: one poll and one recv per wake-up (a read that would
+                # block costs a syscall and an exception)
+                left = None if deadline is None else deadline - time.monotonic()
+                if left is not None and left <= 0:
+                    left = 0.0
+                try:
+                    ready = poller.poll(500 if left is None else min(int(left * 1000 + 0.999), 500))
+                except (OSError, ValueError):  # closed under us
+                    if self._closed:
+                        return None, False
+                    ready = True
+                if not ready:
+                    if deadline is not None and time.monotonic() >= deadline:
+                        return None, False
                     continue
                 try:
                     chunk = sock.recv(65536)
                 except (BlockingIOError, InterruptedError):
-                    left = None if deadline is None else deadline - time.monotonic()
-                    if left is not None and left <= 0:
-                        return None, False
-                    try:
-                        ready = _wait(sock, select.POLLIN, 0.5 if left is None else min(left, 0.5))
-                    except (OSError, ValueError):  # closed under us
-                        if self._closed:
-                            return None, False
-                        ready = True
-                    if not ready and deadline is not None and time.monotonic() >= deadline:
-                        return None, False
                     continue
                 except OSError as exc:
                     if self._closed:
@@ -330,7 +382,7 @@ class LoopbackBus(can.BusABC):
                     continue  # the connection was replaced meanwhile: data of the old one is stale
                 self._inbuf += chunk
                 try:
-                    msgs = wire.decode_stream(self._inbuf, time.time(), self.hub_channel)
+                    msgs = wire.decode_stream(self._inbuf, time.time(), self.hub_channel, self._plain)
                 except wire.ProtocolError as exc:
                     self._lost(gen, f"corrupt stream from hub: {exc}")
                     continue
@@ -338,6 +390,8 @@ class LoopbackBus(can.BusABC):
                     if len(msgs) > 1:
                         self._pending.extend(msgs[1:])
                     return msgs[0], False
+                if deadline is not None and time.monotonic() >= deadline:
+                    return None, False      # only inline frames arrived: they are handled
 
     def shutdown(self) -> None:
         if self._closed:

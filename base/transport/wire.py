@@ -73,6 +73,14 @@ def encode_frame(msg: can.Message) -> bytes:
     return _FRAME_HDR.pack(FRAME_HDR_LEN + len(data), T_FRAME, flags, msg.arbitration_id, dlc) + data
 
 
+def encode_data_frame(can_id: int, data: bytes) -> bytes:
+    """The FRAME record of a standard-ID data frame given as plain values (the hot path: no
+    can.Message). Raises ValueError for what no classic CAN controller could send."""
+    if not 0 <= can_id <= 0x7FF or len(data) > 8:
+        raise ValueError(f"frame 0x{can_id:X} with {len(data)} bytes is not a standard CAN data frame")
+    return _FRAME_HDR.pack(FRAME_HDR_LEN + len(data), T_FRAME, 0, can_id, len(data)) + data
+
+
 def check_frame_body(body: bytes | memoryview) -> None:
     """Validate a FRAME body (the bytes after the type byte); raise ProtocolError if malformed."""
     if len(body) < 6:
@@ -110,11 +118,10 @@ def decode_frame(body: bytes | memoryview, timestamp: float, channel: str | None
 _Message = can.Message
 
 
-def decode_stream(buf: bytearray, timestamp: float, channel: str | None) -> list[can.Message]:
-    """Decode every complete FRAME record at the start of buf (removing them) in one pass.
-    Raises ProtocolError on anything that is not a well-formed FRAME record."""
-    out = []
-    pos = 0
+def frames_end(buf: bytearray) -> tuple[int, int]:
+    """(bytes, count) of the complete, well-formed FRAME records at the start of buf, checked
+    in place (the hub forwards them as one slice); ProtocolError on anything else."""
+    pos = count = 0
     n = len(buf)
     while pos < n:
         length = buf[pos]
@@ -124,25 +131,37 @@ def decode_stream(buf: bytearray, timestamp: float, channel: str | None) -> list
         if length < 7 or buf[pos + 1] != T_FRAME:
             raise ProtocolError(f"unexpected record (type {buf[pos + 1] if length else None}, length {length})")
         flags = buf[pos + 2]
-        ndata = length - 7
-        if flags & ~_KNOWN_FLAGS or ndata > (64 if flags & F_FD else 8):
-            raise ProtocolError(f"malformed frame record (flags 0x{flags:02X}, {ndata} data bytes)")
-        out.append(_Message(
-            timestamp=timestamp,
-            arbitration_id=int.from_bytes(buf[pos + 3:pos + 7], "big"),
-            is_extended_id=bool(flags & F_EXTENDED),
-            is_remote_frame=bool(flags & F_REMOTE),
-            is_error_frame=bool(flags & F_ERROR),
-            is_fd=bool(flags & F_FD),
-            bitrate_switch=bool(flags & F_BRS),
-            error_state_indicator=bool(flags & F_ESI),
-            dlc=buf[pos + 7],
-            data=bytes(buf[pos + 8:end]),
-            channel=channel,
-        ))
+        if flags & ~_KNOWN_FLAGS or length - 7 > (64 if flags & F_FD else 8):
+            raise ProtocolError(f"malformed frame record (flags 0x{flags:02X}, {length - 7} data bytes)")
         pos = end
-    if pos:
-        del buf[:pos]
+        count += 1
+    return pos, count
+
+
+def decode_stream(buf: bytearray, timestamp: float, channel: str | None, plain=None) -> list[can.Message]:
+    """Decode every complete FRAME record at the start of buf (removing them).
+    With `plain`, a standard-ID data frame (no flags) is handed to plain(can_id, data,
+    timestamp) instead of becoming a can.Message; the list holds only the other frames.
+    Raises ProtocolError (and removes nothing) if any record is not a well-formed FRAME."""
+    stop, _ = frames_end(buf)
+    out = []
+    pos = 0
+    while pos < stop:
+        end = pos + 1 + buf[pos]
+        flags = buf[pos + 2]
+        can_id = int.from_bytes(buf[pos + 3:pos + 7], "big")
+        if plain is not None and not flags:
+            plain(can_id, bytes(buf[pos + 8:end]), timestamp)
+        else:
+            out.append(_Message(
+                timestamp=timestamp, arbitration_id=can_id,
+                is_extended_id=bool(flags & F_EXTENDED), is_remote_frame=bool(flags & F_REMOTE),
+                is_error_frame=bool(flags & F_ERROR), is_fd=bool(flags & F_FD),
+                bitrate_switch=bool(flags & F_BRS), error_state_indicator=bool(flags & F_ESI),
+                dlc=buf[pos + 7], data=bytes(buf[pos + 8:end]), channel=channel))
+        pos = end
+    if stop:
+        del buf[:stop]
     return out
 
 

@@ -32,7 +32,7 @@ def test_selection_beats_random_subsets_and_respects_constraints(laser_setup):
     assert direct == pytest.approx(sel.value, rel=1e-8)
     best, _ = random_subsets_best(blocks, 50, 500, rng)
     assert sel.value > 1.1 * best
-    assert sel.elapsed < 5.0
+    # its time is a figure of bench/bench_calibration.py, not an assert here
 
 
 @pytest.mark.parametrize("index", ["O1", "O2", "O4", "O5"])

@@ -23,7 +23,7 @@ def test_laser_noisy_run_is_sub_tenth_mm(laser_setup):
     assert s.rms_rot.max() < 0.4e-3
 
 
-def test_ekf_weighted_lm_close_to_floor_and_fast():
+def test_ekf_weighted_lm_close_to_floor():   # fit time: bench/bench_calibration.py
     st = E.setup()
     ratios = []
     for seed in range(2):
@@ -31,7 +31,6 @@ def test_ekf_weighted_lm_close_to_floor_and_fast():
         floor = run.stats["floor"].pos_norm.mean()
         ratios.append(run.stats["lm"].pos_norm.mean() / floor)
         assert run.stats["lm"].pos_norm.mean() < run.stats["lse"].pos_norm.mean()
-        assert run.fits["lm"].elapsed < 0.5
     assert np.mean(ratios) < 1.15
 
 

@@ -1,6 +1,7 @@
 """In-process fixtures: the simulator and the controller on one python-can virtual bus."""
 from __future__ import annotations
 
+import time
 import uuid
 
 import pytest
@@ -44,3 +45,16 @@ def booted(net):
 def enabled(booted):
     booted.enable_all()
     return booted
+
+
+def eventually(predicate, timeout: float = 10.0, what: str = "condition"):
+    """Wait for `predicate()` to hold. The timeout only ends a test that would otherwise hang
+    (generous: the machine may be loaded); how fast it happens is measured in bench/, not here."""
+    end = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > end:
+            raise AssertionError(f"{what}: not reached within {timeout:.0f} s")
+        time.sleep(0.005)

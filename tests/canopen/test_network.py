@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import threading
 import time
 
 import pytest
@@ -12,6 +13,7 @@ from spacearm.base.canopen.cia402_defs import State
 from spacearm.drivers.devices import EeCommand, EeState
 from spacearm.drivers.errors import BootError, SdoError, SdoTimeoutError
 from spacearm.drivers.network import ArmCommand, ArmNetwork
+from tests.canopen.conftest import eventually
 
 
 def test_boot_configures_by_sdo_and_starts(booted, sim):
@@ -151,33 +153,41 @@ def test_fault_reset_that_does_not_clear_is_reported(enabled, sim):
     assert s.joints[0].enabled
 
 
-def test_heartbeat_loss_detected_within_three_periods(booted, sim):
+def wait_for_event(net: ArmNetwork, kind: str, node: str) -> list:
+    """Collect the network's events until one of `kind` for `node` came; returns them all."""
+    seen = []
+
+    def arrived():
+        seen.extend(net.poll_events())
+        return any(e.kind == kind and e.node == node for e in seen)
+    eventually(arrived, what=f"{kind} of {node}")
+    return seen
+
+
+def test_heartbeat_loss_is_detected_and_named(booted, sim):
+    # How soon (the 3-period bound) is measured by bench/bench_bus.py (supervision figures) and
+    # bounded in cycles by the HIL fault tests; the excuse cap that keeps it is tested in
+    # test_starvation.py without a clock.
     net = booted   # (hil_tests/test_canopen_arm.py checks every node over every transport)
     for cfg in (net.config.node("joint_1"), net.config.node("ft_sensor")):
         node = sim.node(cfg.node_id)
         net.poll_events()
-        t0 = time.monotonic()
         node.faults.silent = True
-        deadline = t0 + 1.0
-        lost = []
-        while time.monotonic() < deadline and not lost:
-            time.sleep(0.005)
-            lost = [e for e in net.poll_events() if e.kind == "heartbeat_lost"]
-        assert lost and lost[0].node == cfg.name, cfg.name
-        assert lost[0].time - t0 <= 3 * cfg.heartbeat_period
+        events = wait_for_event(net, "heartbeat_lost", cfg.name)
+        assert {e.node for e in events if e.kind == "heartbeat_lost"} == {cfg.name}
         assert not net.read().nodes[cfg.name].alive
         node.faults.silent = False
-        time.sleep(cfg.heartbeat_period * 1.5)
-        assert any(e.kind == "heartbeat_restored" and e.node == cfg.name for e in net.poll_events())
+        wait_for_event(net, "heartbeat_restored", cfg.name)
 
 
 def test_lockstep_does_not_wait_for_a_lost_node(enabled, sim):
     net = enabled
     sim.node(17).faults.silent = True
-    time.sleep(0.3)
-    t = time.monotonic()
+    eventually(lambda: not net.read().nodes["ft_sensor"].alive, what="ft_sensor declared lost")
+    timeouts = net.stats.tpdo_timeouts
     s = net.cycle()
-    assert s.complete and time.monotonic() - t < 0.1
+    # complete without the lost node's TPDOs, and no wait ran into its timeout
+    assert s.complete and net.stats.tpdo_timeouts == timeouts
     assert not s.nodes["ft_sensor"].alive
 
 
@@ -301,12 +311,14 @@ def test_nodes_consume_the_controller_heartbeat(enabled, sim):
     assert sim.node(1).get(od.CONSUMER_HEARTBEAT, 1) == (127 << 16) | 300
     for k in range(10):
         net.cycle(ArmCommand(joint_positions=[0.005 * k]))
+    drives = [sim.node(i) for i in range(1, 7)]
+    assert not any(d.error_code == od.EMCY_HEARTBEAT_ERROR for d in drives)   # controller alive: no fault
     net.close()                                   # controller dies: no heartbeat, no SYNC
-    time.sleep(0.45)
-    for i in range(1, 7):
-        drive = sim.node(i)
-        assert drive.error_code == od.EMCY_HEARTBEAT_ERROR, drive.name
-        assert drive.get(od.ERROR_REGISTER) & od.ERR_REG_COMMUNICATION
+    # every drive faults on the consumer timeout (how soon: bench/bench_bus.py, supervision)
+    eventually(lambda: all(d.error_code == od.EMCY_HEARTBEAT_ERROR for d in drives),
+               what="every drive in heartbeat error")
+    for drive in drives:
+        assert drive.get(od.ERROR_REGISTER) & od.ERR_REG_COMMUNICATION, drive.name
     # the fault reaction ramp needs SYNCs (physics runs only on SYNC): a new controller recovers
     net2 = ArmNetwork(net.bus_spec, net.config)
     try:
@@ -352,25 +364,32 @@ def test_torque_limit(enabled, sim):
     assert worst <= limit + 1e-9 and worst == pytest.approx(limit, rel=0.01)
 
 
-def test_free_running_mode_never_blocks(enabled):
+class _NoWait(threading.Condition):
+    """The network's condition, failing any wait on it: a free-running call that waited for
+    process data (instead of returning what arrived) fails here, however fast the machine."""
+
+    def wait(self, timeout=None):
+        raise AssertionError("a free-running call waited for process data")
+
+
+def test_free_running_mode_never_blocks(enabled, sim):
+    # The time of one call is a figure of bench/bench_bus.py (supervision), not an assert here.
     net = enabled
+    net._cv = _NoWait()
     q0 = net.read().joints[0].position
     complete = 0
-    t_next = time.monotonic()
-    worst_call = 0.0
     for k in range(1, 26):
-        t = time.monotonic()
         state = net.read()
         complete += state.complete
         net.write(ArmCommand(joint_positions=[q0 + 0.002 * k]))
         net.send_sync()
         net.poll_events()
-        worst_call = max(worst_call, time.monotonic() - t)
-        t_next += 0.02
-        time.sleep(max(0.0, t_next - time.monotonic()))
     assert complete >= 20
-    assert worst_call < 0.015
     assert net.read().joints[0].position == pytest.approx(q0 + 0.05, abs=2e-3)
+    # with a node that does not answer, the calls still return at once, reporting incomplete data
+    sim.node(1).faults.silent = True
+    net.send_sync()
+    assert not net.read().complete and net.nodes_missing_tpdos() == ["joint_1"]
 
 
 def test_move_to_demo_helper(enabled):

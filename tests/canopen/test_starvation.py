@@ -58,3 +58,4 @@ def test_excused_silence_is_capped_so_a_real_loss_is_declared_within_three_perio
         net._excuse(now, 1.0, factor)      # starved again in the same silence: nothing more
     assert h.last_heartbeat - (now - 0.26) == excused
     assert (now - 0.26) + excused + factor * period <= now - 0.26 + 3 * period   # loss bound kept
+
