@@ -35,6 +35,7 @@ import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from spacearm.base.canopen import od
+from spacearm.base.runtime.priority import use_fifo
 from spacearm.drivers.bringup import BringupReport, NodeBringup
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
 from spacearm.base.canopen.cia402_defs import State
@@ -189,6 +190,10 @@ class ArmNetwork:
         # set is complete saves a thread hop per TPDO.
         self._expected: set[int] | None = None
         self._monitoring = False
+        # SCHED_FIFO priority of the timer thread alone (0: inherit): a lockstep daemon's cycle
+        # runs at normal priority, yet its heartbeat must not stall behind other load
+        self.timer_priority = 0
+        self.timer_scheduling = "inherited"
         self._sync = 0
         self._connected = False
         self._stop = threading.Event()
@@ -675,6 +680,8 @@ class ArmNetwork:
         declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
         heartbeat periods holds whatever the load."""
+        if self.timer_priority:
+            self.timer_scheduling = use_fifo(self.timer_priority) or f"SCHED_FIFO {self.timer_priority}"
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id

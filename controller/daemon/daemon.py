@@ -148,7 +148,14 @@ class Daemon:
             # never hold the GIL at a lower priority than the waiting cycle.
             problem = use_fifo(self.options.rt_priority)
         self.scheduling = problem or describe()
+        if self.options.clock != "realtime" and self.options.rt_priority:
+            # Lockstep: the cycle runs flat out at normal priority (at FIFO it would take a core
+            # from everything else), but the drives time the master's heartbeat in wall time, so
+            # a cycle starved by other load must not silence it: the timer thread alone is FIFO.
+            self.hardware.network.timer_priority = self.options.rt_priority
         self.hardware.start()
+        if self.hardware.network.timer_priority:
+            self.scheduling += f" (heartbeat timer: {self.hardware.network.timer_scheduling})"
         if self.options.camera:
             from spacearm.base.vision.frames import ShmFrameRing
             self.attach_vision(ShmFrameRing.attach(self.options.camera))

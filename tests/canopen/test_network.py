@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 
@@ -399,3 +400,15 @@ def test_move_to_demo_helper(enabled):
     assert state.joints[0].position == pytest.approx(q[0] + 0.1, abs=2e-4)
     assert state.joints[1].position == pytest.approx(q[1], abs=2e-4)
     assert state.joints[2].position == pytest.approx(-0.05, abs=2e-4)
+
+
+def test_the_timer_thread_alone_takes_the_requested_fifo_priority(net):
+    # A lockstep daemon's cycle stays at normal priority; its heartbeat timer must not.
+    net.timer_priority = 10
+    net.boot()
+    eventually(lambda: net.timer_scheduling != "inherited")
+    if net.timer_scheduling.startswith("SCHED_FIFO not permitted"):
+        pytest.skip("SCHED_FIFO not permitted on this machine")
+    assert net.timer_scheduling == "SCHED_FIFO 10"
+    assert os.sched_getscheduler(net._monitor.native_id) == os.SCHED_FIFO
+    assert os.sched_getscheduler(0) == os.SCHED_OTHER     # the caller (the cycle) is untouched
