@@ -102,6 +102,7 @@ class NetworkStats:
     callback_errors: int = 0
     starved_checks: int = 0     # heartbeat checks made after this process was starved (excess excused)
     starved_time: float = 0.0   # s of starvation excused from heartbeat silence
+    guard_toggle_errors: int = 0  # node-guarding answers whose toggle bit did not alternate
 
 
 class _Listener(can.Listener):
@@ -167,6 +168,7 @@ class ArmNetwork:
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
         self._tpdo_lengths: dict[int, int] = {}         # id(PdoSpec) -> its length (the mapping is fixed)
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
+        self._guard_toggle: dict[int, int] = {}         # node-guarded node ID -> toggle bit of its last answer
         for cfg in self.config.nodes:
             object_dictionary = load_od(cfg.eds_path, cfg.node_id)   # EdsError: bad input, exit 2
             driver = DRIVERS[cfg.device](cfg, self.config.bus, object_dictionary)
@@ -602,6 +604,8 @@ class ArmNetwork:
                 self.stats.malformed += 1
                 return
             state = data[0] & 0x7F
+            if driver.node_id in self._guarded:
+                self._check_guard_toggle(driver, data[0], state)
             with self._cv:
                 h = self.health[name]
                 previous, was_alive = h.nmt_state, h.alive
@@ -622,6 +626,22 @@ class ArmNetwork:
                     self._expected = None
                 self._cv.notify_all()
         return on_heartbeat
+
+    def _check_guard_toggle(self, driver: DeviceDriver, answer: int, state: int) -> None:
+        """CiA 301 node guarding: each answer's bit 7 alternates, starting from 0 after boot-up.
+        An answer with the same bit as the one before means an answer was lost or repeated
+        (a stale frame, a second node on the ID): counted and reported, not a node loss."""
+        toggle = answer & 0x80
+        if state == od.NMT_STATE_BOOTUP:
+            self._guard_toggle.pop(driver.node_id, None)
+            return
+        last = self._guard_toggle.get(driver.node_id)
+        self._guard_toggle[driver.node_id] = toggle
+        if last is not None and toggle == last:
+            self.stats.guard_toggle_errors += 1
+            if self._monitoring:
+                self._event("guard_toggle", driver, f"{driver.label}: node-guarding answer did not toggle "
+                                                    "(an answer was lost or repeated)")
 
     def _make_emcy_handler(self, name: str):
         driver = self.drivers[name]

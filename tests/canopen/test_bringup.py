@@ -151,3 +151,34 @@ def test_a_node_with_only_node_guarding_is_polled_and_its_loss_detected(vbus, bu
     finally:
         net.close()
         sim.stop()
+
+
+def test_a_guarding_answer_that_does_not_toggle_is_reported_not_taken_for_loss(vbus, bus_config, tmp_path,
+                                                                             monkeypatch):
+    import time
+    from spacearm.firmware_sim.runner import Simulator
+    cfg = _with_node(bus_config, "joint_3", eds=str(_guarded_eds(tmp_path)))
+    sim = Simulator(vbus, cfg).start()
+    net = ArmNetwork(vbus, cfg)
+    try:
+        net.boot()
+        net.poll_events()
+        time.sleep(0.5)                                       # several polls, each answer toggled
+        assert net.stats.guard_toggle_errors == 0
+        node = sim.node("joint_3")
+        answer = node.on_guard_request
+
+        def stuck_toggle():                                   # a node repeating its last answer
+            answer()
+            node._guard_toggle ^= 0x80
+        monkeypatch.setattr(node, "on_guard_request", stuck_toggle)
+        deadline = time.monotonic() + 10.0
+        events = []
+        while not events and time.monotonic() < deadline:
+            time.sleep(0.05)
+            events = [e for e in net.poll_events() if e.kind == "guard_toggle"]
+        assert events and events[0].node == "joint_3" and net.stats.guard_toggle_errors >= 1
+        assert net.health["joint_3"].alive                     # answered: not a lost node
+    finally:
+        net.close()
+        sim.stop()
