@@ -15,7 +15,7 @@ from scipy.optimize import minimize_scalar
 
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, block_jackknife_stderr
-from spacearm.firmware_sim.plant import PlantConfig
+from spacearm.firmware_sim.plant import ARCSEC, PlantConfig
 
 # Play below about three resolver quanta (25 arcsec each) hunts no differently from the
 # resolver chatter a stick-slip joint makes, so the search starts there.
@@ -79,7 +79,11 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     reduction = 1 - after / before if before > 0 else 0.0
     at_bound = min(best.x - math.log(lo), math.log(hi) - best.x) < 0.1   # the search ran out of range
     significant = reduction >= MIN_HELDOUT_REDUCTION and sse < 0.5 * sse0 and not at_bound
-    fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([value * rel]), (key,), (float("nan"),),
+    stderr = value * rel
+    if key == "backlash":
+        # the play is read through the resolver: no better than one step (uniform error)
+        stderr = max(stderr, joints[j].resolver_arcsec * ARCSEC / math.sqrt(12.0))
+    fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([stderr]), (key,), (float("nan"),),
                      sse, sse0, before, after, 0.0 if significant else 1.0, WINDOW, pred, n, 1)
     return fit
 

@@ -81,3 +81,17 @@ def test_a_light_joints_own_chatter_is_not_taken_for_a_ringing_gear():
     result = diagnose(table, NOMINAL)
     first = result.findings[0]
     assert first.fit.index == 3 and first.fit.effects[0] in ("coulomb", "viscous"), result.verdict
+
+
+def test_backlash_interval_is_no_narrower_than_what_the_resolver_resolves():
+    """Play is read through the link resolver (25 arcsec steps): its stated interval was
+    +-1 % (+-2e-5 rad on 2 mrad) and missed a truth 1.6 % away on the concealed bench."""
+    from spacearm.firmware_sim.plant import ARCSEC
+    t = np.arange(0.0, 25.0, DT)
+    sway = Trajectory(t, Q_HOME + 0.1 * np.sin(2 * math.pi * t[:, None] / np.array([5, 6, 7, 8, 9, 10])))
+    table = record_direct(plant_with(3, seed=3, backlash=2e-3), sway, None, hold_cycles=0)
+    first = diagnose(table, NOMINAL).findings[0]
+    assert first.fit.effects == ("backlash",) and first.fit.index == 3
+    step = NOMINAL.joints[3].resolver_arcsec * ARCSEC
+    assert first.stderr["backlash"] >= step / math.sqrt(12.0) * 0.999
+    assert abs(first.params["backlash"] - 2e-3) <= 1.96 * first.stderr["backlash"]
