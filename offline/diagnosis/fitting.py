@@ -137,7 +137,7 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
 
 def _excited_lstsq(X: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray | None:
     """Least squares on `rows`, or None where they leave a column unexcited."""
-    if np.any(np.sqrt(np.mean(X[rows] ** 2, axis=0)) < 1e-9 * max(float(np.abs(X).max()), 1e-300)):
+    if np.any(np.sqrt(np.mean(X[rows] ** 2, axis=0)) < 1e-9 * max(float(np.abs(X).max()), 1.0)):
         return None
     return _lstsq(X[rows], y[rows])[0]
 
@@ -197,6 +197,8 @@ def _profile_shape(candidate: Candidate, s: Signals, y: np.ndarray, rows: np.nda
     size at the nearest grid point."""
     def sse(log_value: float) -> float:
         X = candidate.features(s, math.exp(log_value))[rows]
+        if float(np.sqrt(np.mean(X ** 2))) < 1e-9:
+            return float(y[rows] @ y[rows])   # a shape the rows never excite explains nothing
         return _lstsq(X, y[rows])[1]
     x0 = math.log(start)
     found = minimize_scalar(sse, bounds=(x0 - 0.47, x0 + 0.47), method="bounded", options={"xatol": 0.005})
