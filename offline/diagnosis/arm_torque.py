@@ -128,7 +128,11 @@ def friction_fit(v: np.ndarray, y: np.ndarray, train: np.ndarray, j: int) -> tup
         return None, []
     block = min(fits, key=lambda f: f.sse_train).block
     fits.sort(key=lambda f: f.bic_at(block))
-    return fits[0], fits[1:]
+    # a set whose sizes the recording cannot pin down (Coulomb beside viscous at one speed:
+    # the block jackknife shows them swinging against each other) gives way to the next best
+    known = [f for f in fits if not uncertain(dict(zip(f.columns, f.coef)), dict(zip(f.columns, f.stderr)))]
+    best = known[0] if known else fits[0]
+    return best, [f for f in fits if f is not best]
 
 
 def _rms(x: np.ndarray) -> float:

@@ -3,19 +3,30 @@
 Residual samples are correlated (servo dynamics, resolver chatter), so the significance test
 counts blocks, not rows: the block length is where the fitted model's residual stops being
 correlated, and the chi-square statistic of the error reduction is divided by it.
+
+Standard errors: the larger of the block-scaled least-squares one and a delete-a-block
+jackknife over contiguous stretches of the training rows. The jackknife holds when the
+residual is correlated over seconds and when the law does not quite fit (the estimate then
+moves with the stretch of recording it sees); with few blocks it is scaled by the t quantile
+so that 1.96 standard errors is a 95 % interval, which is how the report states it.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy import stats
+from scipy.optimize import minimize_scalar
 
 from spacearm.offline.diagnosis.candidates import Candidate, Signals
 
 POSITIVE = ("coulomb_friction", "viscous_friction", "stribeck_friction")
 SIGNIFICANCE = 1e-6          # per test; about 80 tests per recording
 MIN_HELDOUT_REDUCTION = 0.10
+JACKKNIFE_BLOCKS = 8         # contiguous stretches of the training rows (3 s each on a 40 s recording)
+Z95 = 1.96
 
 
 @dataclass
@@ -82,8 +93,11 @@ def _lstsq(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, float]:
 
 def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tuple[str, ...],
                  shape: tuple[float, ...], X: np.ndarray, y: np.ndarray, train: np.ndarray,
-                 fixed_gain: bool = False, held: np.ndarray | None = None) -> ChannelFit:
-    """Fit on the `train` rows; judge on `held` (default: all other rows)."""
+                 fixed_gain: bool = False, held: np.ndarray | None = None,
+                 estimate: Callable[[np.ndarray], np.ndarray | None] | None = None) -> ChannelFit:
+    """Fit on the `train` rows; judge on `held` (default: all other rows). `estimate(rows)`
+    refits the coefficients on a subset of rows (for the jackknife); default: least squares
+    on X with the shape held."""
     held = ~train if held is None else held
     if fixed_gain:
         coef = np.ones(X.shape[1])
@@ -113,29 +127,41 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     except np.linalg.LinAlgError:
         stderr = np.full(X.shape[1], np.nan)
     if not fixed_gain and np.isfinite(sse):
-        stderr = np.maximum(stderr, split_half_spread(X, y, train))
+        refit = estimate or (lambda rows: _excited_lstsq(X, y, rows))
+        stderr = np.maximum(stderr, block_jackknife_stderr(refit, np.flatnonzero(train), len(coef)))
     before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
     return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
                       block, pred, n, k)
 
 
-def split_half_spread(X: np.ndarray, y: np.ndarray, train: np.ndarray) -> np.ndarray:
-    """Half the difference between the fits on the first and second half of the training rows:
-    a standard error that also holds when the law does not quite fit (the estimate then moves
-    with the part of the recording it sees), where the residual-based one is too narrow. Zero
-    where a half does not excite a column (no evidence either way)."""
-    rows = np.flatnonzero(train)
-    half = len(rows) // 2
-    if half < 10 * X.shape[1]:
-        return np.zeros(X.shape[1])
-    parts = rows[:half], rows[half:]
-    scale = np.sqrt(np.mean(X[rows] ** 2, axis=0))
-    if any(np.any(np.sqrt(np.mean(X[r] ** 2, axis=0)) < 0.3 * scale) for r in parts):
-        return np.zeros(X.shape[1])
-    a, _ = _lstsq(X[parts[0]], y[parts[0]])
-    b, _ = _lstsq(X[parts[1]], y[parts[1]])
-    return np.abs(a - b) / 2.0
+def _excited_lstsq(X: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray | None:
+    """Least squares on `rows`, or None where they leave a column unexcited."""
+    if np.any(np.sqrt(np.mean(X[rows] ** 2, axis=0)) < 1e-9 * max(float(np.abs(X).max()), 1.0)):
+        return None
+    return _lstsq(X[rows], y[rows])[0]
+
+
+def block_jackknife_stderr(estimate: Callable[[np.ndarray], np.ndarray | None], rows: np.ndarray,
+                           n_coef: int, blocks: int = JACKKNIFE_BLOCKS) -> np.ndarray:
+    """Delete-a-block jackknife standard errors over contiguous stretches of `rows`, scaled
+    by t(0.975, blocks - 1) / 1.96 (few blocks: the spread is itself uncertain). Each
+    stretch is much longer than the residual's correlation, which is what makes the
+    pseudo-values close to independent. Zero (no evidence either way) where the rows are too
+    few or a refit fails."""
+    if len(rows) < 20 * blocks:
+        return np.zeros(n_coef)
+    est = []
+    for part in np.array_split(np.arange(len(rows)), blocks):
+        keep = np.ones(len(rows), bool)
+        keep[part] = False
+        coef = estimate(rows[keep])
+        if coef is None or not np.all(np.isfinite(coef)):
+            return np.zeros(n_coef)
+        est.append(coef)
+    est = np.array(est)
+    var = (blocks - 1) / blocks * np.sum((est - est.mean(axis=0)) ** 2, axis=0)
+    return np.sqrt(var) * float(stats.t.ppf(0.975, blocks - 1)) / Z95
 
 
 def common_block(fits: list[ChannelFit]) -> int:
@@ -157,7 +183,37 @@ def fit_candidate(candidate: Candidate, s: Signals, y: np.ndarray, train: np.nda
                            candidate.fixed_gain, held)
         if best is None or fit.sse_train < best.sse_train:
             best = fit
+    if candidate.grid and candidate.grid != ("quantiles",) and not candidate.fixed_gain and \
+            np.isfinite(best.sse_train):
+        best = _profiled(candidate, s, y, train, index, held, best.shape[0])
     return best
+
+
+def _profile_shape(candidate: Candidate, s: Signals, y: np.ndarray, rows: np.ndarray, start: float
+                   ) -> tuple[float, np.ndarray | None]:
+    """The shape parameter (and the linear sizes at it) that fits `rows` best, searched on a
+    log scale within a factor 1.6 of `start`: the size and the shape (a Stribeck level and
+    its decay speed) trade off against each other, so they are fitted together, not the
+    size at the nearest grid point."""
+    def sse(log_value: float) -> float:
+        X = candidate.features(s, math.exp(log_value))[rows]
+        if float(np.sqrt(np.mean(X ** 2))) < 1e-9:
+            return float(y[rows] @ y[rows])   # a shape the rows never excite explains nothing
+        return _lstsq(X, y[rows])[1]
+    x0 = math.log(start)
+    found = minimize_scalar(sse, bounds=(x0 - 0.47, x0 + 0.47), method="bounded", options={"xatol": 0.005})
+    value = float(math.exp(found.x))
+    return value, _excited_lstsq(candidate.features(s, value), y, rows)
+
+
+def _profiled(candidate: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,
+              held: np.ndarray | None, start: float) -> ChannelFit:
+    """The candidate at its jointly fitted shape; the jackknife refits the shape too, so the
+    stated interval of the size carries the shape's uncertainty."""
+    value, _ = _profile_shape(candidate, s, y, np.flatnonzero(train), start)
+    return fit_features((candidate.effect,), candidate.channel, index, candidate.columns, (value,),
+                        candidate.features(s, value), y, train, held=held,
+                        estimate=lambda rows: _profile_shape(candidate, s, y, rows, value)[1])
 
 
 def fit_pair(a: Candidate, b: Candidate, s: Signals, y: np.ndarray, train: np.ndarray, index: int,

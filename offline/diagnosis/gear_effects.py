@@ -14,8 +14,8 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from spacearm.offline.diagnosis.direct_sim import simulate
-from spacearm.offline.diagnosis.fitting import ChannelFit
-from spacearm.firmware_sim.plant import PlantConfig
+from spacearm.offline.diagnosis.fitting import ChannelFit, block_jackknife_stderr
+from spacearm.firmware_sim.plant import ARCSEC, PlantConfig
 
 # Play below about three resolver quanta (25 arcsec each) hunts no differently from the
 # resolver chatter a stick-slip joint makes, so the search starts there.
@@ -24,6 +24,7 @@ GEAR_EFFECTS = {"backlash": ("backlash", 3.0e-4, 2e-2), "elasticity": ("joint_st
 WINDOW = 25
 MIN_HELDOUT_REDUCTION = 0.5
 DIVERGED = 1e300            # loss of a size whose simulation diverges
+JACKKNIFE_GRID = np.linspace(-0.3, 0.3, 13)   # log sizes around the fit simulated for the jackknife
 
 
 def envelope(x: np.ndarray, window: int = WINDOW) -> np.ndarray:
@@ -72,26 +73,40 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     h = 0.05
     curv = (loss(best.x + h) - 2 * best.fun + loss(best.x - h)) / h ** 2
     sigma2 = sse / n
-    rel = math.sqrt(2 * sigma2 / max(curv, 1e-30) / n_eff) if curv > 0 else float("nan")
-    rel = max(rel, _split_half_spread(predicted, env_real, train, best.x)) if np.isfinite(rel) else rel
+    rel = math.sqrt(2 * sigma2 / max(curv, 1e-30) / n_eff) if curv > 0 else 0.0
+    spread = _jackknife_spread(predicted, env_real, train, best.x)
+    rel = max(rel, spread) if np.isfinite(spread) else float("nan")   # nan: no interval is stated
     reduction = 1 - after / before if before > 0 else 0.0
     at_bound = min(best.x - math.log(lo), math.log(hi) - best.x) < 0.1   # the search ran out of range
     significant = reduction >= MIN_HELDOUT_REDUCTION and sse < 0.5 * sse0 and not at_bound
-    fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([value * rel]), (key,), (float("nan"),),
+    stderr = value * rel
+    if key == "backlash":
+        # the play is read through the resolver: no better than one step (uniform error)
+        stderr = max(stderr, joints[j].resolver_arcsec * ARCSEC / math.sqrt(12.0))
+    fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([stderr]), (key,), (float("nan"),),
                      sse, sse0, before, after, 0.0 if significant else 1.0, WINDOW, pred, n, 1)
     return fit
 
 
-def _split_half_spread(predicted, env_real: np.ndarray, train: np.ndarray, x0: float) -> float:
-    """Half the difference (log scale, i.e. relative) between the sizes fitted on the first and
-    the second half of the training rows: the curvature alone gave intervals of about 1 % that
-    missed the truth (the envelope match is not that sharp)."""
+def _jackknife_spread(predicted, env_real: np.ndarray, train: np.ndarray, x0: float) -> float:
+    """Delete-a-block jackknife standard error of the size (log scale, i.e. relative), over
+    contiguous stretches of the training rows, scaled so that 1.96 of it is a 95 % interval
+    (fitting.block_jackknife_stderr). The envelope match is not sharp: the curvature alone
+    gave intervals of about 1 % that missed the truth, and a split-half spread (one degree of
+    freedom) still did. The simulations are made once on a grid around the fit; each
+    stretch's refit is the parabola through the lowest loss on that grid."""
+    steps = x0 + JACKKNIFE_GRID
+    preds = [predicted(x) for x in steps]
+    if any(p is None for p in preds):
+        return float("nan")
     rows = np.flatnonzero(train)
-    sizes = []
-    for part in (rows[: len(rows) // 2], rows[len(rows) // 2:]):
-        def loss(log_value: float, part=part) -> float:
-            pred = predicted(log_value)
-            return DIVERGED if pred is None else float(np.mean((env_real[part] - pred[part]) ** 2))
-        sizes.append(minimize_scalar(loss, bounds=(x0 - 0.5, x0 + 0.5), method="bounded",
-                                     options={"xatol": 0.01, "maxiter": 8}).x)
-    return abs(sizes[0] - sizes[1]) / 2.0
+
+    def refit(keep: np.ndarray) -> np.ndarray:
+        loss = np.array([float(np.mean((env_real[keep] - p[keep]) ** 2)) for p in preds])
+        k = int(np.clip(np.argmin(loss), 1, len(loss) - 2))
+        a, b, c = loss[k - 1: k + 2]
+        bend = a - 2 * b + c
+        shift = 0.5 * (a - c) / bend if bend > 0 else 0.0
+        return np.array([steps[k] + float(np.clip(shift, -1.0, 1.0)) * (steps[1] - steps[0])])
+
+    return float(block_jackknife_stderr(refit, rows, 1)[0])
