@@ -4,6 +4,7 @@ camera, lockstep and real time), randomised approaches open vs closed loop on th
 and the vision time per frame. Prints one table.
 
     .venv/bin/python bench/bench_oru.py [--trials 200] [--approaches 200] [--seed 1] [--skip-realtime]
+    .venv/bin/python bench/bench_oru.py --only-approaches --approaches 200      # that part alone
 
 The stiffness experiment and the insertions run the plant and the controller's own contact
 code (spacearm.controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
@@ -38,6 +39,7 @@ from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 from spacearm.controller.impedance.config import load_impedance  # noqa: E402
 from spacearm.offline.scenarios.approach_trials import ApproachTrials, trial_plan  # noqa: E402
 from spacearm.offline.scenarios.changeout import ChangeoutFailed, start_camera  # noqa: E402
+from spacearm.offline.campaign.report import wilson_interval  # noqa: E402
 from hil_tests.harness import CpuSteal  # noqa: E402
 
 IMPEDANCE = load_impedance()
@@ -151,15 +153,18 @@ def approaches(n: int, seed: int) -> list[tuple[str, str, str]]:
     out = []
     for name, rows, target in (("closed loop (vision)", rows_closed, ">= 99 %"), ("open loop, same draws", rows_open, "report")):
         ok = sum(r.success for r in rows)
+        low, high = wilson_interval(ok, n)
         err = np.array([r.handover for r in rows if r.handover is not None]).reshape(-1, 2)
         peak = [r.contact.peak_insert_force for r in rows if r.contact is not None]
         reasons = sorted({(r.failure or (r.contact.failure if r.contact else "") or "not seated")[:60]
                           for r in rows if not r.success})
-        out.append((f"randomised approaches ({n}), {name}: success", f"{100 * ok / n:.1f} % ({ok}/{n})", target))
+        out.append((f"randomised approaches ({n}), {name}: success",
+                    f"{100 * ok / n:.1f} % ({ok}/{n}; 95 % Wilson {100 * low:.1f}-{100 * high:.1f} %)", target))
         if len(err):
-            out.append(("  handover error median / max",
-                        f"{1e3 * np.median(err[:, 0]):.2f} / {1e3 * err[:, 0].max():.2f} mm, "
-                        f"{math.degrees(np.median(err[:, 1])):.3f} / {math.degrees(err[:, 1].max()):.3f} deg", "-"))
+            mm, deg = 1e3 * err[:, 0], np.degrees(err[:, 1])
+            out.append(("  handover error p50 / p90 / p99 / max",
+                        " / ".join(f"{np.percentile(mm, p):.2f}" for p in (50, 90, 99, 100)) + " mm, "
+                        + " / ".join(f"{np.percentile(deg, p):.3f}" for p in (50, 90, 99, 100)) + " deg", "-"))
         if peak:
             out.append(("  peak insertion force median / max", f"{np.median(peak):.1f} / {max(peak):.1f} N", "-"))
         for reason in reasons[:3]:
@@ -179,8 +184,13 @@ def main() -> None:
     parser.add_argument("--bus-config", default=CHANGEOUT_BUS,
                         help="bus file of the changeout runs (configs/oru/bus_shared_machine.toml: slower "
                              "heartbeats for an overloaded machine)")
+    parser.add_argument("--only-approaches", action="store_true",
+                        help="run only the randomised approaches (open vs closed loop)")
     args = parser.parse_args()
     t_start, steal = time.monotonic(), CpuSteal()
+    if args.only_approaches:
+        print_table(approaches(args.approaches, args.seed), t_start, steal)
+        return
     trials = ContactTrials()
     rows: list[tuple[str, str, str]] = []
 
@@ -224,6 +234,12 @@ def main() -> None:
     if args.approaches > 0:
         rows += approaches(args.approaches, args.seed)
 
+    print_table(rows, t_start, steal)
+    for failure in ins["failures"]:
+        print(f"insertion failure: {failure}")
+
+
+def print_table(rows: list[tuple[str, str, str]], t_start: float, steal: CpuSteal) -> None:
     width = max(len(r[0]) for r in rows)
     print(f"\nbench_oru on {platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}, CPU steal {100 * steal.fraction():.1f} %), Python {platform.python_version()}, "
@@ -231,8 +247,6 @@ def main() -> None:
     print(f"{'figure':<{width}}  {'measured':<34}  target")
     for name, value, target in rows:
         print(f"{name:<{width}}  {value:<34}  {target}")
-    for failure in ins["failures"]:
-        print(f"insertion failure: {failure}")
 
 
 if __name__ == "__main__":
