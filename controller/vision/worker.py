@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from spacearm.base.vision.frames import FrameSource
+from spacearm.base.vision.frames import CameraTrigger, FrameSource
 from spacearm.controller.vision.pipeline import VisionPipeline, VisionResult
 from spacearm.base.runtime.priority import use_normal
 
@@ -35,6 +35,9 @@ class VisionWorker:
         """(newest result, SYNC number of its exposure), or None before the first frame."""
         return self._latest
 
+    def on_cycle(self, sync: int) -> None:
+        """Nothing to do in the cycle: this worker runs on its own thread (free-running camera)."""
+
     def step(self) -> bool:
         """Process the newest frame if there is one; True if a frame was processed."""
         frame = self.source.latest()
@@ -53,6 +56,9 @@ class VisionWorker:
         return True
 
     def start(self) -> "VisionWorker":
+        set_trigger = getattr(self.source, "set_trigger", None)
+        if set_trigger is not None:
+            set_trigger(CameraTrigger.FREE_RUN)      # real time: the camera runs at its own rate
         self._thread = threading.Thread(target=self._run, name="vision", daemon=True)
         self._thread.start()
         return self

@@ -1,13 +1,20 @@
 """The eye-in-hand camera inside the simulator process: frames from the plant's true poses.
 
-A thread takes an exposure every 1/frame_rate s of *plant* time (so lockstep runs see the
-same frame rate per control cycle as real-time ones): at that SYNC it snapshots the true
-camera pose (plant.tool_pose() @ end_T_camera, true geometry with the plant file's errors)
-and the true marker poses (scene slot pose @ true_offset @ marker placement), then renders
-and publishes outside the SYNC handler, so rendering (50-200 ms per frame on this machine)
-never delays the nodes' answers. Frames carry the plant time and the SYNC number of the
-exposure. Rendering is slower than 30 Hz here; the effective rate is what the renderer
-manages (frames are dropped, never queued).
+An exposure falls due every 1/frame_rate s of *plant* time: at that SYNC the camera snapshots
+the true camera pose (plant.tool_pose() @ end_T_camera, true geometry with the plant file's
+errors) and the true marker poses (scene slot pose @ true_offset @ marker placement). Frames
+carry the plant time and the SYNC number of the exposure. The sink's trigger mode (set by the
+controller, base/vision/frames.py CameraTrigger) decides when the frame is rendered:
+
+- free run (real time): a thread renders and publishes outside the SYNC handler, so rendering
+  (50-200 ms per frame on this machine) never delays the nodes' answers. Rendering is slower
+  than 30 Hz here; the effective rate is what the renderer manages (frames are dropped, never
+  queued), so which exposures become frames depends on the machine's load.
+- lockstep: every due exposure is queued for the render thread and its SYNC number announced
+  in the sink before the nodes answer; the controller's cycle for that SYNC waits until the
+  frame is published (controller/vision/lockstep.py). The frames a run sees are fixed by plant
+  time and the noise seed, not by the machine. While the controller does not acquire
+  (LOCKSTEP_IDLE) nothing is rendered: lockstep outside the approaches runs at full speed.
 
     service = CameraService.from_files(plant, sink)      # sink: ShmFrameRing or LocalFrameSource
     service.show_board(load_board())                     # optional: calibration checkerboard in the cell
@@ -22,6 +29,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +37,7 @@ import numpy as np
 
 from spacearm.base.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
 from spacearm.base.spatial import inv_transform
+from spacearm.base.vision.frames import CameraTrigger
 from spacearm.firmware_sim.calibration_board import board_layer
 from spacearm.firmware_sim.camera.renderer import FlatLayer
 from spacearm.firmware_sim.camera.scene import OruShape, Scene
@@ -66,7 +75,7 @@ class CameraService:
         self.render_noise = render_noise
         self.min_gap = 0.03                  # s of wall time between renders
         self._next_exposure = 0.0
-        self._pending: tuple | None = None
+        self._pending: deque[tuple] = deque()      # exposures taken, not yet rendered (free run: <= 1)
         self._wake = threading.Condition()
         self._stop = False
         self._thread: threading.Thread | None = None
@@ -88,16 +97,29 @@ class CameraService:
 
     # ------------------------------------------------------------------ plant side (SYNC thread)
     def on_sync(self, sync: int) -> None:
-        """Called after each plant step: take an exposure when one is due and the renderer
-        is free (cheap: one FK of the true model)."""
+        """Called after each plant step: take an exposure when one is due (cheap: one FK of the
+        true model). Free run: only when the render thread is free (frames are dropped, never
+        queued); lockstep: every due one while the controller acquires, announced to it at once."""
+        if self._stop:
+            return
         t = self.plant.time
-        if t + 1e-9 < self._next_exposure or self._pending is not None:
+        trigger = self._trigger()
+        if trigger is CameraTrigger.LOCKSTEP_IDLE:
+            self._next_exposure = t         # the first SYNC after acquisition starts exposes
+            return
+        lockstep = trigger is CameraTrigger.LOCKSTEP
+        if t + 1e-9 < self._next_exposure or (not lockstep and self._pending):
             return
         self._next_exposure = t + self.period
-        base_T_camera = self.plant.tool_pose() @ self.camera.end_T_camera
         with self._wake:
-            self._pending = (t, sync, base_T_camera)
+            self._pending.append((t, sync, self.plant.tool_pose() @ self.camera.end_T_camera))
+            if lockstep:
+                self.sink.announce_exposure(sync)
             self._wake.notify()
+
+    def _trigger(self) -> CameraTrigger:
+        trigger = getattr(self.sink, "trigger", None)
+        return trigger() if trigger is not None else CameraTrigger.FREE_RUN
 
     # ------------------------------------------------------------------ render thread
     def start(self) -> "CameraService":
@@ -154,17 +176,19 @@ class CameraService:
         use_normal()   # rendering takes tens of ms: never at the nodes' real-time priority
         while True:
             with self._wake:
-                while self._pending is None and not self._stop:
+                while not self._pending and not self._stop:
                     self._wake.wait(0.5)
                 if self._stop:
                     return
-                t, sync, pose = self._pending
+                t, sync, pose = self._pending[0]
             try:
                 self.render_now(t, sync, pose)
             except Exception:  # a bad frame must not kill the camera
                 self.errors += 1
             finally:
-                self._pending = None
-            # leave the CPU to the nodes' heartbeat and SYNC threads between frames (lockstep
-            # runs would otherwise render back to back)
-            time.sleep(self.min_gap)
+                with self._wake:
+                    self._pending.popleft()
+            # Free run: leave the CPU to the nodes' heartbeat and SYNC threads between frames.
+            # Lockstep: the controller waits for this camera, the nodes wait for the controller.
+            if self._trigger() is CameraTrigger.FREE_RUN:
+                time.sleep(self.min_gap)
