@@ -93,8 +93,9 @@ DEMO_PLANT = "configs/plant/oru_cell_errors.toml"
 CHANGEOUT_BUS = "configs/oru/bus_shared_machine.toml"
 
 
-def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT):
-    """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)."""
+def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT, keep_daemon: bool = False):
+    """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)
+    (+ the daemon, shut down, with keep_daemon)."""
     bus = f"virtual:bench-oru-{time.monotonic_ns()}"
     sim = start_simulator(bus, bus_config, plant)
     ring = camera = None
@@ -114,7 +115,8 @@ def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEM
         daemon.request_stop()
         thread.join(5)
         times = list(daemon.vision.processing_times) if daemon.vision is not None else []
-        return time.monotonic() - started, result, failure, times
+        out = (time.monotonic() - started, result, failure, times)
+        return (*out, daemon) if keep_daemon else out
     finally:
         daemon.request_stop()
         daemon.shutdown()
