@@ -163,8 +163,10 @@ class Daemon:
         from spacearm.base.vision.config import load_mount
         from spacearm.controller.vision.lockstep import LockstepVision
         from spacearm.controller.vision.worker import VisionWorker
-        lockstep = isinstance(self.clock, LockstepClock)
-        self.vision = (LockstepVision if lockstep else VisionWorker)(source).start()
+        if isinstance(self.clock, LockstepClock):
+            self.vision = LockstepVision(source).start()
+        else:
+            self.vision = VisionWorker(source, cycle_priority=self.options.rt_priority).start()
         self.mode_factories["approach"] = approach_factory(
             self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
             self.vision.pipeline.marker.marker_T_oru, self.arm.cartesian, self.options.period, self.arm.approach)
