@@ -85,7 +85,9 @@ class ShmFrameRing:
         return cls(shm, owner=True)
 
     @classmethod
-    def attach(cls, name: str, timeout: float = 5.0) -> "ShmFrameRing":
+    def attach(cls, name: str, timeout: float = 5.0, shared_tracker: bool = False) -> "ShmFrameRing":
+        """shared_tracker: this process shares the creator's resource tracker (a child spawned by
+        multiprocessing), whose entry must stay."""
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -98,7 +100,7 @@ class ShmFrameRing:
             # Python < 3.13 registers an attached segment with this process's resource
             # tracker, which unlinks it at exit: the owner's ring would vanish for every
             # later reader (and the owner's own unlink would fail).
-            if sys.version_info < (3, 13) and shm.name not in _CREATED_HERE:
+            if sys.version_info < (3, 13) and shm.name not in _CREATED_HERE and not shared_tracker:
                 resource_tracker.unregister(shm._name, "shared_memory")
             return cls(shm, owner=False)
 

@@ -83,17 +83,36 @@ class CameraService:
         self.errors = 0
         self.board = None                    # BoardConfig once show_board() was called
         self.base_T_board = None             # its true pose
+        self.scene_config = scene
+        self.seeds: tuple[int, int | None] | None = None      # (scene, noise), set by from_files
+        self.render_process = None           # RenderProcess after use_render_process()
 
     def show_board(self, board) -> None:
         """Put the calibration checkerboard (spacearm.controller.calibration.board.BoardConfig) in the cell."""
         self.base_T_board = board.pose.matrix() @ board.true_offset.matrix()
         self.board = board
+        if self.render_process is not None:
+            self.render_process.show_board(board)
+
+    def use_render_process(self) -> "CameraService":
+        """Render in a child process (firmware_sim/camera/render_process.py); call before start().
+        The sink must be a named ShmFrameRing, the service made by from_files."""
+        from spacearm.firmware_sim.camera.render_process import RenderProcess
+        if self.seeds is None or not hasattr(self.sink, "name"):
+            raise ValueError("a render process needs CameraService.from_files and a shared-memory ring")
+        self.render_process = RenderProcess(self.sink.name, self.scene_config, 1.0 / self.period, *self.seeds,
+                                            self.render_noise)
+        if self.board is not None:
+            self.render_process.show_board(self.board)
+        return self
 
     @classmethod
     def from_files(cls, plant, sink, scene: str | Path | SceneConfig = DEFAULT_SCENE, frame_rate: float | None = None,
                    scene_seed: int = 0, noise_seed: int | None = 1) -> "CameraService":
         cam = CameraSimulator.from_configs(scene_seed=scene_seed, noise_seed=noise_seed)
-        return cls(plant, sink, cam, scene if isinstance(scene, SceneConfig) else load_scene(scene), frame_rate or 30.0)
+        service = cls(plant, sink, cam, scene if isinstance(scene, SceneConfig) else load_scene(scene), frame_rate or 30.0)
+        service.seeds = (scene_seed, noise_seed)
+        return service
 
     # ------------------------------------------------------------------ plant side (SYNC thread)
     def on_sync(self, sync: int) -> None:
@@ -112,7 +131,7 @@ class CameraService:
             return
         self._next_exposure = t + self.period
         with self._wake:
-            self._pending.append((t, sync, self.plant.tool_pose() @ self.camera.end_T_camera))
+            self._pending.append((t, sync, self.plant.tool_pose() @ self.camera.end_T_camera, self._stocked()))
             if lockstep:
                 self.sink.announce_exposure(sync)
             self._wake.notify()
@@ -133,25 +152,36 @@ class CameraService:
             self._wake.notify()
         if self._thread is not None:
             self._thread.join(2.0)
+        if self.render_process is not None:
+            self.render_process.close()
 
-    def render_now(self, t: float, sync: int, base_T_camera: np.ndarray):
-        """Render and publish one frame (also used directly by single-threaded tests)."""
+    def render_now(self, t: float, sync: int, base_T_camera: np.ndarray, stocked: frozenset[str] | None = None):
+        """Render and publish one frame (also used directly by single-threaded tests). stocked:
+        the stores that held an ORU at the exposure (None: ask the plant now)."""
         site = self._site_in_view(base_T_camera)
         camera_T_marker = inv_transform(base_T_camera) @ site.base_T_marker
-        self.camera.scene.oru = self._oru if self._holds_oru(site) else None
+        stocked = self._stocked() if stocked is None else stocked
+        self.camera.scene.oru = self._oru if site.store in stocked else None
         irradiance = self.camera.renderer.render(self.camera.scene, camera_T_marker,
                                                  self._board_layers(base_T_camera))
         image = self.camera.sensor.expose(irradiance, self.camera.rng, self.render_noise)
         self.frames += 1
         return self.sink.publish(image, t, camera_T_marker, sync)
 
-    def _holds_oru(self, site: MarkerSite) -> bool:
-        """Whether the store shows an ORU now: the contact world's state when the plant has one
+    def _render(self, t: float, sync: int, base_T_camera: np.ndarray, stocked: frozenset[str]) -> None:
+        if self.render_process is None:
+            self.render_now(t, sync, base_T_camera, stocked)
+        else:
+            self.render_process.render(t, sync, base_T_camera, stocked)
+            self.frames += 1
+
+    def _stocked(self) -> frozenset[str]:
+        """The stores that show an ORU now: the contact world's state when the plant has one
         (ORUs move during a changeout), else the cell file's."""
         orus = getattr(getattr(self.plant, "environment", None), "orus", None)
         if orus is None:
-            return site.holds_oru
-        return any(o.where == "store" and o.store == site.store for o in orus.values())
+            return frozenset(site.store for site in self.sites if site.holds_oru)
+        return frozenset(o.store for o in orus.values() if o.where == "store")
 
     def _board_layers(self, base_T_camera: np.ndarray) -> list[FlatLayer]:
         if self.board is None:
@@ -180,9 +210,9 @@ class CameraService:
                     self._wake.wait(0.5)
                 if self._stop:
                     return
-                t, sync, pose = self._pending[0]
+                exposure = self._pending[0]
             try:
-                self.render_now(t, sync, pose)
+                self._render(*exposure)
             except Exception:  # a bad frame must not kill the camera
                 self.errors += 1
             finally:
