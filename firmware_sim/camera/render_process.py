@@ -11,6 +11,9 @@ without the GIL. Needs a named ShmFrameRing as the sink.
 from __future__ import annotations
 
 import multiprocessing as mp
+import os
+
+RENDER_NICE = 10
 
 
 class RenderProcess:
@@ -57,6 +60,11 @@ def _serve(conn, ring_name: str, scene, frame_rate: float, scene_seed: int, nois
     from spacearm.firmware_sim.camera.service import CameraService
 
     use_normal()          # a simulator at SCHED_FIFO must not hand its priority to the renderer
+    # Below the nodes and the daemon on a loaded machine too (free-run frames may be dropped):
+    # spawned in their session it shares their CPU share (autogroup), and at the same nice its
+    # start-up (~3 s of imports and scene set-up) starved the nodes' heartbeats for 0.75 s at
+    # load 15 (bench_lockstep_camera.py with the render process).
+    os.nice(RENDER_NICE)
     ring = ShmFrameRing.attach(ring_name, shared_tracker=True)
     service = CameraService.from_files(None, ring, scene, frame_rate, scene_seed, noise_seed)
     service.render_noise = render_noise
