@@ -17,6 +17,7 @@ approach mode, the camera renderer and the vision pipeline in one loop
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -143,24 +144,45 @@ def changeout_rows(label: str, wall: float, result, failure: str | None) -> list
     return rows
 
 
-def approaches(n: int, seed: int) -> list[tuple[str, str, str]]:
+def approaches(n: int, seed: int, first: int = 0, jsonl: str | None = None) -> list[tuple[str, str, str]]:
+    """Trials first..n-1 of the plan for (n, seed); each trial's outcome also appended to `jsonl`
+    (one JSON object a line) as it finishes, so a run cut short keeps what it measured."""
     trials = ApproachTrials(seed=seed)
     rows_open, rows_closed = [], []
     for i, (store, placing, placement) in enumerate(trial_plan(n, seed)):
+        if i < first:
+            continue
         rows_open.append(trials.open_loop(store, placing, placement))
         rows_closed.append(trials.closed_loop(store, placing, placement))
+        if jsonl:
+            with open(jsonl, "a") as f:
+                f.write(json.dumps({"trial": i, "store": store, "placing": placing,
+                                    "open": outcome_record(rows_open[-1]), "closed": outcome_record(rows_closed[-1])}) + "\n")
         print(f"\r  approach {i + 1}/{n}: open {'ok' if rows_open[-1].success else 'FAILED'}, "
               f"closed {'ok' if rows_closed[-1].success else 'FAILED'}", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
+    return approach_rows(rows_open, rows_closed)
+
+
+def outcome_record(r) -> dict:
+    return {"success": r.success, "handover": r.handover, "failure": r.failure or (r.contact.failure if r.contact else None),
+            "peak_insert_force": r.contact.peak_insert_force if r.contact is not None else None,
+            "wall_time": r.wall_time}
+
+
+def approach_rows(rows_open: list, rows_closed: list) -> list[tuple[str, str, str]]:
+    """The table rows of the randomised approaches (outcomes, or their JSON records)."""
+    n = len(rows_closed)
+    as_record = lambda r: r if isinstance(r, dict) else outcome_record(r)   # noqa: E731
+    rows_open, rows_closed = [as_record(r) for r in rows_open], [as_record(r) for r in rows_closed]
     out = []
     for name, rows, target in (("closed loop (vision)", rows_closed, ">= 99 %"), ("open loop, same draws", rows_open, "report")):
-        ok = sum(r.success for r in rows)
+        ok = sum(r["success"] for r in rows)
         low, high = wilson_interval(ok, n)
-        err = np.array([r.handover for r in rows if r.handover is not None]).reshape(-1, 2)
-        peak = [r.contact.peak_insert_force for r in rows if r.contact is not None]
-        reasons = sorted({(r.failure or (r.contact.failure if r.contact else "") or "not seated")[:60]
-                          for r in rows if not r.success})
-        out.append((f"randomised approaches ({n}), {name}: success",
+        err = np.array([r["handover"] for r in rows if r["handover"] is not None]).reshape(-1, 2)
+        peak = [r["peak_insert_force"] for r in rows if r["peak_insert_force"] is not None]
+        reasons = sorted({(r["failure"] or "not seated")[:60] for r in rows if not r["success"]})
+        out.append((f"randomised approaches ({n} trials), {name}: success",
                     f"{100 * ok / n:.1f} % ({ok}/{n}; 95 % Wilson {100 * low:.1f}-{100 * high:.1f} %)", target))
         if len(err):
             mm, deg = 1e3 * err[:, 0], np.degrees(err[:, 1])
@@ -171,7 +193,7 @@ def approaches(n: int, seed: int) -> list[tuple[str, str, str]]:
             out.append(("  peak insertion force median / max", f"{np.median(peak):.1f} / {max(peak):.1f} N", "-"))
         for reason in reasons[:3]:
             out.append(("  failure", reason, ""))
-    wall = np.median([r.wall_time for r in rows_closed])
+    wall = np.median([r["wall_time"] for r in rows_closed])
     out.append(("  wall time per closed-loop trial median", f"{wall:.1f} s", "-"))
     return out
 
@@ -188,10 +210,17 @@ def main() -> None:
                              "heartbeats for an overloaded machine)")
     parser.add_argument("--only-approaches", action="store_true",
                         help="run only the randomised approaches (open vs closed loop)")
+    parser.add_argument("--first-approach", type=int, default=0, help="start at this trial of the plan")
+    parser.add_argument("--approaches-jsonl", help="append each approach trial's outcome to this file")
+    parser.add_argument("--report-jsonl", nargs="+", help="only print the approach table of these trial files")
     args = parser.parse_args()
     t_start, steal = time.monotonic(), CpuSteal()
+    if args.report_jsonl:
+        records = [json.loads(line) for path in args.report_jsonl for line in Path(path).read_text().splitlines()]
+        print_table(approach_rows([r["open"] for r in records], [r["closed"] for r in records]), t_start, steal)
+        return
     if args.only_approaches:
-        print_table(approaches(args.approaches, args.seed), t_start, steal)
+        print_table(approaches(args.approaches, args.seed, args.first_approach, args.approaches_jsonl), t_start, steal)
         return
     trials = ContactTrials()
     rows: list[tuple[str, str, str]] = []
