@@ -11,7 +11,9 @@ ring's last header word; GenICam's TriggerMode/AcquisitionStart in a real camera
 frame period of *plant* time, only while the controller acquires). In lockstep the camera
 announces each exposure's SYNC number when it takes it (`announce_exposure`, before the nodes
 answer that SYNC) and the controller waits until that frame is published (`published_sync`):
-a lockstep run then sees the same frames whatever the machine's load.
+a lockstep run then sees the same frames whatever the machine's load. Another reader (the
+camera calibration, `spacearm calibrate camera`) asks an idle lockstep camera for one exposure
+at or after a SYNC with `request_exposure`.
 """
 from __future__ import annotations
 
@@ -26,8 +28,9 @@ import numpy as np
 
 MAGIC = 0x5341_4D43_414D_0003          # "SAMCAM" v3
 HEADER_WORDS = 10                       # magic, width, height, slots, slot_bytes, latest_seq, closed, trigger,
-TRIGGER_WORD = 7                        # exposed (SYNC of the newest exposure taken), spare
-EXPOSED_WORD = 8
+TRIGGER_WORD = 7                        # exposed (SYNC of the newest exposure taken), requested (see
+EXPOSED_WORD = 8                        # request_exposure)
+REQUEST_WORD = 9
 SLOT_META = 6 * 8 + 16 * 8              # begin, end, timestamp, flags, sync, spare, truth (16 x f64)
 
 
@@ -139,6 +142,13 @@ class ShmFrameRing:
         """SYNC number of the newest exposure taken (0: none)."""
         return int(self._header[EXPOSED_WORD])
 
+    def request_exposure(self, sync: int) -> None:
+        """Ask for an exposure at or after SYNC `sync` even while the lockstep camera is idle."""
+        self._header[REQUEST_WORD] = max(int(self._header[REQUEST_WORD]), sync)
+
+    def requested_exposure(self) -> int:
+        return int(self._header[REQUEST_WORD])
+
     def published_sync(self) -> int:
         """SYNC number of the newest published frame (0: none); no pixel copy."""
         seq = int(self._header[5])
@@ -188,12 +198,19 @@ class LocalFrameSource:
         self._frame: Frame | None = None
         self._trigger = CameraTrigger.FREE_RUN
         self._exposed = 0
+        self._requested = 0
 
     def announce_exposure(self, sync: int) -> None:
         self._exposed = sync
 
     def exposure_sync(self) -> int:
         return self._exposed
+
+    def request_exposure(self, sync: int) -> None:
+        self._requested = max(self._requested, sync)
+
+    def requested_exposure(self) -> int:
+        return self._requested
 
     def published_sync(self) -> int:
         return self._frame.sync if self._frame is not None else 0

@@ -123,10 +123,10 @@ class CameraService:
             return
         t = self.plant.time
         trigger = self._trigger()
-        if trigger is CameraTrigger.LOCKSTEP_IDLE:
+        if trigger is CameraTrigger.LOCKSTEP_IDLE and not self._requested(sync):
             self._next_exposure = t         # the first SYNC after acquisition starts exposes
             return
-        lockstep = trigger is CameraTrigger.LOCKSTEP
+        lockstep = trigger is not CameraTrigger.FREE_RUN
         if t + 1e-9 < self._next_exposure or (not lockstep and self._pending):
             return
         self._next_exposure = t + self.period
@@ -135,6 +135,12 @@ class CameraService:
             if lockstep:
                 self.sink.announce_exposure(sync)
             self._wake.notify()
+
+    def _requested(self, sync: int) -> bool:
+        """Another reader asked for an exposure at or after a SYNC this camera has not exposed yet."""
+        requested = getattr(self.sink, "requested_exposure", None)
+        wanted = requested() if requested is not None else 0
+        return 0 < wanted <= sync and self.sink.exposure_sync() < wanted
 
     def _trigger(self) -> CameraTrigger:
         trigger = getattr(self.sink, "trigger", None)
