@@ -4,7 +4,7 @@ frame ring), closed-loop approaches on vision. Prints controller (arm) time, wal
 ratio (the speed-up over real time), the frames rendered and the wall time the cycle waited for
 them, with the load and CPU steal beside.
 
-    .venv/bin/python bench/bench_lockstep_camera.py [--bus-config configs/oru/bus_shared_machine.toml]
+    .venv/bin/python bench/bench_lockstep_camera.py [--bus-config configs/oru/bus_shared_machine.toml] [--frame-rate 10]
 
 Before the camera ran in controller time the lockstep clock held runs with a camera to <= 4x
 real time (frames were rendered in wall time); this bench shows what the run gets now.
@@ -28,9 +28,11 @@ from hil_tests.harness import CpuSteal  # noqa: E402
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--bus-config", default=CHANGEOUT_BUS)
+    parser.add_argument("--frame-rate", type=float, default=None, help="Hz of plant time (default: the camera file's)")
     args = parser.parse_args()
     steal, started = CpuSteal(), time.monotonic()
-    wall, result, failure, vision_times, daemon = changeout("lockstep", args.bus_config, keep_daemon=True)
+    wall, result, failure, vision_times, daemon = changeout("lockstep", args.bus_config, keep_daemon=True,
+                                                           frame_rate=args.frame_rate)
     print(f"\nbench_lockstep_camera on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}, "
           f"CPU steal {100 * steal.fraction():.1f} %), Python {platform.python_version()}, "
           f"{time.monotonic() - started:.0f} s")

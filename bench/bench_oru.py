@@ -94,14 +94,15 @@ DEMO_PLANT = "configs/plant/oru_cell_errors.toml"
 CHANGEOUT_BUS = "configs/oru/bus_shared_machine.toml"
 
 
-def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT, keep_daemon: bool = False):
+def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT, keep_daemon: bool = False,
+              frame_rate: float | None = None):
     """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)
     (+ the daemon, shut down, with keep_daemon)."""
     bus = f"virtual:bench-oru-{time.monotonic_ns()}"
     sim = start_simulator(bus, bus_config, plant)
     ring = camera = None
     if vision:
-        ring, camera = start_camera(sim)
+        ring, camera = start_camera(sim, frame_rate)
     daemon = Daemon(DaemonOptions(bus=bus, bus_config=bus_config, clock=clock, api=None, record_dir=None,
                                   camera=camera))
     started = time.monotonic()
