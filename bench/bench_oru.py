@@ -166,9 +166,12 @@ def approaches(n: int, seed: int, first: int = 0, jsonl: str | None = None) -> l
 
 
 def outcome_record(r) -> dict:
-    return {"success": r.success, "handover": r.handover, "failure": r.failure or (r.contact.failure if r.contact else None),
-            "peak_insert_force": r.contact.peak_insert_force if r.contact is not None else None,
-            "wall_time": r.wall_time}
+    """An ApproachOutcome as plain JSON types (the contact trial's figures are NumPy scalars)."""
+    return {"success": bool(r.success),
+            "handover": None if r.handover is None else [float(v) for v in r.handover],
+            "failure": r.failure or (r.contact.failure if r.contact else None),
+            "peak_insert_force": float(r.contact.peak_insert_force) if r.contact is not None else None,
+            "wall_time": float(r.wall_time)}
 
 
 def approach_rows(rows_open: list, rows_closed: list) -> list[tuple[str, str, str]]:
