@@ -4,6 +4,7 @@ camera, lockstep and real time), randomised approaches open vs closed loop on th
 and the vision time per frame. Prints one table.
 
     .venv/bin/python bench/bench_oru.py [--trials 200] [--approaches 200] [--seed 1] [--skip-realtime]
+    .venv/bin/python bench/bench_oru.py --only-approaches --approaches 200      # that part alone
 
 The stiffness experiment and the insertions run the plant and the controller's own contact
 code (spacearm.controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
@@ -16,6 +17,7 @@ approach mode, the camera renderer and the vision pipeline in one loop
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import platform
@@ -38,6 +40,7 @@ from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 from spacearm.controller.impedance.config import load_impedance  # noqa: E402
 from spacearm.offline.scenarios.approach_trials import ApproachTrials, trial_plan  # noqa: E402
 from spacearm.offline.scenarios.changeout import ChangeoutFailed, start_camera  # noqa: E402
+from spacearm.offline.campaign.report import wilson_interval  # noqa: E402
 from hil_tests.harness import CpuSteal  # noqa: E402
 
 IMPEDANCE = load_impedance()
@@ -50,8 +53,8 @@ def vision_timing(seed: int, frames: int = 30) -> list[tuple[str, str, str]]:
     from spacearm.controller.vision.pipeline import VisionPipeline
     from spacearm.firmware_sim.camera.simulator import CameraSimulator
     pipe = VisionPipeline.from_configs()
-    rows = timing(pipe, CameraSimulator.from_configs(scene_seed=0, noise_seed=seed), frames,
-                  np.random.default_rng(seed))[:2]          # OpenCV on the configured thread count
+    rows = [r for r in timing(pipe, CameraSimulator.from_configs(scene_seed=0, noise_seed=seed), frames,
+                              np.random.default_rng(seed)) if "time per" in r][:2]   # OpenCV's configured threads
     out = []
     for r in rows:
         name, measured, target, _, accuracy = (p.strip() for p in r.split("|"))
@@ -91,13 +94,15 @@ DEMO_PLANT = "configs/plant/oru_cell_errors.toml"
 CHANGEOUT_BUS = "configs/oru/bus_shared_machine.toml"
 
 
-def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT):
-    """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)."""
+def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEMO_PLANT, keep_daemon: bool = False,
+              frame_rate: float | None = None):
+    """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)
+    (+ the daemon, shut down, with keep_daemon)."""
     bus = f"virtual:bench-oru-{time.monotonic_ns()}"
     sim = start_simulator(bus, bus_config, plant)
     ring = camera = None
     if vision:
-        ring, camera = start_camera(sim)
+        ring, camera = start_camera(sim, frame_rate)
     daemon = Daemon(DaemonOptions(bus=bus, bus_config=bus_config, clock=clock, api=None, record_dir=None,
                                   camera=camera))
     started = time.monotonic()
@@ -112,7 +117,8 @@ def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEM
         daemon.request_stop()
         thread.join(5)
         times = list(daemon.vision.processing_times) if daemon.vision is not None else []
-        return time.monotonic() - started, result, failure, times
+        out = (time.monotonic() - started, result, failure, times)
+        return (*out, daemon) if keep_daemon else out
     finally:
         daemon.request_stop()
         daemon.shutdown()
@@ -139,32 +145,59 @@ def changeout_rows(label: str, wall: float, result, failure: str | None) -> list
     return rows
 
 
-def approaches(n: int, seed: int) -> list[tuple[str, str, str]]:
+def approaches(n: int, seed: int, first: int = 0, jsonl: str | None = None) -> list[tuple[str, str, str]]:
+    """Trials first..n-1 of the plan for (n, seed); each trial's outcome also appended to `jsonl`
+    (one JSON object a line) as it finishes, so a run cut short keeps what it measured."""
     trials = ApproachTrials(seed=seed)
     rows_open, rows_closed = [], []
     for i, (store, placing, placement) in enumerate(trial_plan(n, seed)):
+        if i < first:
+            continue
         rows_open.append(trials.open_loop(store, placing, placement))
         rows_closed.append(trials.closed_loop(store, placing, placement))
+        if jsonl:
+            with open(jsonl, "a") as f:
+                f.write(json.dumps({"trial": i, "store": store, "placing": placing,
+                                    "open": outcome_record(rows_open[-1]), "closed": outcome_record(rows_closed[-1])}) + "\n")
         print(f"\r  approach {i + 1}/{n}: open {'ok' if rows_open[-1].success else 'FAILED'}, "
               f"closed {'ok' if rows_closed[-1].success else 'FAILED'}", end="", file=sys.stderr, flush=True)
     print(file=sys.stderr)
+    return approach_rows(rows_open, rows_closed)
+
+
+def outcome_record(r) -> dict:
+    """An ApproachOutcome as plain JSON types (the contact trial's figures are NumPy scalars)."""
+    return {"success": bool(r.success),
+            "handover": None if r.handover is None else [float(v) for v in r.handover],
+            "failure": r.failure or (r.contact.failure if r.contact else None),
+            "peak_insert_force": float(r.contact.peak_insert_force) if r.contact is not None else None,
+            "wall_time": float(r.wall_time)}
+
+
+def approach_rows(rows_open: list, rows_closed: list) -> list[tuple[str, str, str]]:
+    """The table rows of the randomised approaches (outcomes, or their JSON records)."""
+    n = len(rows_closed)
+    as_record = lambda r: r if isinstance(r, dict) else outcome_record(r)   # noqa: E731
+    rows_open, rows_closed = [as_record(r) for r in rows_open], [as_record(r) for r in rows_closed]
     out = []
     for name, rows, target in (("closed loop (vision)", rows_closed, ">= 99 %"), ("open loop, same draws", rows_open, "report")):
-        ok = sum(r.success for r in rows)
-        err = np.array([r.handover for r in rows if r.handover is not None]).reshape(-1, 2)
-        peak = [r.contact.peak_insert_force for r in rows if r.contact is not None]
-        reasons = sorted({(r.failure or (r.contact.failure if r.contact else "") or "not seated")[:60]
-                          for r in rows if not r.success})
-        out.append((f"randomised approaches ({n}), {name}: success", f"{100 * ok / n:.1f} % ({ok}/{n})", target))
+        ok = sum(r["success"] for r in rows)
+        low, high = wilson_interval(ok, n)
+        err = np.array([r["handover"] for r in rows if r["handover"] is not None]).reshape(-1, 2)
+        peak = [r["peak_insert_force"] for r in rows if r["peak_insert_force"] is not None]
+        reasons = sorted({(r["failure"] or "not seated")[:60] for r in rows if not r["success"]})
+        out.append((f"randomised approaches ({n} trials), {name}: success",
+                    f"{100 * ok / n:.1f} % ({ok}/{n}; 95 % Wilson {100 * low:.1f}-{100 * high:.1f} %)", target))
         if len(err):
-            out.append(("  handover error median / max",
-                        f"{1e3 * np.median(err[:, 0]):.2f} / {1e3 * err[:, 0].max():.2f} mm, "
-                        f"{math.degrees(np.median(err[:, 1])):.3f} / {math.degrees(err[:, 1].max()):.3f} deg", "-"))
+            mm, deg = 1e3 * err[:, 0], np.degrees(err[:, 1])
+            out.append(("  handover error p50 / p90 / p99 / max",
+                        " / ".join(f"{np.percentile(mm, p):.2f}" for p in (50, 90, 99, 100)) + " mm, "
+                        + " / ".join(f"{np.percentile(deg, p):.3f}" for p in (50, 90, 99, 100)) + " deg", "-"))
         if peak:
             out.append(("  peak insertion force median / max", f"{np.median(peak):.1f} / {max(peak):.1f} N", "-"))
         for reason in reasons[:3]:
             out.append(("  failure", reason, ""))
-    wall = np.median([r.wall_time for r in rows_closed])
+    wall = np.median([r["wall_time"] for r in rows_closed])
     out.append(("  wall time per closed-loop trial median", f"{wall:.1f} s", "-"))
     return out
 
@@ -179,8 +212,20 @@ def main() -> None:
     parser.add_argument("--bus-config", default=CHANGEOUT_BUS,
                         help="bus file of the changeout runs (configs/oru/bus_shared_machine.toml: slower "
                              "heartbeats for an overloaded machine)")
+    parser.add_argument("--only-approaches", action="store_true",
+                        help="run only the randomised approaches (open vs closed loop)")
+    parser.add_argument("--first-approach", type=int, default=0, help="start at this trial of the plan")
+    parser.add_argument("--approaches-jsonl", help="append each approach trial's outcome to this file")
+    parser.add_argument("--report-jsonl", nargs="+", help="only print the approach table of these trial files")
     args = parser.parse_args()
     t_start, steal = time.monotonic(), CpuSteal()
+    if args.report_jsonl:
+        records = [json.loads(line) for path in args.report_jsonl for line in Path(path).read_text().splitlines()]
+        print_table(approach_rows([r["open"] for r in records], [r["closed"] for r in records]), t_start, steal)
+        return
+    if args.only_approaches:
+        print_table(approaches(args.approaches, args.seed, args.first_approach, args.approaches_jsonl), t_start, steal)
+        return
     trials = ContactTrials()
     rows: list[tuple[str, str, str]] = []
 
@@ -224,6 +269,12 @@ def main() -> None:
     if args.approaches > 0:
         rows += approaches(args.approaches, args.seed)
 
+    print_table(rows, t_start, steal)
+    for failure in ins["failures"]:
+        print(f"insertion failure: {failure}")
+
+
+def print_table(rows: list[tuple[str, str, str]], t_start: float, steal: CpuSteal) -> None:
     width = max(len(r[0]) for r in rows)
     print(f"\nbench_oru on {platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"load {os.getloadavg()[0]:.1f}, CPU steal {100 * steal.fraction():.1f} %), Python {platform.python_version()}, "
@@ -231,8 +282,6 @@ def main() -> None:
     print(f"{'figure':<{width}}  {'measured':<34}  target")
     for name, value, target in rows:
         print(f"{name:<{width}}  {value:<34}  {target}")
-    for failure in ins["failures"]:
-        print(f"insertion failure: {failure}")
 
 
 if __name__ == "__main__":

@@ -3,6 +3,11 @@
 beside open-loop positioning. Prints one table of measured figures and the issue's targets.
 
     .venv/bin/python bench/bench_vision.py [--renders 6] [--starts 3 (0: skip the approach)] [--timing-frames 40] [--seed 1]
+    .venv/bin/python bench/bench_vision.py --timing-only [--fifo 40]     # time per frame only (+ at SCHED_FIFO 40)
+
+Where a frame's wall time goes: the timing rows split each frame's wall time into this thread's
+CPU time, its wait for a core (run-queue delay from /proc/thread-self/schedstat) and the rest
+(blocked: locks, I/O), and time the copy out of the shared-memory frame ring.
 
 Renders come from spacearm.firmware_sim.camera (clutter, uneven light, distortion, defocus, sensor
 noise; ~0.3 s each), measured by spacearm.controller.vision.pipeline. The approach runs the in-process
@@ -62,36 +67,80 @@ def accuracy(pipe: VisionPipeline, cam: CameraSimulator, renders: int, rng) -> l
     return rows
 
 
-def timing(pipe: VisionPipeline, cam: CameraSimulator, n: int, rng) -> list[str]:
+def schedstat() -> tuple[float, float]:
+    """(CPU s, s waiting for a core) of the calling thread so far: the CPU clock, and the run-queue
+    delay of Linux schedstat (brought up to date whenever the thread is scheduled in, so a wait
+    for a core is always counted; its CPU sum lags on short runs, hence thread_time)."""
+    try:
+        with open("/proc/thread-self/schedstat") as f:
+            wait = int(f.read().split()[1]) * 1e-9
+    except (OSError, ValueError, IndexError):
+        wait = float("nan")
+    return time.thread_time(), wait
+
+
+def ring_copy(frame, n: int = 50) -> str:
+    """Median time to take the newest frame out of the shared-memory ring (seqlock + copy)."""
+    from spacearm.base.vision.frames import ShmFrameRing
+    ring = ShmFrameRing.create(frame.image.shape[1], frame.image.shape[0])
+    try:
+        ring.publish(frame.image, 0.0)
+        times = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            ring.latest()
+            times.append(time.perf_counter() - t0)
+    finally:
+        ring.close()
+    return f"  copy of the newest frame out of the shared-memory ring | median {np.median(times) * 1e3:.2f} ms | - | - |"
+
+
+def timing(pipe: VisionPipeline, cam: CameraSimulator, n: int, rng, fifo: int = 0) -> list[str]:
     """Time per frame (median, p99) with the pose error against the render's truth beside it:
     acquisition (full frame, no prior) and tracking (prior = a pose a few mm / 0.6 deg off, as
-    the last frame's is while the arm moves), with OpenCV on 1 thread (pipeline.toml) and on 2."""
+    the last frame's is while the arm moves), with OpenCV on 1 thread (pipeline.toml) and on 2;
+    with fifo > 0 also at SCHED_FIFO `fifo` (the cycle's is 50)."""
     frames = [(cam.render(truth), truth) for truth in
               (view(rng.uniform(0.18, 0.4), np.radians(rng.uniform(0, 25)), rng.uniform(0, 2 * np.pi))
                for _ in range(n))]
     priors = [truth @ xyz_rpy_to_transform(rng.uniform(-0.003, 0.003, 3), rng.uniform(-0.01, 0.01, 3))
               for _, truth in frames]
-    rows = []
+    rows = [ring_copy(frames[0][0])]
     configured = pipe.cfg.opencv_threads
-    for threads in (configured, 2):
+    runs = [(configured, 0), (2, 0)] + ([(configured, fifo)] if fifo else [])
+    for threads, priority in runs:
         cv2.setNumThreads(threads)
+        if priority:
+            from spacearm.base.runtime.priority import use_fifo
+            problem = use_fifo(priority)
+            if problem:
+                rows.append(f"  SCHED_FIFO {priority}: {problem}")
+                continue
         full, tracked, e_full, e_tracked, c_full, c_tracked = [], [], [], [], [], []
+        w_full, w_tracked = [], []
         for (frame, truth), prior in zip(frames, priors):
-            for out, errs, cpu, p in ((full, e_full, c_full, None), (tracked, e_tracked, c_tracked, prior)):
-                c0 = time.thread_time()
+            for out, errs, cpu, waits, p in ((full, e_full, c_full, w_full, None),
+                                             (tracked, e_tracked, c_tracked, w_tracked, prior)):
+                s0 = schedstat()
                 r = pipe.process(frame, p)
-                cpu.append(time.thread_time() - c0)     # this thread's CPU: the cost without the wait for a core
+                s1 = schedstat()
+                cpu.append(s1[0] - s0[0])       # this thread's CPU: the cost without the wait for a core
+                waits.append(s1[1] - s0[1])     # runnable, waiting for a core
                 out.append(r.processing_time)
                 errs.append(pose_error(r.camera_T_marker, truth) if r.ok else (np.nan, np.nan))
-        for name, t, e, c in (("acquisition (full frame, no prior)", full, e_full, c_full),
-                              ("tracking (prior = last pose)", tracked, e_tracked, c_tracked)):
+        if priority:
+            from spacearm.base.runtime.priority import use_normal
+            use_normal()
+        for name, t, e, c, w in (("acquisition (full frame, no prior)", full, e_full, c_full, w_full),
+                                 ("tracking (prior = last pose)", tracked, e_tracked, c_tracked, w_tracked)):
             t, e = np.array(t) * 1e3, np.array(e) * [1e3, np.degrees(1)]
             med, p99 = np.median(t), np.percentile(t, 99)
-            name = f"{name} (CPU median {np.median(c) * 1e3:.1f} ms)"
+            name = (f"{name} (CPU {np.median(c) * 1e3:.1f} + wait for a core {np.median(w) * 1e3:.1f} ms)"
+                    + (f" SCHED_FIFO {priority}" if priority else ""))
             ok = np.isfinite(e[:, 0])
             acc = (f"error max {np.max(e[ok, 0]):.3f} mm / {np.max(e[ok, 1]):.3f} deg, {ok.sum()}/{len(e)} ok"
                    if ok.any() else "no pose")
-            rows.append(f"  time per 1360x1024 frame, {name:56s}, OpenCV {threads} thread(s) | median {med:5.1f} ms, "
+            rows.append(f"  time per 1360x1024 frame, {name:72s}, OpenCV {threads} thread(s) | median {med:5.1f} ms, "
                         f"p99 {p99:5.1f} ms | median <= 15 ms | {'met' if med <= 15 else 'MISSED'} | {acc}")
     cv2.setNumThreads(configured)
     return rows
@@ -152,6 +201,8 @@ def main() -> None:
     ap.add_argument("--timing-frames", type=int, default=40)
     ap.add_argument("--solver-views", type=int, default=300)
     ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--timing-only", action="store_true", help="only the time per frame (and the ring copy)")
+    ap.add_argument("--fifo", type=int, default=0, help="also time at this SCHED_FIFO priority (needs CAP_SYS_NICE)")
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
     pipe = VisionPipeline.from_configs()
@@ -159,10 +210,12 @@ def main() -> None:
     t0 = time.monotonic()
     steal = CpuSteal()
     rows = ["  figure | measured | target | status | note"]
-    rows += accuracy(pipe, cam, args.renders, rng)
-    rows += timing(pipe, cam, args.timing_frames, rng)
-    rows += solvers(pipe, args.solver_views, rng)
-    if args.starts > 0:
+    if not args.timing_only:
+        rows += accuracy(pipe, cam, args.renders, rng)
+    rows += timing(pipe, cam, args.timing_frames, rng, args.fifo)
+    if not args.timing_only:
+        rows += solvers(pipe, args.solver_views, rng)
+    if args.starts > 0 and not args.timing_only:
         rows += approach(args.starts, rng)
     print("\n".join(rows))
     print(f"\nbench_vision on {platform.node()} ({platform.processor() or platform.machine()}, {os.cpu_count()} cores, "

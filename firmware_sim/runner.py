@@ -143,14 +143,20 @@ class Simulator:
             self.laser.start()
         return self
 
-    def attach_camera(self, sink, scene=None, frame_rate: float | None = None):
+    def attach_camera(self, sink, scene=None, frame_rate: float | None = None, render_process: bool = False):
         """Serve the eye-in-hand camera from this plant into `sink` (ShmFrameRing for another
-        process, LocalFrameSource in-process); renders on its own thread."""
+        process, LocalFrameSource in-process); renders on its own thread, with render_process
+        (a ring only) in a child process (firmware_sim/camera/render_process.py). Not the default:
+        on this shared machine (load 15-21) the child, competing for the same CPU share, starved
+        the nodes' heartbeats at its start-up, or, niced, kept lockstep cycles waiting > 2 s."""
         from spacearm.firmware_sim.camera.service import CameraService
         from spacearm.base.config.scene import DEFAULT_SCENE
         # the camera sees the cell the contact world is built from (the plant's store errors included)
         scene = scene or getattr(self.plant.environment, "scene", None) or DEFAULT_SCENE
-        self.camera = CameraService.from_files(self.plant, sink, scene, frame_rate).start()
+        self.camera = CameraService.from_files(self.plant, sink, scene, frame_rate)
+        if render_process:
+            self.camera.use_render_process()
+        self.camera.start()
         return self.camera
 
     def stop(self) -> None:

@@ -42,7 +42,9 @@ def start_joints(offset_xyz, offset_rpy) -> list[float]:
 
 
 def true_error_from_ring(ring: ShmFrameRing, after_seq: int, timeout: float = 60.0) -> tuple[float, float]:
-    """Tool error against the true pre-contact pose from a frame exposed after after_seq."""
+    """Tool error against the true pre-contact pose from the newest frame, exposed after after_seq.
+    In lockstep the camera exposes only while the controller acquires: the newest frame is the
+    last of the approach, taken at its end (the arm still, the mode finished)."""
     deadline = time.monotonic() + timeout
     while (frame := ring.latest()) is None or frame.seq <= after_seq or frame.true_camera_T_marker is None:
         assert time.monotonic() < deadline, "no new camera frame"
@@ -60,10 +62,11 @@ def test_approach_command_converges_to_the_true_pre_contact_pose(loopback_hub, l
     try:
         op.run("enable")
         op.run("move", "joints", *map(str, start_joints((0.008, -0.006, -0.04), (0.01, -0.015, 0.02))))
+        before = ring.latest().seq if ring.latest() is not None else 0
         out = op.run("approach", TARGET, "--dz", "100mm", "--timeout", str(240 * time_scale), "--json")
         result = json.loads(out.stdout)
         assert result["final"]["state"] == "enabled" and not result["final"].get("stop_reason")
-        pos, rot = true_error_from_ring(ring, ring.latest().seq)
+        pos, rot = true_error_from_ring(ring, before)
         assert pos <= 1.0e-3 and rot <= np.radians(0.2), f"{pos * 1e3:.3f} mm / {np.degrees(rot):.3f} deg"
     finally:
         ring.close()

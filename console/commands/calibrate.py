@@ -242,6 +242,7 @@ def settled_frame_grabber(ring, session, name: str, timeout: float):
 
     def grab():
         settled_sync = int(session.status()["sync_counter"])
+        ring.request_exposure(settled_sync)    # a lockstep camera exposes only when asked
         first = ring.latest()
         seq0 = first.seq if first is not None else 0
         deadline = time.monotonic() + timeout

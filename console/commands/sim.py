@@ -3,7 +3,8 @@
     spacearm sim --bus loopback:arm [--plant PLANT.toml] [--bus-config configs/bus/arm.toml]
 
 With `--camera NAME` it renders the eye-in-hand camera into a shared-memory frame ring, and
-with `--board FILE` that camera also sees the calibration checkerboard.
+with `--board FILE` that camera also sees the calibration checkerboard; SIGUSR1 stops the
+camera (a fault to inject: frames stop, the nodes go on).
 With a `[laser]` section in the plant file it also serves the tool's laser ranger on a
 pseudo-terminal and prints "spacearm sim: laser ranger on /dev/pts/N" first.
 Prints one line "spacearm sim: N nodes ready on BUS" when all nodes have sent their boot-up
@@ -82,6 +83,10 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
             typer.echo(f"spacearm sim: shared memory {camera!r} exists (another sim running?)", err=True)
             return 1
         service = sim.attach_camera(ring)
+        if threading.current_thread() is threading.main_thread():
+            # Fault injection: SIGUSR1 and the camera stops delivering frames, the nodes go on
+            # (hil_tests/test_web_camera.py: the changeout pauses with camera_stopped).
+            previous[signal.SIGUSR1] = signal.signal(signal.SIGUSR1, lambda signum, frame: service.stop())
         if board_config is not None:
             service.show_board(board_config)
         typer.echo(CAMERA_LINE.format(name=ring.name))

@@ -32,13 +32,14 @@ class CameraFeed:
     def describe(self) -> dict[str, Any]:
         return {"ring": self.ring_name, "width": self.ring.width, "height": self.ring.height}
 
-    def latest_png(self) -> bytes | None:
+    def latest_frame_png(self) -> tuple[int, bytes] | None:
+        """(frame number, PNG) of the newest frame, or None before the first."""
         with self._lock:
             frame = self.ring.latest()
             if frame is None:
                 return None
             if self._cached is not None and self._cached[0] == frame.seq:
-                return self._cached[1]
+                return self._cached
             result = self.pipeline.process(frame)
             self.last_result = result
             image = cv2.cvtColor(frame.image, cv2.COLOR_GRAY2BGR)
@@ -52,7 +53,7 @@ class CameraFeed:
             if not ok:
                 return None
             self._cached = (frame.seq, png.tobytes())
-            return self._cached[1]
+            return self._cached
 
     def _overlay(self, image: np.ndarray, result: Any) -> None:
         if not result.ok:

@@ -145,10 +145,11 @@ class WebConsole:
         camera = self.options.camera
         if camera is None:
             raise web.HTTPNotFound(text="no camera")
-        png = await self.loop.run_in_executor(self.pool, camera.latest_png)
-        if png is None:
+        frame = await self.loop.run_in_executor(self.pool, camera.latest_frame_png)
+        if frame is None:
             raise web.HTTPNotFound(text="no frame yet")
-        return web.Response(body=png, content_type="image/png", headers={"Cache-Control": "no-store"})
+        return web.Response(body=frame[1], content_type="image/png",
+                            headers={"Cache-Control": "no-store", "X-Frame-Seq": str(frame[0])})
 
     # ---- the page's WebSocket --------------------------------------------------------------
     async def _websocket(self, request: web.Request) -> web.WebSocketResponse:

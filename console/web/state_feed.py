@@ -27,7 +27,7 @@ SLOW_KEYS = ("stats", "network", "recording", "control")   # sent at most every 
 SLOW_EVERY = 10
 TASK_POLL = 0.5    # s between asks for the ORU task's progress (`oru.status`, answered in the cycle)
 TASK_KEYS = ("state", "progress", "stage", "stage_name", "subtask", "subtasks", "subtask_index",
-             "title", "algorithm", "holding", "failure")
+             "title", "algorithm", "holding", "failure", "pause")
 PUBLISH_MARGIN = 0.001   # s after the cycle's typical execution time before its snapshot is asked for
 RETRY_DELAY = 0.002      # s between asks when the new cycle has not published yet
 MAX_RETRIES = 4

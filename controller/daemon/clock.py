@@ -80,18 +80,10 @@ class LockstepClock:
         self._now = now
         self._cycle = -1
         self._last_yield = float("-inf")
-        self._started: float | None = None
         self.overruns = 0
         self.skipped_cycles = 0
-        # None: as fast as the nodes answer. A number: controller time runs at most this many
-        # times faster than wall time, for devices that work in wall time (the simulated camera
-        # renders a frame in ~0.1-0.3 s whatever the clock; a closed loop on it needs its frames
-        # to be recent in controller time).
-        self.max_speedup: float | None = None
 
     def next_tick(self) -> Tick:
-        if self.max_speedup is not None:
-            self._pace()
         # With the in-process bus a lockstep cycle never blocks, and Python's locks are not
         # fair: without a yield, threads that share the simulator's or the master's send
         # lock (heartbeat producers, the API) can starve for hundreds of ms, and heartbeats
@@ -105,11 +97,3 @@ class LockstepClock:
             wall = self._last_yield = self._now()
         self._cycle += 1
         return Tick(self._cycle, self._cycle * self.period, wall, wall, 0)
-
-    def _pace(self) -> None:
-        now = self._now()
-        if self._started is None:
-            self._started = now - (self._cycle + 1) * self.period / self.max_speedup
-        ahead = self._started + (self._cycle + 1) * self.period / self.max_speedup - now
-        if ahead > 0:
-            time.sleep(ahead)

@@ -58,12 +58,6 @@ class DaemonOptions:
     # 0: normal scheduling. `spacearm daemon` asks for 50.
     rt_priority: int = 0
 
-# Lockstep with a camera: at most this many times real time. The camera renders in wall time
-# (~0.1-0.3 s a frame, more on a loaded machine) and the approach refuses results older than
-# [approach] stale_after (3 s) of controller time; unpaced, a lockstep cycle of ~0.6 ms ran 30x
-# real time and every frame arrived stale.
-CAMERA_LOCKSTEP_SPEEDUP = 4.0
-
 
 @dataclass(frozen=True)
 class Snapshot:
@@ -167,15 +161,19 @@ class Daemon:
             self.server.start()
 
     def attach_vision(self, source) -> None:
-        """Run the vision pipeline on `source` (a FrameSource) on its own thread and register
-        mode_factories["approach"] (controller/daemon/approach_mode.py)."""
+        """Run the vision pipeline on `source` (a FrameSource) and register
+        mode_factories["approach"] (controller/daemon/approach_mode.py). Real time: on its own
+        thread on a free-running camera; lockstep: in the cycle, on a camera triggered in plant
+        time (controller/vision/lockstep.py), so a lockstep run's results do not depend on load."""
         from spacearm.base.config.scene import load_scene
         from spacearm.controller.daemon.approach_mode import approach_factory
         from spacearm.base.vision.config import load_mount
+        from spacearm.controller.vision.lockstep import LockstepVision
         from spacearm.controller.vision.worker import VisionWorker
         if isinstance(self.clock, LockstepClock):
-            self.clock.max_speedup = CAMERA_LOCKSTEP_SPEEDUP
-        self.vision = VisionWorker(source).start()
+            self.vision = LockstepVision(source).start()
+        else:
+            self.vision = VisionWorker(source, cycle_priority=self.options.rt_priority).start()
         self.mode_factories["approach"] = approach_factory(
             self.model, load_scene(), self.vision, load_mount().end_T_camera.matrix(),
             self.vision.pipeline.marker.marker_T_oru, self.arm.cartesian, self.options.period, self.arm.approach)
@@ -206,6 +204,8 @@ class Daemon:
     def cycle_once(self) -> Snapshot:
         tick = self.clock.next_tick()
         measurement = self.hardware.read(tick.time)
+        if self.vision is not None:
+            self.vision.on_cycle(measurement.sync_counter)
         command = self.core.update(measurement)
         self.hardware.write(command, protective_stop=self.core.state is MachineState.STOPPED)
         events = self.core.drain_events()

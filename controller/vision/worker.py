@@ -11,16 +11,28 @@ import time
 
 import numpy as np
 
-from spacearm.base.vision.frames import FrameSource
+from spacearm.base.vision.frames import CameraTrigger, FrameSource
 from spacearm.controller.vision.pipeline import VisionPipeline, VisionResult
-from spacearm.base.runtime.priority import use_normal
+from spacearm.base.runtime.priority import use_fifo, use_normal
 
 PRIOR_MAX_AGE = 0.5          # s (frame time): an older good pose is not used as prior
+# With the cycle at SCHED_FIFO the worker runs this far below it: above every ordinary process,
+# so on a loaded machine a frame's wall time is its CPU time. bench/bench_vision.py --fifo 40
+# at load 16 on 2 cores: full frame 32.6 ms wall at normal priority (7.5 ms CPU + 24.4 ms
+# waiting for a core) vs 6.7 ms at FIFO 40. Bounded: ~7.5 ms per frame, at most the camera's
+# 30 frames a second (a quarter of a core), and never ahead of the cycle.
+BELOW_CYCLE = 10
 
 
 class VisionWorker:
-    def __init__(self, source: FrameSource, pipeline: VisionPipeline | None = None, poll: float = 0.002):
+    def __init__(self, source: FrameSource, pipeline: VisionPipeline | None = None, poll: float = 0.002,
+                 cycle_priority: int = 0):
+        """cycle_priority: the control cycle's SCHED_FIFO priority (0: normal scheduling); the
+        worker then runs at BELOW_CYCLE under it, else at normal priority."""
         self.source = source
+        below = max(cycle_priority - BELOW_CYCLE, 1)
+        self.priority = below if below < cycle_priority else 0      # 0: normal scheduling
+        self.scheduling = "normal"
         self.pipeline = pipeline or VisionPipeline.from_configs()
         self.poll = poll
         self._latest: tuple[VisionResult, int] | None = None   # (result, frame sync)
@@ -34,6 +46,9 @@ class VisionWorker:
     def latest(self) -> tuple[VisionResult, int] | None:
         """(newest result, SYNC number of its exposure), or None before the first frame."""
         return self._latest
+
+    def on_cycle(self, sync: int) -> None:
+        """Nothing to do in the cycle: this worker runs on its own thread (free-running camera)."""
 
     def step(self) -> bool:
         """Process the newest frame if there is one; True if a frame was processed."""
@@ -53,6 +68,9 @@ class VisionWorker:
         return True
 
     def start(self) -> "VisionWorker":
+        set_trigger = getattr(self.source, "set_trigger", None)
+        if set_trigger is not None:
+            set_trigger(CameraTrigger.FREE_RUN)      # real time: the camera runs at its own rate
         self._thread = threading.Thread(target=self._run, name="vision", daemon=True)
         self._thread.start()
         return self
@@ -63,7 +81,11 @@ class VisionWorker:
             self._thread.join(2.0)
 
     def _run(self) -> None:
-        use_normal()   # tens of ms of CPU per frame: never at the cycle's real-time priority
+        # Several ms of CPU per frame: never at or above the cycle's real-time priority.
+        use_normal()
+        if self.priority:
+            problem = use_fifo(self.priority)
+            self.scheduling = problem or f"SCHED_FIFO {self.priority}"
         while not self._stop.is_set():
             try:
                 busy = self.step()

@@ -5,7 +5,9 @@ clone as the bench does): simulated nodes with the camera on the plant with geom
 daemon with its vision worker, lockstep clock, on a virtual bus of the trial's own. The arm is
 moved open loop to the nominal pre-contact pose offset by the trial's start error, then the
 approach runs; the figure is the final tool error against the *true* pre-contact pose.
-Not bit-reproducible: the vision worker is a thread, so which frame a cycle uses varies.
+The camera and the vision are in controller time (controller/vision/lockstep.py), but commands
+enter the threaded daemon at a cycle that depends on wall time, so replays agree closely, not
+to the bit (tests/vision/test_lockstep_camera.py steps the cycle itself and gets identical runs).
 """
 from __future__ import annotations
 

@@ -53,7 +53,7 @@ class ChangeoutResult:
     arm_time: float = 0.0
 
 
-def start_camera(simulator):
+def start_camera(simulator, frame_rate: float | None = None):
     """The simulated plant's eye-in-hand camera rendering into a new shared-memory frame ring;
     returns (ring, name): give the daemon `camera=name`, close the ring after the run."""
     import os
@@ -62,7 +62,7 @@ def start_camera(simulator):
     cam = load_camera()
     name = f"spacearm-{os.getpid()}-{time.monotonic_ns() % 1000000}"
     ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height, name=name)
-    simulator.attach_camera(ring)
+    simulator.attach_camera(ring, frame_rate=frame_rate)
     return ring, name
 
 

@@ -1,5 +1,10 @@
 """In-process stack for the closed-loop approach: simulated nodes with the camera on a plant
-with geometry errors, the daemon with the vision worker, lockstep clock, virtual bus."""
+with geometry errors, the daemon with the vision worker, lockstep clock, virtual bus.
+
+threaded=False steps the daemon's cycle on the caller's thread and only while a command waits
+for it or a condition is awaited: every command then starts at the same cycle in every run,
+so two runs of the same script are identical to the bit (the lockstep camera is triggered in
+plant time and measured in the cycle, controller/vision/lockstep.py)."""
 from __future__ import annotations
 
 import threading
@@ -22,7 +27,7 @@ PLANT = "configs/plant/oru_testbed_errors.toml"
 
 
 class ApproachStack:
-    def __init__(self, plant: str = PLANT):
+    def __init__(self, plant: str = PLANT, threaded: bool = True):
         self.bus = f"virtual:approach-{time.monotonic_ns()}"
         self.sim = start_simulator(self.bus, DEFAULT_BUS_CONFIG, plant)
         self.frames = LocalFrameSource()
@@ -30,13 +35,38 @@ class ApproachStack:
         self.daemon = Daemon(DaemonOptions(bus=self.bus, clock="lockstep", api=None, record_dir=None))
         self.daemon.start()
         self.daemon.attach_vision(self.frames)
-        self.thread = threading.Thread(target=self.daemon.run, name="control-cycle", daemon=True)
-        self.thread.start()
+        self.thread = None
+        if threaded:
+            self.thread = threading.Thread(target=self.daemon.run, name="control-cycle", daemon=True)
+            self.thread.start()
         self.lease = self.daemon.lease.take("test")
         self.scene = load_scene()
 
     def call(self, cmd: str, **args):
-        return self.daemon.handlers.handle(None, cmd, {**args, "lease": self.lease})
+        return self._stepped(lambda: self.daemon.handlers.handle(None, cmd, {**args, "lease": self.lease}))
+
+    def _stepped(self, command):
+        """Run `command` (which waits for the cycle); unthreaded, cycle only while it waits."""
+        if self.thread is not None:
+            return command()
+        out: dict = {}
+
+        def run():
+            try:
+                out["value"] = command()
+            except BaseException as exc:     # re-raised on the caller's thread
+                out["error"] = exc
+
+        worker = threading.Thread(target=run, daemon=True)
+        worker.start()
+        while worker.is_alive():
+            if self.daemon.core._pending.empty():
+                worker.join(0.001)           # the command is planning on its own thread
+            else:
+                self.daemon.cycle_once()
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
 
     def wait(self, predicate, timeout: float = 300.0, poll: float = 0.02):
         deadline = time.monotonic() + timeout
@@ -44,7 +74,10 @@ class ApproachStack:
             value = predicate()
             if value:
                 return value
-            time.sleep(poll)
+            if self.thread is None:
+                self.daemon.cycle_once()
+            else:
+                time.sleep(poll)
         raise TimeoutError("condition not reached")
 
     def wait_motion(self, motion: int, timeout: float = 300.0) -> None:
@@ -90,12 +123,13 @@ class ApproachStack:
             mode = self.daemon.mode_factories["approach"](target, dz, holding)
             return core.start_planned(t, m, mode, None)
 
-        motion = self.daemon.handlers._in_cycle(begin)["motion"]
+        motion = self._stepped(lambda: self.daemon.handlers._in_cycle(begin))["motion"]
         self.wait_motion(motion, timeout)
         return {"state": core.state, "stop_reason": core.stop_reason}
 
     def close(self) -> None:
         self.daemon.request_stop()
-        self.thread.join(timeout=5)
+        if self.thread is not None:
+            self.thread.join(timeout=5)
         self.daemon.shutdown()
         self.sim.stop()

@@ -147,7 +147,8 @@ function taskText(t) {                   // ORU task flow (oru.status): stage, s
   const parts = [`ORU task ${t.state}`, t.stage ? `stage ${t.stage} ${t.stage_name || ""}` : null,
     t.subtask ? `subtask ${t.subtask_index + 1}/${t.subtasks}: ${t.title || ""}` : null,
     t.progress !== undefined && t.progress !== null ? `${(100 * t.progress).toFixed(0)} %` : null,
-    t.holding ? `holding ${t.holding}` : null, t.failure ? `FAILED: ${t.failure}` : null];
+    t.holding ? `holding ${t.holding}` : null, t.failure ? `FAILED: ${t.failure}` : null,
+    t.pause ? `PAUSED [${t.pause.code}]: ${t.pause.message}` : null];   // why the flow paused itself
   return parts.filter(Boolean).join(" \u00b7 ");
 }
 
@@ -317,9 +318,28 @@ function setupCamera(camera) {
   img.alt = "eye-in-hand camera";
   $("camera").innerHTML = "";
   $("camera").appendChild(img);
-  const next = () => { img.src = "/api/camera.png?t=" + Date.now(); };
-  img.onload = () => setTimeout(next, 200);
-  img.onerror = () => setTimeout(next, 1000);
+  // Each new frame shown: [page s, camera frame number, the ORU task line at the time]
+  // (what the operator saw during which subtask; the web HIL test reads it).
+  spacearm.cameraFrames = [];
+  const shown = seq => {
+    const f = spacearm.cameraFrames, last = f[f.length - 1];
+    if (last && last[1] === seq) return;
+    f.push([performance.now() / 1000, seq, $("task").textContent]);
+    if (f.length > 5000) f.shift();
+  };
+  const next = async () => {
+    try {
+      const r = await fetch("/api/camera.png?t=" + Date.now(), { cache: "no-store" });
+      if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const url = URL.createObjectURL(await r.blob());
+      img.onload = () => URL.revokeObjectURL(url);
+      img.src = url;
+      shown(parseInt(r.headers.get("X-Frame-Seq") || "0", 10));
+      setTimeout(next, 200);
+    } catch (err) {
+      setTimeout(next, 1000);
+    }
+  };
   next();
 }
 
