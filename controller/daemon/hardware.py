@@ -38,8 +38,9 @@ FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingC
 def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits] = ()) -> BusConfig:
     """The bus configuration with each joint drive's limits taken from the arm file: 607Dh
     position limits (outside the arm's, see DRIVE_LIMIT_MARGIN) and, where the arm file gives
-    its drives ([joints.drive]), 607Fh maximum velocity and 6072h maximum torque, so the drives
-    (simulated or real) enforce the arm's own limits, not a test bed's."""
+    its drives ([joints.drive]), 607Fh maximum velocity, 6072h maximum torque and, where stated,
+    6065h following-error window, so the drives (simulated or real) enforce the arm's own
+    limits, not a test bed's."""
     nodes, joint = [], 0
     for node in bus.nodes:
         if node.device == "joint_drive":
@@ -51,6 +52,9 @@ def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits
                 limits["max_velocity"] = min(float(drive.velocity), 10.0)           # 607Fh field range
                 limits["profile_velocity"] = min(settings.profile_velocity, limits["max_velocity"])
                 limits["max_torque"] = min(float(drive.torque) / settings.rated_joint_torque, 3.0)
+                if "following_error" in drive.model_fields_set:
+                    # only where the arm file states it: the test bed's drives keep their 6065h
+                    limits["following_error_window"] = float(drive.following_error)
             node = node.model_copy(update={"joint": settings.model_copy(update=limits)})
             joint += 1
         nodes.append(node)

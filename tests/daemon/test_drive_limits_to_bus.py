@@ -34,3 +34,17 @@ def test_the_test_bed_keeps_its_drive_settings():
     after = [n.joint for n in configured.nodes if n.device == "joint_drive"]
     for b, a in zip(before, after):
         assert (a.max_velocity, a.max_torque) == pytest.approx(((b or a).max_velocity, (b or a).max_torque))
+
+
+def test_a_stated_following_error_window_configures_6065h(tmp_path):
+    text = open("configs/arm/ur10.toml").read().replace("[joints.drive]\n", "[joints.drive]\nfollowing_error = 0.03\n", 1)
+    path = tmp_path / "ur10_window.toml"
+    path.write_text(text)
+    arm = load_arm_config(path)
+    bus = load_bus_config("configs/bus/ur10.toml")
+    configured = with_drive_limits(bus, [j.limits.lower for j in arm.joints], [j.limits.upper for j in arm.joints],
+                                   [j.drive for j in arm.joints])
+    windows = [n.joint.following_error_window for n in configured.nodes if n.device == "joint_drive"]
+    stock = [n.joint.following_error_window for n in bus.nodes if n.device == "joint_drive"]
+    assert windows[0] == pytest.approx(0.03)          # stated for joint 1 only
+    assert windows[1:] == pytest.approx(stock[1:])    # the others keep the bus file's 6065h
