@@ -1,16 +1,19 @@
 """Calibration benchmarks: configuration selection vs random subsets, identification speed,
-the laser and EKF headline numbers (small Monte-Carlo sizes by default; --full for the studies),
+the laser and EKF headline numbers (small Monte-Carlo sizes by default; --full for the studies;
+run as campaigns on Dask like `spacearm calibrate study`, --workers N),
 and the measurement-model table (validation error / noise floor per model, EKF default tuning /
 LM, fit time, plausibility rejections).
 
-    .venv/bin/python bench/bench_calibration.py [--full] [--models-only]
+    .venv/bin/python bench/bench_calibration.py [--full] [--models-only] [--workers 2] [--results DIR]
 """
 from __future__ import annotations
 
 import argparse
 import os
 import platform
+import tempfile
 import time
+from pathlib import Path
 
 # Identification matrices are small (<= 600 x 50): BLAS threads only contend for the 2 shared
 # cores (measured: 8x slower fits at load 5). One thread unless the caller chose otherwise.
@@ -21,7 +24,6 @@ import numpy as np  # noqa: E402
 from spacearm.controller.calibration import Problem, lm  # noqa: E402
 from spacearm.controller.calibration import study_ekf as E  # noqa: E402
 from spacearm.controller.calibration import study_laser as L  # noqa: E402
-from spacearm.controller.calibration.studies import ekf_study, laser_study  # noqa: E402
 
 
 def bench_selection() -> None:
@@ -157,6 +159,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--full", action="store_true", help="run the full studies (20 / 10 runs)")
     ap.add_argument("--models-only", action="store_true", help="only the measurement-model table")
+    ap.add_argument("--workers", type=int, default=None, help="Dask workers for the studies (default: one per core)")
+    ap.add_argument("--results", type=Path, help="result directory of the study campaigns (default: a new temporary "
+                                                 "one; an existing one resumes)")
     args = ap.parse_args()
     print(f"machine: {platform.node()}, {os.cpu_count()} cores, load average {os.getloadavg()[0]:.2f} at start, "
           f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
@@ -171,18 +176,46 @@ def main() -> None:
     bench_selection()
     bench_identification_speed()
     runs_l, runs_e = (20, 10) if args.full else (5, 3)
-    text, head = laser_study(runs=runs_l)
-    print(text)
-    for m, lim in ((100, 0.08), (50, 0.15)):
-        worst = max(head["rms_pos_mm"][m])
-        print(f"laser {m} configs: worst-axis RMS position {worst:.4f} mm (target <= {lim})")
-    print(f"laser 100 configs: worst-axis max position {max(head['max_pos_mm'][100]):.4f} mm (target <= 0.3), "
-          f"worst-axis RMS orientation {max(head['rms_rot_mrad'][100]):.4f} mrad (target <= 0.25)")
-    text, head = ekf_study(runs=runs_e, counts=(10, 50, 200), count_reps=3)
-    print(text)
-    best = min(head["ratios"], key=head["ratios"].get)
-    print(f"EKF study: best method {best}, mean position error / floor = {head['ratios'][best]:.3f} (target <= 1.10)")
+    bench_studies(runs_l, runs_e, None if args.full else (10, 50, 200), args.workers, args.results)
 
+
+def bench_studies(runs_laser: int, runs_ekf: int, counts: tuple[int, ...] | None = None, workers: int | None = None,
+                  results: Path | None = None, scheduler: str | None = None) -> dict:
+    """The laser and EKF studies as campaigns on Dask (offline/campaign/calibration_study.py, what
+    `spacearm calibrate study` runs), on one LocalCluster for both (or `scheduler`); `counts`:
+    Figure 8's configuration counts (default the study's), `runs_ekf` trials at each."""
+    from distributed import LocalCluster
+
+    from spacearm.controller.calibration.studies import EKF_COUNTS
+    from spacearm.offline.campaign.calibration_study import campaign_runner, run_study
+
+    results = results or Path(tempfile.mkdtemp(prefix="bench-calibration-"))
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None, silence_logs=40)
+        scheduler = cluster.scheduler_address
+    try:
+        run = campaign_runner(scheduler, resume=True)
+        t0 = time.perf_counter()
+        text, laser = run_study("laser-ranger", runs_laser, 0, None, results / "laser-ranger", run)
+        print(text + f"\n({runs_laser} runs in {time.perf_counter() - t0:.1f} s on the campaign runner)")
+        for m, lim in ((100, 0.08), (50, 0.15)):
+            worst = max(laser["rms_pos_mm"][m])
+            print(f"laser {m} configs: worst-axis RMS position {worst:.4f} mm (target <= {lim})")
+        print(f"laser 100 configs: worst-axis max position {max(laser['max_pos_mm'][100]):.4f} mm (target <= 0.3), "
+              f"worst-axis RMS orientation {max(laser['rms_rot_mrad'][100]):.4f} mrad (target <= 0.25)")
+        t0 = time.perf_counter()
+        text, ekf = run_study("ekf", runs_ekf, 0, None, results / "ekf", run, counts=counts or EKF_COUNTS)
+        print(text + f"\n(study took {time.perf_counter() - t0:.1f} s on the campaign runner)")
+        best = min(ekf["ratios"], key=ekf["ratios"].get)
+        print(f"EKF study: best method {best}, mean position error / floor = {ekf['ratios'][best]:.3f} "
+              "(target <= 1.10)")
+    finally:
+        if cluster is not None:
+            cluster.close()
+    print(f"(study trials and their Parquet rows: {results}; given again with --results, the runs resume)")
+    return {"laser": laser, "ekf": ekf}
 
 if __name__ == "__main__":
     main()

@@ -4,7 +4,7 @@ camera, lockstep and real time), randomised approaches open vs closed loop on th
 and the vision time per frame. Prints one table.
 
     .venv/bin/python bench/bench_oru.py [--trials 200] [--approaches 200] [--seed 1] [--skip-realtime]
-    .venv/bin/python bench/bench_oru.py --only-approaches --approaches 200      # that part alone
+    .venv/bin/python bench/bench_oru.py --only-approaches --approaches 200 [--workers 2] [--approaches-results DIR]
 
 The stiffness experiment and the insertions run the plant and the controller's own contact
 code (spacearm.controller.oru.flow's ContactTask in the ImpedanceMode, the drives' servo law) in one
@@ -12,12 +12,12 @@ loop without the CAN transport (offline/contact/direct_loop.py) for speed; the f
 runs the daemon, the simulated nodes and the simulated camera (shared-memory ring, the
 daemon's vision worker) over the embedded virtual CAN bus; the randomised approaches run the
 approach mode, the camera renderer and the vision pipeline in one loop
-(offline/scenarios/approach_trials.py: ~10 s per closed-loop trial here, so 200 take ~40 min).
+(offline/scenarios/approach_trials.py: ~10 s per closed-loop trial here), one draw a trial of
+the changeout_approach campaign on Dask (configs/campaigns/changeout_approach.toml).
 """
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import platform
@@ -38,7 +38,6 @@ from spacearm.offline.scenarios.changeout import run_changeout  # noqa: E402
 from spacearm.offline.contact.trials import ContactTrials, run_stiffness_direct  # noqa: E402
 from spacearm.firmware_sim.runner import start_simulator  # noqa: E402
 from spacearm.controller.impedance.config import load_impedance  # noqa: E402
-from spacearm.offline.scenarios.approach_trials import ApproachTrials, trial_plan  # noqa: E402
 from spacearm.offline.scenarios.changeout import ChangeoutFailed, start_camera  # noqa: E402
 from spacearm.offline.campaign.report import wilson_interval  # noqa: E402
 from hil_tests.harness import CpuSteal  # noqa: E402
@@ -145,42 +144,47 @@ def changeout_rows(label: str, wall: float, result, failure: str | None) -> list
     return rows
 
 
-def approaches(n: int, seed: int, first: int = 0, jsonl: str | None = None) -> list[tuple[str, str, str]]:
-    """Trials first..n-1 of the plan for (n, seed); each trial's outcome also appended to `jsonl`
-    (one JSON object a line) as it finishes, so a run cut short keeps what it measured."""
-    trials = ApproachTrials(seed=seed)
-    rows_open, rows_closed = [], []
-    for i, (store, placing, placement) in enumerate(trial_plan(n, seed)):
-        if i < first:
-            continue
-        rows_open.append(trials.open_loop(store, placing, placement))
-        rows_closed.append(trials.closed_loop(store, placing, placement))
-        if jsonl:
-            with open(jsonl, "a") as f:
-                f.write(json.dumps({"trial": i, "store": store, "placing": placing,
-                                    "open": outcome_record(rows_open[-1]), "closed": outcome_record(rows_closed[-1])}) + "\n")
-        print(f"\r  approach {i + 1}/{n}: open {'ok' if rows_open[-1].success else 'FAILED'}, "
-              f"closed {'ok' if rows_closed[-1].success else 'FAILED'}", end="", file=sys.stderr, flush=True)
-    print(file=sys.stderr)
-    return approach_rows(rows_open, rows_closed)
+APPROACH_CAMPAIGN = ROOT / "configs" / "campaigns" / "changeout_approach.toml"
 
 
-def outcome_record(r) -> dict:
-    """An ApproachOutcome as plain JSON types (the contact trial's figures are NumPy scalars)."""
-    return {"success": bool(r.success),
-            "handover": None if r.handover is None else [float(v) for v in r.handover],
-            "failure": r.failure or (r.contact.failure if r.contact else None),
-            "peak_insert_force": float(r.contact.peak_insert_force) if r.contact is not None else None,
-            "wall_time": float(r.wall_time)}
+def approaches(n: int, seed: int, workers: int | None = None, results: Path | None = None,
+               scheduler: str | None = None) -> list[tuple[str, str, str]]:
+    """The randomised approaches as a campaign on Dask (configs/campaigns/changeout_approach.toml
+    with this run's count and seed: each trial flies one draw open loop and closed loop). A result
+    directory given again resumes: only the unfinished trials run."""
+    from spacearm.offline.campaign.runner import run_campaign
+    from spacearm.offline.campaign.schema import campaign_from_text
+    from spacearm.offline.campaign.store import ResultStore
+    text = APPROACH_CAMPAIGN.read_text()
+    text = re.sub(r"(?m)^seed = \d+", f"seed = {seed}", text)
+    text = re.sub(r"(?m)^trials = \d+", f"trials = {n}", text)
+    results = results or Path(tempfile.mkdtemp(prefix="bench-oru-approaches-"))
+    run_campaign(campaign_from_text(text, str(APPROACH_CAMPAIGN)), results, scheduler, workers, resume=True)
+    print(f"  approach trials: {results} (Parquet, one file per trial; --approaches-results resumes)", file=sys.stderr)
+    return approach_rows(ResultStore(results).rows())
 
 
-def approach_rows(rows_open: list, rows_closed: list) -> list[tuple[str, str, str]]:
-    """The table rows of the randomised approaches (outcomes, or their JSON records)."""
-    n = len(rows_closed)
-    as_record = lambda r: r if isinstance(r, dict) else outcome_record(r)   # noqa: E731
-    rows_open, rows_closed = [as_record(r) for r in rows_open], [as_record(r) for r in rows_closed]
+def loop_record(row: dict, loop: str) -> dict:
+    """One loop's outcome out of a changeout_approach trial's Parquet row."""
+    get = lambda name: row.get(f"f_{loop}_{name}")   # noqa: E731
+    lateral, angle = get("handover_lateral"), get("handover_angle")
+    if row.get("error"):
+        success, failure = False, f"trial raised: {row['error']}"
+    elif loop == "closed":
+        success, failure = bool(row["success"]), row["failure"]
+    else:
+        success, failure = bool(get("success")), row.get("l_open_failure")
+    return {"success": success, "failure": failure, "peak_insert_force": get("peak_insert_force"),
+            "handover": None if lateral is None or angle is None else [lateral, angle],
+            "wall_time": row.get(f"w_{loop}_wall_time")}
+
+
+def approach_rows(trials: list[dict]) -> list[tuple[str, str, str]]:
+    """The table rows of the randomised approaches, from the campaign's Parquet rows."""
+    n = len(trials)
     out = []
-    for name, rows, target in (("closed loop (vision)", rows_closed, ">= 99 %"), ("open loop, same draws", rows_open, "report")):
+    for name, loop, target in (("closed loop (vision)", "closed", ">= 99 %"), ("open loop, same draws", "open", "report")):
+        rows = [loop_record(r, loop) for r in trials]
         ok = sum(r["success"] for r in rows)
         low, high = wilson_interval(ok, n)
         err = np.array([r["handover"] for r in rows if r["handover"] is not None]).reshape(-1, 2)
@@ -197,8 +201,8 @@ def approach_rows(rows_open: list, rows_closed: list) -> list[tuple[str, str, st
             out.append(("  peak insertion force median / max", f"{np.median(peak):.1f} / {max(peak):.1f} N", "-"))
         for reason in reasons[:3]:
             out.append(("  failure", reason, ""))
-    wall = np.median([r["wall_time"] for r in rows_closed])
-    out.append(("  wall time per closed-loop trial median", f"{wall:.1f} s", "-"))
+    walls = [r["w_closed_wall_time"] for r in trials if r.get("w_closed_wall_time") is not None]
+    out.append(("  wall time per closed-loop trial median", f"{np.median(walls):.1f} s" if walls else "-", "-"))
     return out
 
 
@@ -206,7 +210,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=200)
     parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--workers", type=int, default=None, help="Dask workers for the insertions (default: one per core)")
+    parser.add_argument("--workers", type=int, default=None, help="Dask workers for the insertions and the approaches (default: one per core)")
     parser.add_argument("--approaches", type=int, default=200, help="randomised approaches, open vs closed loop")
     parser.add_argument("--skip-realtime", action="store_true", help="leave out the real-time changeout (4 min)")
     parser.add_argument("--bus-config", default=CHANGEOUT_BUS,
@@ -214,17 +218,13 @@ def main() -> None:
                              "heartbeats for an overloaded machine)")
     parser.add_argument("--only-approaches", action="store_true",
                         help="run only the randomised approaches (open vs closed loop)")
-    parser.add_argument("--first-approach", type=int, default=0, help="start at this trial of the plan")
-    parser.add_argument("--approaches-jsonl", help="append each approach trial's outcome to this file")
-    parser.add_argument("--report-jsonl", nargs="+", help="only print the approach table of these trial files")
+    parser.add_argument("--approaches-results", type=Path,
+                        help="result directory of the approach campaign (Parquet; given again, a run cut short "
+                             "resumes: only the unfinished trials run)")
     args = parser.parse_args()
     t_start, steal = time.monotonic(), CpuSteal()
-    if args.report_jsonl:
-        records = [json.loads(line) for path in args.report_jsonl for line in Path(path).read_text().splitlines()]
-        print_table(approach_rows([r["open"] for r in records], [r["closed"] for r in records]), t_start, steal)
-        return
     if args.only_approaches:
-        print_table(approaches(args.approaches, args.seed, args.first_approach, args.approaches_jsonl), t_start, steal)
+        print_table(approaches(args.approaches, args.seed, args.workers, args.approaches_results), t_start, steal)
         return
     trials = ContactTrials()
     rows: list[tuple[str, str, str]] = []
@@ -267,7 +267,7 @@ def main() -> None:
                          f"{1e3 * stats['execution_p99']:.3f} / {1e3 * stats.get('execution_max', math.nan):.3f} ms; "
                          f"{stats['overruns']}", "< 20 ms; 0"))
     if args.approaches > 0:
-        rows += approaches(args.approaches, args.seed)
+        rows += approaches(args.approaches, args.seed, args.workers, args.approaches_results)
 
     print_table(rows, t_start, steal)
     for failure in ins["failures"]:

@@ -1,9 +1,10 @@
 """`spacearm calibrate study WHICH`: a calibration study as campaigns on the Dask runner.
 
 Each Monte-Carlo run of the study is one trial (offline/campaign/kind_calibration.py) of a
-campaign written here from the command's options; the trials run on a LocalCluster (or
+campaign written from the command's options; the trials run on a LocalCluster (or
 --scheduler), each finished one lands in RESULTS/trials/*.parquet, a second call resumes the
-unfinished ones, and the papers' tables are pooled from the rows (controller/calibration/studies).
+unfinished ones, and the papers' tables are pooled from the rows (offline/campaign/calibration_study.py,
+shared with bench/bench_calibration.py).
 Under --json only the headline numbers go to stdout; tables and progress go to stderr.
 """
 from __future__ import annotations
@@ -16,52 +17,8 @@ import typer
 
 from spacearm.console.commands.campaign import check_scheduler, run_with_progress
 from spacearm.console.errors import CommandFailed, friendly_errors
-from spacearm.controller.calibration import studies as S
-from spacearm.controller.calibration.study_ekf import NOISE_LEVELS
-from spacearm.offline.campaign.schema import campaign_from_text, campaign_text
-from spacearm.offline.campaign.store import ResultStore
-
-STUDIES = ("laser-ranger", "ekf", *S.MODELS)
-DEFAULT_RUNS = {"laser-ranger": 20, "ekf": 10}        # the measurement models: 20
-
-def _rows(text: str, results: Path, scheduler: str | None, workers: int | None, resume: bool) -> list[dict]:
-    """Run (or resume) one campaign; the rows of its finished trials. A broken trial stops the study."""
-    campaign = campaign_from_text(text, f"calibrate study ({results})")
-    run_with_progress(campaign, results, scheduler, workers, resume)      # the bar goes to stderr
-    rows = ResultStore(results).rows()
-    broken = [r["trial_id"] for r in rows if r["error"]]
-    if broken:
-        raise CommandFailed(f"{len(broken)} trials raised ({', '.join(broken[:5])}): see {results}/trials; "
-                            "the tables need every trial")
-    return rows
-
-
-def _unique(values) -> list[float]:
-    return sorted(set(values))
-
-
-def run_study(which: str, runs: int, seed: int, out: Path | None, results: Path, scheduler: str | None,
-              workers: int | None, resume: bool, postures: int = 60) -> tuple[str, dict]:
-    if which == "laser-ranger":
-        text = campaign_text("study_laser_ranger", "calibration_laser", seed, runs,
-                             options={"configurations": list(S.LASER_CASES), "methods": ["lm", "lse"]})
-        return S.laser_tables(_rows(text, results, scheduler, workers, resume), seed, S.LASER_CASES)
-    if which == "ekf":
-        # the paper's four noise levels are the cross of two position and two rotation sigmas
-        noise = campaign_text("study_ekf_noise_levels", "calibration_ekf", seed, len(NOISE_LEVELS) * runs,
-                              levels={"sigma_position": _unique(sp for sp, _ in NOISE_LEVELS),
-                                      "sigma_rotation": _unique(sr for _, sr in NOISE_LEVELS)},
-                              options={"methods": list(S.EKF_METHODS), "per_posture": out is not None})
-        counts = campaign_text("study_ekf_configurations", "calibration_ekf", seed, len(S.EKF_COUNTS) * runs,
-                               levels={"configurations": list(S.EKF_COUNTS)},
-                               options={"methods": list(S.EKF_CURVES),
-                                        "validation_seed": S.FIG8_VALIDATION_SEED + seed})
-        noise_rows = _rows(noise, results / "noise_levels", scheduler, workers, resume)
-        count_rows = _rows(counts, results / "configurations", scheduler, workers, resume)
-        return S.ekf_tables(noise_rows, count_rows, out)
-    text = campaign_text(f"study_{which}", "calibration_model", seed, runs,
-                         options={"model": which, "postures": postures})
-    return S.model_tables(which, _rows(text, results, scheduler, workers, resume))
+from spacearm.controller.calibration.studies import MODELS
+from spacearm.offline.campaign.calibration_study import DEFAULT_RUNS, STUDIES, BrokenTrials, run_study
 
 
 def register_study(cal: typer.Typer) -> None:
@@ -88,10 +45,14 @@ def register_study(cal: typer.Typer) -> None:
             raise CommandFailed(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
         check_scheduler(scheduler)
         runs = runs or DEFAULT_RUNS.get(which, 20)
-        model_size = f"-postures{postures}" if which in S.MODELS else ""
+        model_size = f"-postures{postures}" if which in MODELS else ""
         results = results or Path("runs/calibration_studies") / f"{which}-seed{seed}-runs{runs}{model_size}"
-        text, head = run_study(which, runs, seed, out if which == "ekf" else None, results, scheduler, workers,
-                               resume, postures)
+        try:      # the progress bar goes to stderr
+            text, head = run_study(which, runs, seed, out if which == "ekf" else None, results,
+                                   lambda campaign, where: run_with_progress(campaign, where, scheduler, workers,
+                                                                             resume), postures)
+        except BrokenTrials as exc:
+            raise CommandFailed(str(exc)) from None
         head["results"] = str(results)
         print(text, file=sys.stderr if as_json else sys.stdout)
         if as_json:

@@ -1,18 +1,16 @@
 """The calibration studies' tables beside the papers' numbers, pooled from trial rows.
 
 A study is a campaign of trials (study_trials.py: one seeded run each); `spacearm calibrate
-study` runs them on the campaign runner and hands the finished rows here. A row is the campaign's
+study` and bench/bench_calibration.py run them on the campaign runner
+(offline/campaign/calibration_study.py) and hand the finished rows here. A row is the campaign's
 Parquet row as a dict: parameters `p_*`, figures `f_*`, series `s_*`, timings `w_*`. Each table
 function returns the printable text plus a dict of the headline numbers (console, bench, tests).
-
-`laser_study` / `ekf_study` run the same trials one after another in this process and print the
-same tables (bench/bench_calibration.py's small sizes, where starting a cluster is not worth it).
 """
 from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -21,7 +19,7 @@ from spacearm.controller.calibration import study_laser as L
 from spacearm.controller.calibration import study_models as M
 from spacearm.controller.calibration.plots import box_panels, error_vs_configs
 from spacearm.controller.calibration.study_trials import (EKF_METHODS, EKF_TABLE4, LASER_COLUMNS, TrialNumbers,
-                                                          ekf_trial, laser_block, laser_trial)
+                                                          laser_block)
 
 Row = dict[str, Any]
 LASER_CASES = (50, 100)
@@ -93,20 +91,6 @@ def laser_tables(rows: list[Row], seed0: int = 0, cases=LASER_CASES, n_random: i
         "rms_rot_mrad": {m: (blocks[f"{m}/lm"]["rms_rot"] * 1e3).tolist() for m in cases},
         "selection": bench, "tables_seconds": time.perf_counter() - t0}
     return "\n".join(lines), headline
-
-
-def laser_study(runs: int = 20, seed0: int = 0, cases=LASER_CASES, n_random: int = 10_000,
-                progress: Callable | None = None) -> tuple[str, dict]:
-    """The study's trials one after another in this process (seeds seed0, seed0 + 1, ...)."""
-    t0 = time.perf_counter()
-    rows = []
-    for k in range(runs):
-        rows.append(as_row(laser_trial(seed0 + k, cases=cases, methods=("lm", "lse")), {}))
-        if progress:
-            progress(k + 1, runs)
-    text, head = laser_tables(rows, seed0, cases, n_random)
-    head["seconds"] = time.perf_counter() - t0
-    return text + f"\n({runs} runs in {head['seconds']:.1f} s)", head
 
 
 # ------------------------------------------------------------------------------------ EKF
@@ -217,25 +201,6 @@ def _ekf_plots(out_dir: Path, main: list[Row], by_level: list[list[Row]], counts
             error_vs_configs(out_dir / "ekf_fig8_configs.png", list(counts),
                              {METHOD_LABEL[k]: (np.array(v[0]), np.array(v[1])) for k, v in curves.items()},
                              float(np.mean(floors)), "Error vs number of configurations (cf. Fig. 8)")]
-
-
-def ekf_study(runs: int = 10, seed0: int = 0, out_dir: Path | None = None, counts=EKF_COUNTS,
-              count_reps: int = 10, progress: Callable | None = None) -> tuple[str, dict]:
-    """The study's trials one after another in this process, then the same tables."""
-    t0 = time.perf_counter()
-    noise_rows = [as_row(ekf_trial(seed0 + k, sp, sr, methods=EKF_METHODS, per_posture=out_dir is not None),
-                         {"sigma_position": sp, "sigma_rotation": sr})
-                  for sp, sr in E.NOISE_LEVELS for k in range(runs)]
-    if progress:
-        progress("tables 4 and 5")
-    count_rows = [as_row(ekf_trial(1000 * n + seed0 + k, configurations=n, methods=EKF_CURVES,
-                                   validation_seed=FIG8_VALIDATION_SEED + seed0), {"configurations": n})
-                  for n in counts for k in range(count_reps)]
-    if progress:
-        progress("figure 8")
-    text, head = ekf_tables(noise_rows, count_rows, out_dir)
-    head["seconds"] = time.perf_counter() - t0
-    return text + f"\n(study took {head['seconds']:.1f} s)", head
 
 
 # ------------------------------------------------------------------------ measurement models

@@ -64,3 +64,63 @@ APPROACH = TrialKind(
     # replayed approaches end within a few hundredths of a mm of each other (measured 0.047 vs
     # 0.124 mm): a quarter of the success limits
     replay_atol={"final_position_error": 0.25e-3, "final_rotation_error": np.radians(0.05)})
+
+
+# --- changeout_approach: bench_oru's randomised approaches, open vs closed loop on one draw ------------
+
+@functools.lru_cache(maxsize=2)
+def _approach_trials(plant: str, frame_every: int, latency_cycles: int):
+    from spacearm.offline.scenarios.approach_trials import ApproachTrials
+    return ApproachTrials(plant, frame_every=frame_every, latency_cycles=latency_cycles)
+
+
+def _loop_figures(prefix: str, outcome) -> dict[str, float]:
+    figures = {f"{prefix}_success": float(outcome.success)}
+    if outcome.handover is not None:
+        figures[f"{prefix}_handover_lateral"], figures[f"{prefix}_handover_angle"] = (float(v) for v in outcome.handover)
+    if outcome.contact is not None:
+        figures[f"{prefix}_peak_insert_force"] = float(outcome.contact.peak_insert_force)
+    return figures
+
+
+def _loop_failure(outcome) -> str | None:
+    if outcome.success:
+        return None
+    return outcome.failure or (outcome.contact.failure if outcome.contact is not None else None) or "not seated"
+
+
+def run_changeout_approach(params: dict[str, float], options: dict[str, Any], seed: int) -> TrialOutcome:
+    """One draw of a store placement error (parameters placement_*) for one of the changeout's
+    four approaches (level `stage`: its (store, placing) in flow order), flown both ways on the
+    same draw: open loop (nominal model's joints) and closed loop (approach mode on rendered
+    frames). Success is the closed loop's; the open loop's outcome is in the open_* figures.
+    Both loops run in one trial: draws come from the trial's own seed, so a level would pair
+    different draws."""
+    in_clone()
+    from spacearm.controller.oru.config import load_changeout
+    from spacearm.offline.scenarios.approach_trials import Placement
+
+    opts = {**CHANGEOUT_APPROACH.options, **options}
+    stages = [(s.store, i % 2 == 1) for i, s in enumerate(load_changeout().stages)]
+    store, placing = stages[int(params.get("stage", 0)) % len(stages)]
+    placement = Placement(tuple(params.get(f"placement_{k}", 0.0) for k in ("x", "y", "z")),
+                          tuple(params.get(f"placement_{k}", 0.0) for k in ("roll", "pitch", "yaw")))
+    trials = _approach_trials(opts["plant"], int(opts["frame_every"]), int(opts["latency_cycles"]))
+    trials.camera.rng = np.random.default_rng(seed)       # the camera noise of this trial alone
+    open_loop = trials.open_loop(store, placing, placement)
+    closed = trials.closed_loop(store, placing, placement, int(opts["max_cycles"]))
+    figures = {**_loop_figures("closed", closed), **_loop_figures("open", open_loop)}
+    labels = {"store": store, "subtask": "insert" if placing else "capture"}
+    if not open_loop.success:
+        labels["open_failure"] = _loop_failure(open_loop)
+    return TrialOutcome(closed.success, _loop_failure(closed), figures,
+                        {"closed_wall_time": closed.wall_time, "open_wall_time": open_loop.wall_time}, labels=labels)
+
+
+CHANGEOUT_APPROACH = TrialKind(
+    "changeout_approach", run_changeout_approach,
+    ("stage", "placement_x", "placement_y", "placement_z", "placement_roll", "placement_pitch", "placement_yaw"),
+    {"plant": "configs/plant/oru_cell_errors.toml", "frame_every": 3, "latency_cycles": 3, "max_cycles": 2000},
+    "closed_handover_lateral",
+    "changeout approach from a random store placement, open loop vs closed loop (vision) on the same draw, "
+    "then the contact subtask")

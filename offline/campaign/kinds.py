@@ -152,9 +152,9 @@ CHECKOUT = TrialKind(
 
 
 # kinds that load a benchmark's own stack from the clone live in modules of their own
-from spacearm.offline.campaign.kind_approach import APPROACH  # noqa: E402
+from spacearm.offline.campaign.kind_approach import APPROACH, CHANGEOUT_APPROACH  # noqa: E402
 from spacearm.offline.campaign.kind_calibration import CALIBRATION_EKF, CALIBRATION_LASER, CALIBRATION_MODEL  # noqa: E402
 from spacearm.offline.campaign.kind_diagnosis import DIAGNOSIS  # noqa: E402
 
 KINDS: dict[str, TrialKind] = {k.name: k for k in (INSERTION, CALIBRATION_LASER, CALIBRATION_EKF, CALIBRATION_MODEL,
-                                                   CHECKOUT, DIAGNOSIS, APPROACH)}
+                                                   CHECKOUT, DIAGNOSIS, APPROACH, CHANGEOUT_APPROACH)}

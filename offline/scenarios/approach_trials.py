@@ -1,8 +1,9 @@
 """Randomised changeout approaches on the demo plant's arm, open loop vs closed loop on the
 same draws (bench/bench_oru.py): why the ORU paper flies subtasks 2 and 8 on vision.
 
-Each trial draws a store placement error (a few mm, about a degree of yaw, tenths of a degree
-of tilt) and then, for the same draw:
+Each trial takes a store placement error (a few mm, about a degree of yaw, tenths of a degree
+of tilt; drawn by the changeout_approach campaign, configs/campaigns/changeout_approach.toml,
+offline/campaign/kind_approach.py) and then, for the same draw:
 - open loop: the nominal model's joints for the nominal pre-contact pose, flown by the true
   arm (configs/plant/oru_cell_errors.toml geometry): the handover error is kinematics;
 - closed loop: the approach mode (controller/daemon/approach_mode.py) from the view pose,
@@ -58,12 +59,6 @@ class ApproachOutcome:
     @property
     def success(self) -> bool:
         return self.contact is not None and self.contact.success
-
-
-def draw_placement(rng: np.random.Generator) -> Placement:
-    """A store placed to a few mm and about a degree (configs/plant/oru_cell_errors.toml says why)."""
-    return Placement((*rng.uniform(-0.007, 0.007, 2), rng.uniform(-0.001, 0.001)),
-                     (*rng.uniform(-0.004, 0.004, 2), rng.uniform(-0.021, 0.021)))
 
 
 class _DelayedVision:
@@ -177,12 +172,4 @@ class ApproachTrials:
                                frames=frames, wall_time=time.perf_counter() - t0)
 
 
-def trial_plan(n: int, seed: int) -> list[tuple[str, bool, Placement]]:
-    """n draws over the changeout's four approaches (store, placing) in turn."""
-    rng = np.random.default_rng(seed)
-    flow = load_changeout()
-    kinds = [(s.store, i % 2 == 1) for i, s in enumerate(flow.stages)]
-    return [(*kinds[i % len(kinds)], draw_placement(rng)) for i in range(n)]
-
-
-__all__ = ["ApproachTrials", "ApproachOutcome", "Placement", "draw_placement", "trial_plan"]
+__all__ = ["ApproachTrials", "ApproachOutcome", "Placement"]

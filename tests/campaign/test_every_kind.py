@@ -1,6 +1,7 @@
 """Every campaign kind the issue names has a shipped campaign file and runs a tiny campaign on Dask.
 
-The kinds: insertion (and the capture subtask), the changeout approach, a calibration study per
+The kinds: insertion (and the capture subtask), the changeout approach (closed loop on the
+daemon; and open vs closed loop on one draw, bench_oru's), a calibration study per
 measurement model (pose, point, range, plane; the laser-ranger and EKF paper studies), the
 diagnosis benchmark and the soak (checkout). Each shipped file runs with its trials cut to one or
 two, on one LocalCluster the module shares (reached by address: the --scheduler path).
@@ -21,11 +22,12 @@ pytestmark = pytest.mark.slow
 
 CAMPAIGNS = CONFIGS / "campaigns"
 NAMED = {"insertion": "insertion", "capture": "insertion", "approach": "approach",
+         "changeout_approach": "changeout_approach",
          "calibration_pose": "calibration_model", "calibration_point": "calibration_model",
          "calibration_range": "calibration_model", "calibration_plane": "calibration_model",
          "calibration_laser": "calibration_laser", "calibration_ekf": "calibration_ekf",
          "diagnosis": "diagnosis", "soak_checkout": "checkout"}
-HEAVY = {"approach", "soak_checkout", "diagnosis", "capture", "insertion"}    # seconds to a minute a trial
+HEAVY = {"approach", "changeout_approach", "soak_checkout", "diagnosis", "capture", "insertion"}    # seconds to a minute a trial
 
 
 def test_every_named_kind_exists_with_a_campaign_file():
