@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import json
 import math
 import os
 import platform
@@ -406,7 +405,7 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"| stated 95 % interval covers the truth | {pct(cis)} | >= 90 % |")
     if red:
         ceil = [c for _, c in red if np.isfinite(c)]
-        print(f"| held-out RMS reduction, median, where the true plant reaches >= 80 % | "
+        print("| held-out RMS reduction, median, where the true plant reaches >= 80 % | "
               + (f"{100 * np.median(red80):.0f} % ({len(red80)} channels)" if red80 else "-")
               + " | >= 80 % |")
         print(f"| held-out RMS reduction, median, all named | {100 * np.median([r for r, _ in red]):.0f} % "

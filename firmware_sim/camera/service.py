@@ -40,7 +40,7 @@ from spacearm.base.spatial import inv_transform
 from spacearm.base.vision.frames import CameraTrigger
 from spacearm.firmware_sim.calibration_board import board_layer
 from spacearm.firmware_sim.camera.renderer import FlatLayer
-from spacearm.firmware_sim.camera.scene import OruShape, Scene
+from spacearm.firmware_sim.camera.scene import OruShape
 from spacearm.firmware_sim.camera.simulator import CameraSimulator
 from spacearm.base.runtime.priority import use_normal
 

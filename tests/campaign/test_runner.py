@@ -24,6 +24,7 @@ def test_resumed_campaign_skips_done_trials_and_equals_a_one_shot_run(tmp_path, 
     rest = run_campaign(campaign, tmp_path / "resumed", workers=2, resume=True)
     assert (rest.ran, rest.skipped, rest.errors) == (5, 3, 0)
     one_shot = run_campaign(campaign, tmp_path / "one_shot", workers=2)
+    assert (one_shot.ran, one_shot.skipped, one_shot.errors) == (8, 0, 0)
     resumed = ResultStore(tmp_path / "resumed")
     assert sorted(resumed.done_ids()) == [trial_id(i) for i in range(8)]
     assert resumed.outcomes() == ResultStore(tmp_path / "one_shot").outcomes()
