@@ -35,7 +35,7 @@ import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from spacearm.base.canopen import od
-from spacearm.base.runtime.priority import use_fifo
+from spacearm.base.runtime.priority import describe, use_fifo
 from spacearm.drivers.bringup import BringupReport, NodeBringup
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
 from spacearm.base.canopen.cia402_defs import State
@@ -701,7 +701,7 @@ class ArmNetwork:
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
         heartbeat periods holds whatever the load."""
         if self.timer_priority:
-            self.timer_scheduling = use_fifo(self.timer_priority) or f"SCHED_FIFO {self.timer_priority}"
+            self.timer_scheduling = use_fifo(self.timer_priority) or describe()
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
         hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id

@@ -24,6 +24,7 @@ import struct
 from dataclasses import dataclass
 
 from spacearm.base.canopen.codes import TPDO_BASE
+from spacearm.base.runtime.priority import current as priority_of_thread
 
 SIMULATOR_DIAG_NODE = 125     # node IDs below the fault-injection unit (126) and the master (127)
 HUB_DIAG_NODE = 124
@@ -63,11 +64,11 @@ def decode(data: bytes) -> TimingReport | None:
 
 
 def _calling_thread_scheduling() -> tuple[int, int]:
-    try:
-        policy = os.sched_getscheduler(0)
-        priority = os.sched_getparam(0).sched_priority
-    except (OSError, AttributeError):
+    """(policy field, priority field) of the frame for the calling thread."""
+    scheduling = priority_of_thread()
+    if scheduling is None:
         return 0, 0
+    policy, priority = scheduling
     return {os.SCHED_FIFO: 1, os.SCHED_RR: 2}.get(policy, 0), priority
 
 

@@ -45,12 +45,21 @@ def use_normal() -> None:
         pass
 
 
+def current() -> tuple[int, int] | None:
+    """The calling thread's (policy, real-time priority) as os.SCHED_* and 0..99; None where
+    the platform cannot say."""
+    try:
+        return os.sched_getscheduler(0), os.sched_getparam(0).sched_priority
+    except (OSError, AttributeError):
+        return None
+
+
 def describe() -> str:
     """The calling thread's policy, for start-up messages."""
-    try:
-        policy = os.sched_getscheduler(0)
-    except (OSError, AttributeError):
+    scheduling = current()
+    if scheduling is None:
         return "unknown"
+    policy, priority = scheduling
     if policy == os.SCHED_FIFO:
-        return f"SCHED_FIFO {os.sched_getparam(0).sched_priority}"
+        return f"SCHED_FIFO {priority}"
     return "normal"
