@@ -21,6 +21,7 @@ GRID_TOLERANCE = 0.03        # of a step
 COARSER = 1.5                # recorded step / nominal step to call it a finding
 MAX_LAG = 6
 LAG_GAIN = 0.5               # the best shift must halve the misfit of the nominal shift
+SMOOTH = 7                   # rows of the moving average both velocities are compared through
 
 
 @dataclass
@@ -41,14 +42,23 @@ def quantum(x: np.ndarray) -> float | None:
     step = float(np.min(d[d >= np.percentile(d, 2)]))
     k = d / step
     on_grid = np.mean(np.abs(k - np.round(k)) < GRID_TOLERANCE)
-    return step if on_grid >= ON_GRID else None
+    # A joint at constant speed moves about the same whole number of fine steps every row, so
+    # its changes can look like multiples of a coarse step; the values themselves then drift
+    # off that coarse grid, which a quantised signal's values never do.
+    level = (x - x[0]) / step
+    values_on_grid = np.mean(np.abs(level - np.round(level)) < GRID_TOLERANCE)
+    return step if on_grid >= ON_GRID and values_on_grid >= ON_GRID else None
 
 
 def velocity_lag(q: np.ndarray, dq: np.ndarray, dt: float) -> tuple[int, float] | None:
     """(shift in cycles that best matches dq to q's velocity, its gain over no shift)."""
     v = np.gradient(q, dt)
-    if float(np.std(v)) < 1e-9 or float(np.std(dq)) < 1e-9 or len(q) < 4 * MAX_LAG:
+    if float(np.std(v)) < 1e-9 or float(np.std(dq)) < 1e-9 or len(q) < 4 * MAX_LAG + 2 * SMOOTH:
         return None
+    # One resolver step per row is a large velocity on a slow joint: the same moving average
+    # on both signals removes that chatter and leaves their relative shift as it was.
+    kernel = np.ones(SMOOTH) / SMOOTH
+    v, dq = (np.convolve(x, kernel, "same")[SMOOTH:-SMOOTH] for x in (v, dq))
     err = [float(np.sqrt(np.mean((dq[k:] - v[: len(v) - k]) ** 2))) for k in range(MAX_LAG + 1)]
     best = int(np.argmin(err))
     return best, 1.0 - err[best] / max(err[0], 1e-300)

@@ -167,3 +167,25 @@ def test_light_joint_whose_gear_sizes_diverge_gets_no_crash_and_no_gear_finding(
     table.tau[:, 3] += np.random.default_rng(3).normal(0.0, 4.0, len(t))      # ringing the model lacks
     result = diagnose(table, light)
     assert not any(f.fit.effects[0] in ("backlash", "elasticity") for f in result.findings)
+
+
+def test_joint_at_constant_speed_is_no_coarse_encoder():
+    """At a constant speed a joint moves about the same whole number of resolver steps every
+    row; that is no coarse encoder (it was named one at 7x the nominal step)."""
+    t = np.arange(0.0, 40.0, 0.02)
+    q = np.repeat(Q7[None, :6], len(t), axis=0)
+    q[:, 1] += 7 * 25 * math.pi / (180 * 3600) / 0.02 * t     # 7 resolver steps (25 arcsec) per 20 ms row
+    result = diagnose(record_direct(plant(6), Trajectory(t, q), None, hold_cycles=0), NOMINAL)
+    assert not [f for f in result.sensor_findings if f.effect == "position_quantisation"]
+
+
+def test_velocity_lag_is_seen_on_a_slowly_moving_joint():
+    """A joint moving +-0.04 rad: resolver steps make the row-to-row velocity noisy; a velocity
+    channel 2 cycles late is still named, with its size."""
+    t = np.arange(0.0, 40.0, 0.02)
+    phase = 2 * math.pi * (0.05 * t + 0.5 * 0.2 * t ** 2 / 40.0)
+    q = Q7[:6] + np.outer(np.sin(phase), [0.0, 0.0, 0.0, 0.04, 0.0, 0.0])
+    rec = record_direct(plant(6), Trajectory(t, q), None, hold_cycles=0)
+    rec.dq[2:, 3] = rec.dq[:-2, 3].copy()
+    lag = [f for f in diagnose(rec, NOMINAL).sensor_findings if f.effect == "velocity_latency"]
+    assert [(f.joint, f.params["velocity_latency_cycles"]) for f in lag] == [(3, 2)]
