@@ -35,7 +35,7 @@ from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_
 from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, uncertain
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
-from spacearm.offline.diagnosis.sim_refit import refine_size
+from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import ARCSEC, PlantConfig
 
@@ -316,6 +316,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             alternatives[j] = equally_good(fit, ranked, quiet.dq[:, j])
             fit = refine_size(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j],
                               train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits)
+            fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits)
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])
@@ -324,7 +325,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # the drive hunts or rings: try the gear effects (simulated, compared by envelope)
             for effect in GEAR_EFFECTS:
                 gear = fit_gear_effect(effect, nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual,
-                                       tau_noise, j, train)
+                                       tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j])
                 if gear.significant and (fit is None or gear.rms_heldout_after < 0.7 * _envelope_error(
                         fit, residual, tau_noise, ~train)):
                     fit = gear

@@ -33,27 +33,56 @@ def envelope(x: np.ndarray, window: int = WINDOW) -> np.ndarray:
 
 def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
                     base_tau: np.ndarray, residual: np.ndarray, noise: float, j: int,
-                    train: np.ndarray) -> ChannelFit:
+                    train: np.ndarray, base_q: np.ndarray | None = None,
+                    q_residual: np.ndarray | None = None) -> ChannelFit:
+    """With `base_q` and `q_residual` (the ideal-sensor replay's position and the recording's
+    position minus it) the size is found on the position envelope: once the drive hunts, its
+    torque ripple is set by the drive's own limits and hardly grows with the play (the loss
+    over the size is flat and ragged), while the link's position wanders through the play, so
+    its envelope grows steadily with the size. The torque envelope still decides whether the
+    effect is there and what it explains."""
     key, lo, hi = GEAR_EFFECTS[effect]
     joints = [nominal.joints[i] if i < len(nominal.joints) else nominal.joint for i in range(q_cmd.shape[1])]
     env_real = envelope(residual)
+    by_position = base_q is not None and q_residual is not None
+    if by_position:
+        q_noise = joints[j].resolver_arcsec * ARCSEC / math.sqrt(12.0)
+        env_q_real = envelope(q_residual)
+    sims: dict[float, object] = {}
+
+    def simulated(log_value: float):
+        if log_value not in sims:
+            p = joints[j].model_copy(update={key: float(math.exp(log_value)), "resolver_arcsec": 0.0,
+                                            "torque_noise": 0.0})
+            js = list(joints)
+            js[j] = p
+            try:
+                # a light joint with a stiff gear or wide play can make the explicit step diverge
+                with np.errstate(all="raise"):
+                    sims[log_value] = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j])
+            except (OverflowError, FloatingPointError, ValueError):
+                sims[log_value] = None
+        return sims[log_value]
 
     def predicted(log_value: float) -> np.ndarray | None:
-        p = joints[j].model_copy(update={key: float(math.exp(log_value)), "resolver_arcsec": 0.0, "torque_noise": 0.0})
-        js = list(joints)
-        js[j] = p
-        try:
-            # a light joint with a stiff gear or wide play can make the explicit step diverge
-            with np.errstate(all="raise"):
-                sim = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j])
-        except (OverflowError, FloatingPointError, ValueError):
+        sim = simulated(log_value)
+        if sim is None:
             return None
         out = np.sqrt(envelope(sim.tau[:, 0] - base_tau) ** 2 + noise ** 2)
         return out if np.all(np.isfinite(out)) else None
 
+    def predicted_q(log_value: float) -> np.ndarray | None:
+        sim = simulated(log_value)
+        if sim is None:
+            return None
+        out = np.sqrt(envelope(sim.q[:, 0] - base_q) ** 2 + q_noise ** 2)
+        return out if np.all(np.isfinite(out)) else None
+
+    sizing, env_sized = (predicted_q, env_q_real) if by_position else (predicted, env_real)
+
     def loss(log_value: float) -> float:
-        pred = predicted(log_value)
-        return DIVERGED if pred is None else float(np.mean((env_real[train] - pred[train]) ** 2))
+        pred = sizing(log_value)
+        return DIVERGED if pred is None else float(np.mean((env_sized[train] - pred[train]) ** 2))
 
     best = minimize_scalar(loss, bounds=(math.log(lo), math.log(hi)), method="bounded",
                            options={"xatol": 0.02, "maxiter": 14})
@@ -72,9 +101,9 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     # uncertainty: curvature of the loss on the log scale, blocks of one window counted once
     h = 0.05
     curv = (loss(best.x + h) - 2 * best.fun + loss(best.x - h)) / h ** 2
-    sigma2 = sse / n
+    sigma2 = best.fun            # mean square misfit of the envelope the size was found on
     rel = math.sqrt(2 * sigma2 / max(curv, 1e-30) / n_eff) if curv > 0 else 0.0
-    spread = _jackknife_spread(predicted, env_real, train, best.x)
+    spread = _jackknife_spread(sizing, env_sized, train, best.x)
     rel = max(rel, spread) if np.isfinite(spread) else float("nan")   # nan: no interval is stated
     reduction = 1 - after / before if before > 0 else 0.0
     at_bound = min(best.x - math.log(lo), math.log(hi) - best.x) < 0.1   # the search ran out of range

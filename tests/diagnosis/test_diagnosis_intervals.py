@@ -95,3 +95,31 @@ def test_backlash_interval_is_no_narrower_than_what_the_resolver_resolves():
     step = NOMINAL.joints[5].resolver_arcsec * ARCSEC
     assert first.stderr["backlash"] >= step / math.sqrt(12.0) * 0.999     # it was 8e-6 rad (0.3 %)
     assert abs(first.params["backlash"] - 2.9e-3) <= 1.96 * first.stderr["backlash"]
+
+
+def test_wide_play_is_sized_from_how_far_the_link_wanders():
+    """4 mrad of play on the light wrist joint: the hunting torque is no larger than with
+    2.8 mrad (the drive limits it), so a size found on the torque envelope stopped at 2.8
+    (32 % low, interval missed). The link position wanders through the play."""
+    truth = 4.1e-3
+    table = record_direct(plant_with(5, seed=4, backlash=truth), walk(5), None, hold_cycles=0)
+    first = diagnose(table, NOMINAL).findings[0]
+    assert first.fit.effects == ("backlash",) and first.fit.index == 5
+    fitted, half = first.params["backlash"], 1.96 * first.stderr["backlash"]
+    print(f"backlash true {truth:.4g} fitted {fitted:.4g} +- {half:.2g}")
+    assert abs(fitted - truth) <= 0.15 * truth
+    assert abs(fitted - truth) <= half
+
+
+def test_large_stiction_is_sized_with_its_decay_speed_by_replay():
+    """22.8 N m of stiction: the joint sticks and slips, and the linear fit traded level for a
+    slower decay (12.5 +- 1.9 N m fading above 0.024 rad/s). Replays of the joint with both
+    found together size it, and the interval holds."""
+    truth = {"stribeck_friction": 22.8, "stribeck_velocity": 0.0159}
+    table = record_direct(plant_with(1, **truth), walk(1), None, hold_cycles=0)
+    first = diagnose(table, NOMINAL).findings[0]
+    assert first.fit.effects == ("stribeck",) and first.fit.index == 1
+    fitted, half = first.params["stribeck_friction"], 1.96 * first.stderr["stribeck_friction"]
+    print(f"stiction true 22.8 fitted {fitted:.4g} +- {half:.2g}, decay {first.params['stribeck_velocity']:.3g}")
+    assert abs(fitted - 22.8) <= 0.15 * 22.8
+    assert abs(fitted - 22.8) <= half
