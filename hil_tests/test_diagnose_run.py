@@ -3,13 +3,17 @@ with viscous instead of Coulomb friction); a recording at one speed one way cann
 from Coulomb friction;
 the designed experiment runs on the daemon (separate processes on the loopback CAN hub, over the
 API, under the console's control lease), the daemon records it, and the re-diagnosis of that
-recording names the true law. Without a daemon, or with the lease held by another console, it
-refuses with one line and moves nothing."""
+recording names the true law and sizes it: within 15 % of the truth, inside its stated 95 %
+interval. The daemon's moves send their planned velocity as the drives' velocity offset; the
+re-diagnosis reads that from the recording and replays it (offline/diagnosis/command_timing.py).
+Without a daemon, or with the lease held by another console, it refuses with one line and moves
+nothing."""
 from __future__ import annotations
 
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -104,6 +108,12 @@ def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack, monke
     assert recorded.is_file() and str(recorded) in experiment["ran_on"]
     after = experiment["verdict_after"]
     assert after.startswith("joint 3: viscous friction") and "equally well" not in after, after
+    assert any("velocity offset" in line for line in experiment["lines"]), experiment["lines"]
+    size, half = map(float, re.search(r"viscous friction about ([\d.]+) \+- ([\d.]+)", after).groups())
+    print(f"\nafter the experiment on the daemon: viscous {size:.1f} +- {half:.2g} N m s/rad (95 % interval "
+          f"{size - half:.1f}..{size + half:.1f}), truth {VISCOUS:.0f}: {size / VISCOUS - 1:+.1%}")
+    assert abs(size - VISCOUS) <= 0.15 * VISCOUS, after
+    assert size - half <= VISCOUS <= size + half, after
     status = json.loads(ok(spacearm(env, "status", "--json")))
     assert status["recording"]["path"] != str(recorded)      # the daemon records on, in a file of its own
     if status["state"] != "enabled":
