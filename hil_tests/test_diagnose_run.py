@@ -102,6 +102,8 @@ def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack, monke
     res = spacearm(env, "diagnose", str(first), "--run", "--report", str(tmp / "d"), "--json")
     out = json.loads(ok(res))
     assert out["findings"][0]["joint"] == 3 and out["findings"][0]["equally_good"]     # ambiguous at one speed
+    print(f"\nthe ramp: {out['findings'][0]['text']}, or equally well {out['findings'][0]['equally_good']}; "
+          f"{out.get('command_timing')}")
     experiment = out["experiment"]
     assert experiment["joints"] == [3] and "daemon" in experiment["ran_on"]
     recorded = tmp / "d" / "experiment.mcap"
@@ -111,7 +113,7 @@ def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack, monke
     assert any("velocity offset" in line for line in experiment["lines"]), experiment["lines"]
     size, half = map(float, re.search(r"viscous friction about ([\d.]+) \+- ([\d.]+)", after).groups())
     print(f"\nafter the experiment on the daemon: viscous {size:.1f} +- {half:.2g} N m s/rad (95 % interval "
-          f"{size - half:.1f}..{size + half:.1f}), truth {VISCOUS:.0f}: {size / VISCOUS - 1:+.1%}")
+          f"{size - half:.1f}..{size + half:.1f}), truth {VISCOUS:.0f}: {size / VISCOUS - 1:+.1%}\n{after}")
     assert abs(size - VISCOUS) <= 0.15 * VISCOUS, after
     assert size - half <= VISCOUS <= size + half, after
     status = json.loads(ok(spacearm(env, "status", "--json")))
