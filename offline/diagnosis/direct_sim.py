@@ -154,7 +154,7 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     settings = settings or drive_settings(config, n)
     if len(settings) < n:
         settings = list(settings) + [settings[-1]] * (n - len(settings))
-    if limits is None and isinstance(config, ArmPlant):
+    if limits is None and isinstance(config, ArmPlant) and config.drives:
         limits = [(s.lower, s.upper) for s in settings]     # 607Dh, as the daemon configures it
     params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
     start = q_cmd[0] if q0 is None else np.asarray(q0, float)
