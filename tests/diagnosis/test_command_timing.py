@@ -8,6 +8,7 @@ import math
 import re
 
 import numpy as np
+import pytest
 
 from spacearm.firmware_sim.plant import ARCSEC, load_plant_config
 from spacearm.offline.diagnosis.analysis import diagnose
@@ -96,20 +97,22 @@ def test_can_recording_with_velocity_offset_lines_up_position_and_torque_in_the_
     assert np.mean(np.abs(table.tau[:, 2] - sim.tau[:, 0])) < 1.0
 
 
-def test_viscous_friction_sized_on_a_daemon_style_recording(tmp_path):
+@pytest.mark.parametrize("offset", [True, False], ids=["daemon_moves", "record_sim"])
+def test_viscous_friction_sized_on_a_daemon_style_recording(tmp_path, offset):
     """The experiment of `diagnose --run`, recorded over CAN with the velocity offset the daemon's
-    moves send: the viscous friction is sized within 15 % and its 95 % interval holds the truth
-    (the one-row command re-indexing this replaces gave 18-22 % low, the interval missing it)."""
+    moves send (and, as record-sim sends it, without): the offset is found where it was sent
+    only, the viscous friction is sized within 15 % and its 95 % interval holds the truth (the
+    one-row command re-indexing this replaces gave 18-22 % low, the interval missing it)."""
     truth = 200.0
     plant = load_plant_config("configs/plant/effects/coulomb_joint3.toml")
     joints = [j.model_copy(update={"coulomb_friction": 0.0, "viscous_friction": truth}) if i == 2 else j
               for i, j in enumerate(plant.joints)]
     plant = plant.model_copy(update={"joints": joints})
     traj = design_experiment([2], Q_HOME, limits_from_arm(DEFAULT_ARM, 6), DT)
-    table = read_table(record_can(plant, traj, tmp_path / "experiment.mcap", velocity_offset=True))
+    table = read_table(record_can(plant, traj, tmp_path / "experiment.mcap", velocity_offset=offset))
     nominal = on_arm_drives(NOMINAL, DEFAULT_ARM)
     replayed, note = replay_plant(table, nominal)
-    assert note is not None
+    assert (note is not None) == offset and replayed.planned_velocity_offset == offset
     verdict = diagnose(table, replayed).verdict
     size, half = map(float, re.search(r"viscous friction about ([\d.]+) \+- ([\d.]+)", verdict).groups())
     print(f"viscous {size:.1f} +- {half:.2g} N m s/rad (truth {truth:.0f}): {size / truth - 1:+.1%}")
