@@ -6,7 +6,9 @@ privileged than an operator at the console: it takes control only if nobody hold
 refuses with one line when the daemon is unreachable, the lease is someone else's, the arm
 is not enabled or is another arm. The daemon writes the recording to a path this console
 names, and this console reads it from there: the API listens on the loopback interface, so
-both run on one machine.
+both run on one machine. The moves send their planned velocity as the drives' velocity offset
+(60B1h) and the recording keeps only the targets: the re-diagnosis replays the offset, read
+from the recording (offline/diagnosis/command_timing.py).
 """
 from __future__ import annotations
 

@@ -3,13 +3,17 @@ with viscous instead of Coulomb friction); a recording at one speed one way cann
 from Coulomb friction;
 the designed experiment runs on the daemon (separate processes on the loopback CAN hub, over the
 API, under the console's control lease), the daemon records it, and the re-diagnosis of that
-recording names the true law. Without a daemon, or with the lease held by another console, it
-refuses with one line and moves nothing."""
+recording names the true law and sizes it: within 15 % of the truth, inside its stated 95 %
+interval. The daemon's moves send their planned velocity as the drives' velocity offset; the
+re-diagnosis reads that from the recording and replays it (offline/diagnosis/command_timing.py).
+Without a daemon, or with the lease held by another console, it refuses with one line and moves
+nothing."""
 from __future__ import annotations
 
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import time
@@ -98,12 +102,20 @@ def test_diagnose_run_settles_viscous_against_coulomb_on_the_daemon(stack, monke
     res = spacearm(env, "diagnose", str(first), "--run", "--report", str(tmp / "d"), "--json")
     out = json.loads(ok(res))
     assert out["findings"][0]["joint"] == 3 and out["findings"][0]["equally_good"]     # ambiguous at one speed
+    print(f"\nthe ramp: {out['findings'][0]['text']}, or equally well {out['findings'][0]['equally_good']}; "
+          f"{out.get('command_timing')}")
     experiment = out["experiment"]
     assert experiment["joints"] == [3] and "daemon" in experiment["ran_on"]
     recorded = tmp / "d" / "experiment.mcap"
     assert recorded.is_file() and str(recorded) in experiment["ran_on"]
     after = experiment["verdict_after"]
     assert after.startswith("joint 3: viscous friction") and "equally well" not in after, after
+    assert any("velocity offset" in line for line in experiment["lines"]), experiment["lines"]
+    size, half = map(float, re.search(r"viscous friction about ([\d.]+) \+- ([\d.]+)", after).groups())
+    print(f"\nafter the experiment on the daemon: viscous {size:.1f} +- {half:.2g} N m s/rad (95 % interval "
+          f"{size - half:.1f}..{size + half:.1f}), truth {VISCOUS:.0f}: {size / VISCOUS - 1:+.1%}\n{after}")
+    assert abs(size - VISCOUS) <= 0.15 * VISCOUS, after
+    assert size - half <= VISCOUS <= size + half, after
     status = json.loads(ok(spacearm(env, "status", "--json")))
     assert status["recording"]["path"] != str(recorded)      # the daemon records on, in a file of its own
     if status["state"] != "enabled":

@@ -13,7 +13,7 @@ import typer
 from spacearm.console.commands.operate import API_OPTION, TOKEN_OPTION
 from spacearm.console.errors import EXIT_USAGE, friendly_errors
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
-from spacearm.offline.diagnosis.command_timing import align_commands
+from spacearm.offline.diagnosis.command_timing import replay_plant
 from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged, on_arm_drives
 from spacearm.offline.diagnosis.column_spec import parse_columns
 from spacearm.offline.diagnosis.recording_io import RecordingFormatError, read_recording
@@ -90,11 +90,12 @@ def register(app: typer.Typer) -> None:
             print(f"error: {exc}", file=sys.stderr)
             raise SystemExit(EXIT_USAGE) from None
         timing_note = None
-        if real.suffix == ".mcap" and traces is None:
-            table, timing_note = align_commands(table, nominal_config)
+        replayed = nominal_config
+        if real.suffix == ".mcap" and traces is None:      # the daemon's recording: as its drives were driven
+            replayed, timing_note = replay_plant(table, nominal_config)
         try:
             with _progress_bar() as progress:
-                result = run_diagnosis(table, nominal_config, traces, progress)
+                result = run_diagnosis(table, replayed, traces, progress)
         except SimulationDiverged as exc:
             print(f"error: nominal replay of {real.name}: {exc}; check the nominal plant file {nominal}",
                   file=sys.stderr)
@@ -104,7 +105,7 @@ def register(app: typer.Typer) -> None:
         if timing_note:
             data["command_timing"] = timing_note
         if experiment is not None or experiment_plant is not None or run:
-            runner = _on_daemon(api, token, nominal_config) if run else _on_plant(experiment_plant, arm, bus)
+            runner = _on_daemon(api, token) if run else _on_plant(experiment_plant, arm, bus)
             data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
                                              runner, report)
         if as_json:
@@ -158,8 +159,12 @@ def _experiment(result, table, nominal_config, arm: Path, out: Path, runner, rep
         lines.append(f"  run it: spacearm record-sim --plant PLANT --trajectory {out} --out exp.csv, "
                      "then spacearm diagnose exp.csv (or diagnose --run on the daemon)")
     else:
-        recording, where = runner(joints, limits, traj, load_arm_config(arm).arm.name, table.n_joints, report)
-        second = run_diagnosis(recording, nominal_config)
+        recording, where, from_daemon = runner(joints, limits, traj, load_arm_config(arm).arm.name, table.n_joints,
+                                               report)
+        replayed, timing_note = replay_plant(recording, nominal_config) if from_daemon else (nominal_config, None)
+        second = run_diagnosis(recording, replayed)
+        if timing_note:
+            lines.append(f"  {timing_note}")
         write_report(second, report / "experiment", out.name, nominal_config)
         lines.append(f"  after the experiment ({where}): {second.verdict}")
         info["verdict_after"] = second.verdict
@@ -176,19 +181,18 @@ def _on_plant(plant: Path | None, arm: Path, bus: Path | None):
 
     def run(joints, limits, traj, arm_name, n_joints, report):
         from spacearm.offline.diagnosis.record import record_direct
-        return record_direct(on_arm_drives(load_plant_config(plant), arm, bus), traj, None), plant.name
+        return record_direct(on_arm_drives(load_plant_config(plant), arm, bus), traj, None), plant.name, False
     return run
 
 
-def _on_daemon(api: str, token: str | None, nominal):
+def _on_daemon(api: str, token: str | None):
     """Runs the experiment on the daemon at `api`, which records it (console/experiment_run.py)."""
     def run(joints, limits, traj, arm_name, n_joints, report):
         from spacearm.console.experiment_run import run_experiment
         report.mkdir(parents=True, exist_ok=True)
         path = run_experiment(joints, limits, arm_name, n_joints, report / "experiment.mcap", api, token)
         recording, _ = read_recording(path)
-        recording, _ = align_commands(recording, nominal)
-        return recording, f"run on the daemon at {api}, recorded to {path}"
+        return recording, f"run on the daemon at {api}, recorded to {path}", True
     return run
 
 

@@ -3,8 +3,9 @@
 Same plant (``spacearm.firmware_sim.plant``), same drive servo law (``spacearm.firmware_sim.joint_drive.servo_torque``)
 and the same CSP interpolation, scaling and reporting as the CAN path, minus the CANopen
 frames: a 5-minute recording replays in seconds instead of minutes. Command timing matches
-the daemon: the target written in cycle k-1 is latched at SYNC k, the plant advances one
-period, and what the drives report after it is the measurement of row k.
+the daemon: the target (and velocity offset) written in cycle k-1 is latched at SYNC k, the
+plant advances one period, and what the drives report after it is the measurement of row k
+(the full timeline: ``command_timing.py``).
 ``tests/diagnosis/test_direct_vs_can.py`` checks both paths give the same recording.
 
 Torque limit, position limits and the velocity clamp are the drives': the bus file's, or, for
@@ -62,9 +63,24 @@ def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = No
 class ArmPlant(PlantConfig):
     """A plant file's physics on one arm's drives, as the diagnosis replays it: the drive
     settings carry the arm file's velocity and torque limits and joint limits. Every copy of
-    it (``model_copy``: each fitted variant) keeps them; they are not written to plant files."""
+    it (``model_copy``: each fitted variant) keeps them; they are not written to plant files.
+
+    ``planned_velocity_offset``: the recording's controller sent each command's planned
+    velocity as the drives' velocity offset (60B1h), as the daemon's moves do. Recordings
+    hold the positions only, so the replay rebuilds the offsets from them (``planned_velocity``);
+    ``offline/diagnosis/command_timing.py`` decides from the recording whether it was sent."""
     drives: list[JointSettings] = Field(default_factory=list, exclude=True)
     following_error: list[float] = Field(default_factory=list, exclude=True)
+    planned_velocity_offset: bool = Field(default=False, exclude=True)
+
+
+def planned_velocity(q_cmd: np.ndarray, dt: float) -> np.ndarray:
+    """The velocity of the plan the commands were sampled from, at each command (N, n): the
+    five-point central difference, exact on the jerk-limited (piecewise cubic) moves away
+    from their jerk switches; the ends repeat the first and last command."""
+    q = np.asarray(q_cmd, float)
+    p = np.concatenate([q[:1], q[:1], q, q[-1:], q[-1:]])
+    return (-p[4:] + 8.0 * p[3:-1] - 8.0 * p[1:-3] + p[:-4]) / (12.0 * dt)
 
 
 def on_arm_drives(plant: PlantConfig, arm_file: str | Path, bus_config: BusConfig | str | None = None) -> ArmPlant:
@@ -138,7 +154,7 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     settings = settings or drive_settings(config, n)
     if len(settings) < n:
         settings = list(settings) + [settings[-1]] * (n - len(settings))
-    if limits is None and isinstance(config, ArmPlant):
+    if limits is None and isinstance(config, ArmPlant) and config.drives:
         limits = [(s.lower, s.upper) for s in settings]     # 607Dh, as the daemon configures it
     params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
     start = q_cmd[0] if q0 is None else np.asarray(q0, float)
@@ -153,7 +169,12 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     wrench = np.empty((rows, 6))
     fe = 0.0
     cols = q_cmd[:, index]
-    vel = np.zeros_like(cols) if dq_cmd is None else np.asarray(dq_cmd, float)[:, index]
+    if dq_cmd is not None:
+        vel = np.asarray(dq_cmd, float)[:, index]
+    elif isinstance(config, ArmPlant) and config.planned_velocity_offset:
+        vel = planned_velocity(cols, dt)
+    else:
+        vel = np.zeros_like(cols)
     previous = cols[0]
     previous_v = np.zeros(len(index))
     for r in range(rows):

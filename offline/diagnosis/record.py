@@ -3,6 +3,10 @@
 The CAN path: simulated nodes and the daemon (lockstep clock) in this process on a private
 virtual bus; the daemon enables the arm, records, and plays the trajectory as a planned
 mode. The direct path (``direct_sim``) is the fast equivalent for the benchmark.
+
+A trajectory sends no velocity feed-forward (``Trajectory.sample``); with ``velocity_offset``
+the CAN path sends its velocity as the drives' velocity offset (60B1h), as the daemon's own
+moves do, so the replay of such recordings (``command_timing.py``) can be checked against it.
 """
 from __future__ import annotations
 
@@ -16,6 +20,7 @@ import numpy as np
 
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
 from spacearm.controller.modes import PlannedMode
+from spacearm.controller.planning.joint_move import JointSetpoint
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.recording_io import RecordingTable, write_csv
 from spacearm.offline.diagnosis.trajectory import Trajectory
@@ -38,9 +43,25 @@ def starting_at(config: PlantConfig, q0: np.ndarray) -> PlantConfig:
                                                 for p, q in zip(joints, q0)]})
 
 
+class WithVelocityOffset:
+    """A trajectory as a plan whose setpoints carry its velocity (the daemon's moves' way)."""
+
+    def __init__(self, trajectory: Trajectory):
+        self.trajectory = trajectory
+        self.duration = trajectory.duration
+        self._velocity = np.gradient(trajectory.q, trajectory.t, axis=0)
+
+    def sample(self, t: float) -> JointSetpoint:
+        q = self.trajectory.sample(t).q
+        dq = np.array([np.interp(t, self.trajectory.t, v) for v in self._velocity.T])
+        return JointSetpoint(q, dq, np.zeros_like(q))
+
+
 def record_can(config: PlantConfig, trajectory: Trajectory, out: Path, arm: Path = DEFAULT_ARM,
-               bus_config: Path = DEFAULT_BUS_CONFIG, timeout: float = 3600.0, clock: str = "lockstep") -> Path:
-    """Record over CAN; writes MCAP (out.mcap) or the wide CSV (out.csv). Returns out."""
+               bus_config: Path = DEFAULT_BUS_CONFIG, timeout: float = 3600.0, clock: str = "lockstep",
+               velocity_offset: bool = False) -> Path:
+    """Record over CAN; writes MCAP (out.mcap) or the wide CSV (out.csv). Returns out.
+    `velocity_offset`: the setpoints carry the trajectory's velocity (see the module's note)."""
     out = Path(out)
     bus = f"virtual:record-sim-{uuid.uuid4().hex[:8]}"
     workdir = tempfile.TemporaryDirectory()
@@ -58,7 +79,8 @@ def record_can(config: PlantConfig, trajectory: Trajectory, out: Path, arm: Path
         core.submit(core.cmd_enable)
         _wait(daemon, lambda s: s.state == "enabled", 10.0, "drives did not enable")
         daemon.start_recording(str(mcap))
-        mode = PlannedMode("trajectory", trajectory, 0.0, f"{len(trajectory.t)} points, {trajectory.duration:.1f} s")
+        plan = WithVelocityOffset(trajectory) if velocity_offset else trajectory
+        mode = PlannedMode("trajectory", plan, 0.0, f"{len(trajectory.t)} points, {trajectory.duration:.1f} s")
         answer = core.submit(lambda t, m: core.start_planned(t, m, mode, None))
         _wait(daemon, lambda s: s.motions_finished >= answer["motion"] or s.state == "stopped", timeout,
               "trajectory did not finish")
