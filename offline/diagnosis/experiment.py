@@ -78,17 +78,22 @@ class ExperimentMove:
 
 
 def experiment_moves(joints: list[int], q_start: np.ndarray, limits: list[JointLimit]) -> list[ExperimentMove]:
-    """Each given joint in turn, out and back at each speed; the arm ends where it started."""
+    """Speed by speed, each given joint out and back; the arm ends where it started. Speed
+    before joint, so that with several joints the held-out end of the recording (the last
+    40 %, the fastest moves) still shows every one of them: joint by joint, the first joint's
+    fit had nothing held out to be confirmed on."""
     q = np.asarray(q_start, float).copy()
-    moves = []
+    strokes, signs = {}, {}
     for j in joints:
         lim = limits[j]
         room_up, room_down = lim.upper - q[j], q[j] - lim.lower
-        stroke = min(STROKE, 0.9 * max(room_up, room_down))
-        sign = 1.0 if room_up >= room_down else -1.0
-        for fraction in SPEED_FRACTIONS:
-            for direction in (sign, -sign):       # out and back: both directions at this speed
-                q[j] += direction * stroke
+        strokes[j] = min(STROKE, 0.9 * max(room_up, room_down))
+        signs[j] = 1.0 if room_up >= room_down else -1.0
+    moves = []
+    for fraction in SPEED_FRACTIONS:
+        for j in joints:
+            for direction in (signs[j], -signs[j]):       # out and back: both directions at this speed
+                q[j] += direction * strokes[j]
                 moves.append(ExperimentMove(j, q.copy(), fraction * SPEED_MARGIN))
     return moves
 
@@ -113,8 +118,8 @@ def design_experiment(joints: list[int], q_start: np.ndarray, limits: list[Joint
 
 def joints_to_excite(diagnosis, q: np.ndarray, min_travel: float) -> list[int]:
     """Joints with an ambiguous finding or a torque mismatch nothing explains (0-based); if
-    there are none, the joints that did not move. Not both: the diagnosis holds out the last 40 % of the rows, which must show the
-    joints in question, so one experiment answers one kind of question."""
+    there are none, the joints that did not move. Not both: one experiment answers one kind
+    of question."""
     ambiguous = sorted({f.fit.index for f in diagnosis.findings if f.alternatives and f.fit.channel == "tau"}
                        | {int(c.name[4:]) - 1 for c in diagnosis.unexplained if c.name.startswith("tau_")})
     return ambiguous or [j for j in range(q.shape[1]) if np.ptp(q[:, j]) <= min_travel]

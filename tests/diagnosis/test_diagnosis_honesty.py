@@ -80,6 +80,22 @@ def test_designed_experiment_settles_coulomb_against_viscous():
     assert abs(settled.params["coulomb_friction"] - 4.0) < 0.6
 
 
+def test_experiment_on_two_joints_confirms_the_first_one_too():
+    """Two joints in question: the diagnosis holds out the last 40 % of the rows, and with the
+    moves joint by joint that stretch showed only the second joint, so the first joint's
+    viscous friction could not be confirmed ("unexplained" instead). Speed by speed, the
+    fastest moves of both are held out."""
+    from spacearm.offline.diagnosis.experiment import design_experiment, limits_from_arm
+    truth = plant(7, j3={"viscous_friction": 140.0})
+    limits = limits_from_arm("configs/arm/oru_testbed_6dof.toml", 7)
+    exp = design_experiment([2, 6], Q7, limits)
+    held = exp.q[int(0.6 * len(exp.q)):]
+    assert np.ptp(held[:, 2]) > 0.1 and np.ptp(held[:, 6]) > 0.1
+    found = diagnose(record_direct(truth, exp, None, hold_cycles=0), NOMINAL).findings
+    assert [(f.fit.index, f.fit.effects) for f in found] == [(2, ("viscous",))]
+    assert abs(found[0].params["viscous_friction"] - 140.0) <= 0.15 * 140.0
+
+
 def test_console_designs_runs_and_rediagnoses_the_experiment(tmp_path):
     import json
 
