@@ -141,7 +141,7 @@ def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 2
 
 
 def replay(table: RecordingTable, plant: PlantConfig, joints: list[int] | None = None) -> SimTraces:
-    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0], joints=joints, t0=0.0)
+    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0], dq_cmd=table.dq_cmd, joints=joints, t0=0.0)
 
 
 def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
@@ -151,7 +151,7 @@ def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
     n = table.q.shape[1]
     quantum = np.array([(plant.joints[j] if j < len(plant.joints) else plant.joint).resolver_arcsec
                         for j in range(n)]) * ARCSEC
-    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, t0=0.0)
+    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, dq_cmd=table.dq_cmd, t0=0.0)
 
 
 def _signals(table: RecordingTable, sim: SimTraces, j: int) -> Signals:
@@ -315,8 +315,9 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
         if fit is not None:
             alternatives[j] = equally_good(fit, ranked, quiet.dq[:, j])
             fit = refine_size(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j],
-                              train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits)
-            fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits)
+                              train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits, table.dq_cmd)
+            fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits,
+                                  table.dq_cmd)
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])
@@ -325,7 +326,8 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # the drive hunts or rings: try the gear effects (simulated, compared by envelope)
             for effect in GEAR_EFFECTS:
                 gear = fit_gear_effect(effect, nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual,
-                                       tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j])
+                                       tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j],
+                                       dq_cmd=table.dq_cmd)
                 if gear.significant and (fit is None or gear.rms_heldout_after < 0.7 * _envelope_error(
                         fit, residual, tau_noise, ~train)):
                     fit = gear
