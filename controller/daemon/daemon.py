@@ -243,7 +243,8 @@ class Daemon:
         m = s.measurement
         recorder.put("/cycle", s.tick.time, {
             "t": s.tick.time, "sync": m.sync_counter, "cycle": s.tick.cycle,
-            "q_cmd": s.command.q.tolist(), "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
+            "q_cmd": s.command.q.tolist(), "dq_cmd": self._velocity_offsets_sent(),
+            "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
             "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
             "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
             "io_wait": self.hardware.last_io_wait})
@@ -252,6 +253,12 @@ class Daemon:
         if s.tick.time - self._last_stats_time >= 1.0:
             self._last_stats_time = s.tick.time
             recorder.put("/stats", s.tick.time, self.stats.summary().as_dict())
+
+    def _velocity_offsets_sent(self) -> list[float]:
+        """The velocity offset (60B1h, rad/s) each drive was sent with this cycle's target: the
+        command's planned velocity, or the last one sent when a command carries none (the
+        drivers keep it). The diagnosis replays it as sent instead of rebuilding it."""
+        return [joint.velocity_ff for joint in self.hardware.network.joints]
 
     # ---- recording ---------------------------------------------------------------------
     def start_recording(self, path: str | None) -> dict:

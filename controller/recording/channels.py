@@ -1,7 +1,7 @@
 """The channels of a spacearm recording and their JSON schemas (Foxglove-readable).
 
-/cycle   one message per control cycle: time, SYNC counter, commanded and measured joint
-         values, wrench, end-effector state, mode, cycle timing (SI units)
+/cycle   one message per control cycle: time, SYNC counter, commanded (position and
+         velocity offset) and measured joint values, wrench, end-effector state, mode, cycle timing (SI units)
 /events  state changes, protective stops and their reasons, device events
 /stats   cycle statistics summary, once per second
 """
@@ -19,6 +19,8 @@ CYCLE_SCHEMA: dict[str, Any] = {
         "sync": {"type": "integer", "description": "CANopen SYNC counter (1..240)"},
         "cycle": {"type": "integer", "description": "cycle number since start (gaps = skipped)"},
         "q_cmd": {**NUMBER_ARRAY, "description": "rad"},
+        "dq_cmd": {**NUMBER_ARRAY, "description": "rad/s, velocity offset (60B1h) sent with q_cmd; "
+                                                  "absent in recordings made before it was recorded"},
         "q": {**NUMBER_ARRAY, "description": "rad"},
         "dq": {**NUMBER_ARRAY, "description": "rad/s"},
         "tau": {**NUMBER_ARRAY, "description": "N m"},

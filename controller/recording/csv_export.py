@@ -1,7 +1,8 @@
 """Export the /cycle channel of a recording to the wide CSV other tools read.
 
 Columns: t, q_cmd_1..n, q_1..n, dq_1..n, tau_1..n, fx, fy, fz, tx, ty, tz, then sync,
-cycle, period_error, execution and any `extra` channels (SI units). SYNC-counter gaps
+cycle, period_error, execution, dq_cmd_1..n (the velocity offset sent with q_cmd; only
+for recordings that have it) and any `extra` channels (SI units). SYNC-counter gaps
 are reported, never filled.
 """
 from __future__ import annotations
@@ -14,6 +15,11 @@ from spacearm.controller.recording.mcap_reader import Recording, RecordingError,
 
 WRENCH_COLUMNS = ["fx", "fy", "fz", "tx", "ty", "tz"]
 SYNC_COUNTER_MAX = 240  # CiA 301 synchronous counter overflow value used on our buses
+
+
+def dq_cmd_columns(n: int) -> list[str]:
+    """The commanded velocity offset's columns (optional: older recordings have none)."""
+    return [f"dq_cmd_{i}" for i in range(1, n + 1)]
 
 
 @dataclass
@@ -39,9 +45,11 @@ def export_csv(recording_path: str | Path, csv_path: str | Path) -> ExportResult
                              + (f" ({recording.problem})" if recording.problem else ""))
     n = len(cycles[0].data["q"])
     extra_names = sorted({k for m in cycles for k in m.data.get("extra", {})})
+    with_dq_cmd = all("dq_cmd" in m.data for m in cycles)
     columns = (["t"] + [f"q_cmd_{i}" for i in range(1, n + 1)] + [f"q_{i}" for i in range(1, n + 1)]
                + [f"dq_{i}" for i in range(1, n + 1)] + [f"tau_{i}" for i in range(1, n + 1)]
-               + WRENCH_COLUMNS + ["sync", "cycle", "period_error", "execution"] + extra_names)
+               + WRENCH_COLUMNS + ["sync", "cycle", "period_error", "execution"]
+               + (dq_cmd_columns(n) if with_dq_cmd else []) + extra_names)
     with open(csv_path, "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(columns)
@@ -51,6 +59,7 @@ def export_csv(recording_path: str | Path, csv_path: str | Path) -> ExportResult
             writer.writerow([repr(d["t"]), *map(repr, d["q_cmd"]), *map(repr, d["q"]), *map(repr, d["dq"]),
                              *map(repr, d["tau"]), *map(repr, d["wrench"]), d["sync"], d["cycle"],
                              repr(d.get("period_error", 0.0)), repr(d.get("execution", 0.0)),
+                             *(map(repr, d["dq_cmd"]) if with_dq_cmd else ()),
                              *(repr(extra[k]) if k in extra else "" for k in extra_names)])
     gaps = find_cycle_gaps([m.data["cycle"] for m in cycles], [m.data["t"] for m in cycles])
     return ExportResult(len(cycles), columns, gaps, recording.complete, recording.problem)

@@ -120,7 +120,8 @@ def smoothed_rms(residual: np.ndarray, window: int = 25) -> float:
 
 
 def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 25,
-                       reference_noise: float | None = None, null_smooth: float = 0.0) -> float:
+                       reference_noise: float | None = None, null_smooth: float = 0.0,
+                       parked: np.ndarray | None = None, parked_dither: float = 0.0) -> float:
     """How far a residual is from noise, as a multiple of the limit (> 1: significant).
 
     Two views: the raw RMS against the row-to-row noise (catches ringing and hunting) and the
@@ -128,7 +129,14 @@ def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 2
     resolver chatter, which is not white; measured on effect-free recordings. `null_smooth`
     is the 0.5 s average RMS between two equally valid nominal replays (see null_replay):
     where the arm rests, the servo parks anywhere within a resolver quantum, and that
-    offset, not the chatter, sets what the average shows without any effect."""
+    offset, not the chatter, sets what the average shows without any effect.
+
+    `parked` (rows where the joint holds its commanded position) and `parked_dither` (the RMS
+    by which two equally valid replays differ there): a joint parked between two resolver
+    readings dithers between them faster than the rows sample it, with a phase set by its
+    sub-quantum state, which no recording gives (a real servo dithers between encoder counts
+    alike). Even the true plant replays that dither out of phase, so in those rows the "drive
+    hunts" view compares with the dither, not with the quieter joints' noise alone."""
     noise = max(noise_level(residual), noise_floor)
     raw = float(np.sqrt(np.mean(residual ** 2))) / noise
     smooth = smoothed_rms(residual, window)
@@ -136,12 +144,15 @@ def mismatch_statistic(residual: np.ndarray, noise_floor: float, window: int = 2
     if reference_noise:
         # dense ringing (a hunting drive) inflates the channel's own row-to-row noise estimate:
         # compare with the noise the other channels of the same kind show
-        stat = max(stat, float(np.sqrt(np.mean(residual ** 2))) / reference_noise / HUNTING_RATIO)
+        parked = np.zeros(len(residual), bool) if parked is None else parked
+        for rows, reference in ((~parked, reference_noise), (parked, max(reference_noise, parked_dither))):
+            if rows.sum() >= min(window, len(residual)):     # a few rows alone (a joint's first nudge) say nothing
+                stat = max(stat, float(np.sqrt(np.mean(residual[rows] ** 2))) / reference / HUNTING_RATIO)
     return stat
 
 
 def replay(table: RecordingTable, plant: PlantConfig, joints: list[int] | None = None) -> SimTraces:
-    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0], joints=joints, t0=0.0)
+    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0], dq_cmd=table.dq_cmd, joints=joints, t0=0.0)
 
 
 def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
@@ -151,7 +162,7 @@ def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
     n = table.q.shape[1]
     quantum = np.array([(plant.joints[j] if j < len(plant.joints) else plant.joint).resolver_arcsec
                         for j in range(n)]) * ARCSEC
-    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, t0=0.0)
+    return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, dq_cmd=table.dq_cmd, t0=0.0)
 
 
 def _signals(table: RecordingTable, sim: SimTraces, j: int) -> Signals:
@@ -315,8 +326,9 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
         if fit is not None:
             alternatives[j] = equally_good(fit, ranked, quiet.dq[:, j])
             fit = refine_size(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j],
-                              train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits)
-            fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits)
+                              train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits, table.dq_cmd)
+            fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits,
+                                  table.dq_cmd)
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])
@@ -325,7 +337,8 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # the drive hunts or rings: try the gear effects (simulated, compared by envelope)
             for effect in GEAR_EFFECTS:
                 gear = fit_gear_effect(effect, nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual,
-                                       tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j])
+                                       tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j],
+                                       dq_cmd=table.dq_cmd)
                 if gear.significant and (fit is None or gear.rms_heldout_after < 0.7 * _envelope_error(
                         fit, residual, tau_noise, ~train)):
                     fit = gear
@@ -382,21 +395,24 @@ def _channel_results(table: RecordingTable, nominal: PlantConfig, sim: SimTraces
     channels, before, after = [], {}, {}
     quantum = [(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
                for j in range(n)]
-    ref = {"ta": tau_noise}
     null_sim = null_sim if null_sim is not None else null_replay(table, nominal)
     null = dict((name, real - nom) for name, real, nom, _ in _channels(null_sim, sim, sim))
     for name, real, nom, fitted in _channels(table, sim, refit):
         r0, r1 = real - nom, real - fitted
         null_smooth = smoothed_rms(null[name])
+        hunting = {}
+        if name.startswith("tau"):
+            still = np.diff(table.q_cmd[:, int(name[4:]) - 1]) == 0.0
+            parked = np.r_[still[:1], still]
+            dither = float(np.sqrt(np.mean(null[name][parked] ** 2))) if parked.any() else 0.0
+            hunting = {"reference_noise": tau_noise, "parked": parked, "parked_dither": dither}
         before[name], after[name] = r0, r1
         floor = (quantum[int(name[2:]) - 1] if name.startswith("q_") else 0.01 if name.startswith("f") else 0.001) \
             / math.sqrt(12.0) if not name.startswith("tau") else 1e-3
         channels.append(ChannelResult(name, max(noise_level(r0), floor), float(np.sqrt(np.mean(r0[held] ** 2))),
                                       float(np.sqrt(np.mean(r1[held] ** 2))), False,
-                                      mismatch_statistic(r0, floor, reference_noise=ref.get(name[:2]),
-                                                         null_smooth=null_smooth),
-                                      mismatch_statistic(r1, floor, reference_noise=ref.get(name[:2]),
-                                                         null_smooth=null_smooth)))
+                                      mismatch_statistic(r0, floor, null_smooth=null_smooth, **hunting),
+                                      mismatch_statistic(r1, floor, null_smooth=null_smooth, **hunting)))
     return channels, before, after
 
 

@@ -8,7 +8,8 @@
 
 Units allowed as factors are the console's (deg, mrad, mm, cm, ...) plus a few of the
 torque/current world (mNm, kNm); anything else is a plain number. Our names are
-t, q_cmd_i, q_i, dq_i, tau_i and the wrench columns.
+t, q_cmd_i, q_i, dq_i, tau_i, the wrench columns and, optionally, dq_cmd_i (the velocity
+offset sent with the command, rad/s).
 """
 from __future__ import annotations
 
@@ -27,9 +28,9 @@ class ColumnSpecError(RecordingFormatError):
 UNIT_FACTORS = {"rad": 1.0, "deg": math.pi / 180.0, "mrad": 1e-3, "urad": 1e-6, "m": 1.0, "mm": 1e-3, "cm": 1e-2,
                 "s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "Nm": 1.0, "mNm": 1e-3, "kNm": 1e3, "N": 1.0,
                 "rpm": 2.0 * math.pi / 60.0, "degps": math.pi / 180.0}
-JOINT_PREFIXES = ("q_cmd", "q", "dq", "tau")
-_OURS = re.compile(r"^(t|(?:q_cmd|q|dq|tau)_\d+|" + "|".join(WRENCH_COLUMNS) + r")$")
-_RANGE_OURS = re.compile(r"^(q_cmd|q|dq|tau)_(\d+)\.\.(\d+)$")
+JOINT_PREFIXES = ("q_cmd", "dq_cmd", "q", "dq", "tau")
+_OURS = re.compile(r"^(t|(?:q_cmd|dq_cmd|q|dq|tau)_\d+|" + "|".join(WRENCH_COLUMNS) + r")$")
+_RANGE_OURS = re.compile(r"^(q_cmd|dq_cmd|q|dq|tau)_(\d+)\.\.(\d+)$")
 _RANGE_THEIRS = re.compile(r"^(#|.*?)(\d+)\.\.(\d+)$")
 
 

@@ -36,6 +36,11 @@ rebuilt from the targets, position and torque both match (``tests/diagnosis/
 test_command_timing.py``). The offset is decided from the recording itself: the nominal
 replay of the moving joints' positions with and without it; with it must halve the residual,
 otherwise the recording is replayed as commanded (record-sim's trajectories send no offset).
+
+Since the daemon records the offset it sends (``dq_cmd``, controller/daemon/daemon.py
+``_record``), none of this guessing is needed for its recordings: the recorded offset is
+replayed as sent (``simulate(dq_cmd=table.dq_cmd)``) and wins over the rebuilt one, which
+stays for recordings made before, and other tools' CSVs.
 """
 from __future__ import annotations
 
@@ -58,14 +63,20 @@ def with_velocity_offset(plant: PlantConfig, offset: bool = True) -> ArmPlant:
 
 def position_residual(table: RecordingTable, plant: PlantConfig, joints: list[int]) -> float:
     """RMS of the recorded minus the replayed positions of `joints` (rad)."""
-    sim = simulate(plant, table.q_cmd, table.dt, q0=table.q[0], joints=joints)
+    sim = simulate(plant, table.q_cmd, table.dt, q0=table.q[0], dq_cmd=table.dq_cmd, joints=joints)
     return float(np.sqrt(np.mean((table.q[:, joints] - sim.q) ** 2)))
 
 
 def replay_plant(table: RecordingTable, nominal: PlantConfig) -> tuple[PlantConfig, str | None]:
     """The nominal plant driven as the recording's controller drove the drives (and a line
     saying so), or `nominal` unchanged (and None) when the commands sent no velocity offset
-    or the recording cannot tell."""
+    or the recording cannot tell. A recording with the offsets it sent (``table.dq_cmd``) is
+    replayed with those, not with rebuilt ones."""
+    if table.dq_cmd is not None:
+        sent = float(np.max(np.abs(table.dq_cmd), initial=0.0))
+        return with_velocity_offset(nominal, False) if isinstance(nominal, ArmPlant) else nominal, (
+            f"commands: the drives' velocity offset as recorded (dq_cmd, up to {sent:.3g} rad/s): replayed as sent"
+            if sent > 0.0 else None)
     moving = [j for j in range(table.q.shape[1]) if np.ptp(table.q_cmd[:, j]) > MIN_TRAVEL]
     if not moving or len(table.t) < 20:
         return nominal, None

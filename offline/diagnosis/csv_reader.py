@@ -83,6 +83,25 @@ def _resolve(spec: ColumnSpec, header: list[str] | None, width: int, path: Path)
     return header.index(spec.source)
 
 
+def _velocity_offset_columns(values: dict[str, np.ndarray], n: int, command: str, report: ReadReport) -> list[str]:
+    """The names of the commanded velocity offset's columns dq_cmd_1..n, completed with zeros,
+    when the recording has any (our CSV since the daemon records it); [] otherwise. With
+    --command measured they are dropped: the measured motion's steps carry its velocity already."""
+    names = [f"dq_cmd_{i}" for i in range(1, n + 1)]
+    columns = {k: values.pop(k) for k in [k for k in values if k.startswith("dq_cmd_")]}
+    if not any(k in columns for k in names):
+        return []
+    if command == "measured":
+        report.notes.append("commanded velocity offset (dq_cmd) not used: the command is the measured position")
+        return []
+    missing = [k for k in names if k not in columns]
+    for k in names:
+        values[k] = columns[k] if k in columns else np.zeros(len(values["q_1"]))
+    report.notes.append("commanded velocity offset: recorded (dq_cmd), replayed as sent"
+                        + (f"; {', '.join(missing)} not in the recording, taken as 0" if missing else ""))
+    return names
+
+
 def read_any_csv(path: str | Path, specs: list[ColumnSpec] | None = None, command: str = "recorded",
                  period: float | None = None) -> tuple[RecordingTable, ReadReport]:
     """The recording as a table plus the report of how it was read. Raises
@@ -164,6 +183,7 @@ def read_any_csv(path: str | Path, specs: list[ColumnSpec] | None = None, comman
         report.notes.append("commanded position: the measured position (--command measured), so the replay follows"
                             " the recorded motion and only torques and forces are compared")
     zero = np.zeros(len(t))
+    offset = _velocity_offset_columns(values, n, command, report)
     absent = [name for name in [f"dq_{i}" for i in range(1, n + 1)] + [f"tau_{i}" for i in range(1, n + 1)]
               + list(WRENCH_COLUMNS) if name not in values]
     for name in absent:
@@ -179,14 +199,15 @@ def read_any_csv(path: str | Path, specs: list[ColumnSpec] | None = None, comman
         raise RecordingFormatError(f"{path}: {len(grid)} usable rows after cleaning the time base; need at least 10")
     joint = lambda p: np.column_stack([out[f"{p}_{i}"] for i in range(1, n + 1)])
     table = RecordingTable(grid, joint("q_cmd"), joint("q"), joint("dq"), joint("tau"),
-                           np.column_stack([out[c] for c in WRENCH_COLUMNS]))
+                           np.column_stack([out[c] for c in WRENCH_COLUMNS]),
+                           dq_cmd=np.column_stack([out[c] for c in offset]) if offset else None)
     for name, x in (("q", table.q), ("q_cmd", table.q_cmd)):
         if not np.all(np.isfinite(x)):
             raise RecordingFormatError(f"{path}: {name} has no finite values in some joint")
         if float(np.max(np.abs(x))) > 1e3 * math.pi:
             raise RecordingFormatError(f"{path}: {name} reaches {float(np.max(np.abs(x))):.3g}: not radians or "
                                        "metres (scale it with --columns, e.g. q_1=pos1*deg)")
-    for name in ("dq", "tau", "wrench"):
+    for name in ("dq", "tau", "wrench") + (("dq_cmd",) if offset else ()):
         arr = getattr(table, name)
         arr[~np.isfinite(arr)] = 0.0
     return table, report

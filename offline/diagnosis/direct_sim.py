@@ -67,8 +67,10 @@ class ArmPlant(PlantConfig):
 
     ``planned_velocity_offset``: the recording's controller sent each command's planned
     velocity as the drives' velocity offset (60B1h), as the daemon's moves do. Recordings
-    hold the positions only, so the replay rebuilds the offsets from them (``planned_velocity``);
-    ``offline/diagnosis/command_timing.py`` decides from the recording whether it was sent."""
+    made before the daemon recorded the offset (``dq_cmd``) hold the positions only, so the
+    replay rebuilds it from them (``planned_velocity``); ``offline/diagnosis/command_timing.py``
+    decides from the recording whether it was sent. A recorded ``dq_cmd`` passed to
+    ``simulate`` wins over this flag."""
     drives: list[JointSettings] = Field(default_factory=list, exclude=True)
     following_error: list[float] = Field(default_factory=list, exclude=True)
     planned_velocity_offset: bool = Field(default=False, exclude=True)

@@ -34,7 +34,7 @@ def envelope(x: np.ndarray, window: int = WINDOW) -> np.ndarray:
 def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
                     base_tau: np.ndarray, residual: np.ndarray, noise: float, j: int,
                     train: np.ndarray, base_q: np.ndarray | None = None,
-                    q_residual: np.ndarray | None = None) -> ChannelFit:
+                    q_residual: np.ndarray | None = None, dq_cmd: np.ndarray | None = None) -> ChannelFit:
     """With `base_q` and `q_residual` (the ideal-sensor replay's position and the recording's
     position minus it) the size is found on the position envelope: once the drive hunts, its
     torque ripple is set by the drive's own limits and hardly grows with the play (the loss
@@ -59,7 +59,8 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
             try:
                 # a light joint with a stiff gear or wide play can make the explicit step diverge
                 with np.errstate(all="raise"):
-                    sims[log_value] = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j])
+                    sims[log_value] = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j],
+                                                 dq_cmd=dq_cmd)
             except (OverflowError, FloatingPointError, ValueError):
                 sims[log_value] = None
         return sims[log_value]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
+from spacearm.controller.recording.csv_export import WRENCH_COLUMNS, dq_cmd_columns
 
 
 class RecordingFormatError(ValueError):
@@ -23,6 +23,9 @@ class RecordingTable:
     tau: np.ndarray
     wrench: np.ndarray
     extra: dict[str, np.ndarray] = field(default_factory=dict)   # temp_i, dist, ... when present
+    # rad/s (N, n): the velocity offset sent with each command, where the recording has it (the
+    # daemon's since it records it); None: unknown (older recordings, other tools' CSVs)
+    dq_cmd: np.ndarray | None = None
 
     @property
     def n_joints(self) -> int:
@@ -34,7 +37,8 @@ class RecordingTable:
 
     def rows(self, sl: slice) -> "RecordingTable":
         return RecordingTable(self.t[sl], self.q_cmd[sl], self.q[sl], self.dq[sl], self.tau[sl], self.wrench[sl],
-                              {k: v[sl] for k, v in self.extra.items()})
+                              {k: v[sl] for k, v in self.extra.items()},
+                              None if self.dq_cmd is None else self.dq_cmd[sl])
 
 
 def read_table(path: str | Path, column_map: dict[str, str] | None = None) -> RecordingTable:
@@ -53,8 +57,11 @@ def read_recording(path: str | Path, specs=None, command: str = "recorded", peri
     if path.suffix == ".mcap":
         table = _from_mcap(path)
         lines = [f"{path}: MCAP recording, {len(table.t)} cycles, {table.n_joints} joints"]
+        if table.dq_cmd is not None:
+            lines.append("commanded velocity offset: recorded (dq_cmd), replayed as sent")
         if command == "measured":
-            table.q_cmd = table.q.copy()
+            # the measured motion's own steps carry its velocity: a recorded offset on top would count it twice
+            table.q_cmd, table.dq_cmd = table.q.copy(), None
             lines.append("commanded position: the measured position (--command measured)")
         return table, lines
     from spacearm.offline.diagnosis.csv_reader import read_any_csv
@@ -69,12 +76,16 @@ def _from_mcap(path: Path) -> RecordingTable:
         d = [m.data for m in cycles]
         arr = lambda key: np.array([row[key] for row in d], dtype=float)
         table = RecordingTable(arr("t"), arr("q_cmd"), arr("q"), arr("dq"), arr("tau"), arr("wrench")) if d else None
+        if table is not None and all("dq_cmd" in row for row in d):     # recorded since the daemon sends it
+            table.dq_cmd = arr("dq_cmd")
         if table is not None and all("sync" in row for row in d):
             # one row per SYNC: the simulated plant did not advance in the cycles the daemon skipped
             from spacearm.offline.diagnosis.time_base import sync_time_base
             from spacearm.controller.recording.csv_export import SYNC_COUNTER_MAX
             by_sync = sync_time_base(table.t, arr("sync"), SYNC_COUNTER_MAX)
             table.t = table.t if by_sync is None else by_sync
+        if table is not None and table.dq_cmd is not None and table.dq_cmd.shape != table.q_cmd.shape:
+            raise ValueError(f"dq_cmd has shape {table.dq_cmd.shape}, q_cmd {table.q_cmd.shape}")
     except Exception as exc:   # any library error on a damaged file: one line, not its traceback
         raise RecordingFormatError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: "
                                    f"{str(exc)[:120]})") from None
@@ -90,7 +101,8 @@ def write_csv(path: str | Path, table: RecordingTable) -> None:
     n = table.n_joints
     names = (["t"] + [f"q_cmd_{i}" for i in range(1, n + 1)] + [f"q_{i}" for i in range(1, n + 1)]
              + [f"dq_{i}" for i in range(1, n + 1)] + [f"tau_{i}" for i in range(1, n + 1)] + WRENCH_COLUMNS
-             + sorted(table.extra))
+             + (dq_cmd_columns(n) if table.dq_cmd is not None else []) + sorted(table.extra))
     data = np.column_stack([table.t, table.q_cmd, table.q, table.dq, table.tau, table.wrench,
+                            *([] if table.dq_cmd is None else [table.dq_cmd]),
                             *[table.extra[k] for k in sorted(table.extra)]])
     np.savetxt(path, data, delimiter=",", header=",".join(names), comments="", fmt="%.10g")

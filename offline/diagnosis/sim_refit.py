@@ -33,7 +33,7 @@ SIZE_COLUMNS = ("coulomb_friction", "viscous_friction", "load_cos", "load_sin")
 
 
 def refine_size(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
-                tau_real: np.ndarray, rows: np.ndarray, apply) -> ChannelFit:
+                tau_real: np.ndarray, rows: np.ndarray, apply, dq_cmd: np.ndarray | None = None) -> ChannelFit:
     """The fit with its size columns scaled by the factor whose replay matches the recorded
     torque best on `rows` (boolean, within the leading training part). `apply(nominal, fits)`
     builds the plant with a fit switched on."""
@@ -51,7 +51,8 @@ def refine_size(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
         fit.coef = np.where(size, base * math.exp(log_scale), base)
         try:
             with np.errstate(all="raise"):
-                sim = simulate(apply(nominal, [fit]), q_cmd[:last], dt, q0=q0, joints=[j])
+                sim = simulate(apply(nominal, [fit]), q_cmd[:last], dt, q0=q0, joints=[j],
+                               dq_cmd=None if dq_cmd is None else dq_cmd[:last])
             r = (tau_real[:last] - sim.tau[:, 0])[rows[:last]]
         except (OverflowError, FloatingPointError, ValueError):
             return math.inf
@@ -72,7 +73,7 @@ STICTION_DECAY_GRID = (-0.15, 0.0, 0.15)    # log decay-speed offsets (the pair 
 
 
 def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
-                    tau_real: np.ndarray, train: np.ndarray, apply) -> ChannelFit:
+                    tau_real: np.ndarray, train: np.ndarray, apply, dq_cmd: np.ndarray | None = None) -> ChannelFit:
     """A Stribeck fit with its level and decay speed found together by replays of the joint
     on the training rows (Nelder-Mead on the logs, from the linear estimate). Its standard
     error: a delete-a-block jackknife over a small grid of replays around the best pair,
@@ -93,7 +94,8 @@ def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt
             trial = _with(fit, math.exp(log_level), math.exp(log_decay))
             try:
                 with np.errstate(all="raise"):
-                    sim = simulate(apply(nominal, [trial]), q_cmd[:last], dt, q0=q0, joints=[j])
+                    sim = simulate(apply(nominal, [trial]), q_cmd[:last], dt, q0=q0, joints=[j],
+                                   dq_cmd=None if dq_cmd is None else dq_cmd[:last])
                 cache[key] = sim.tau[:, 0] if np.all(np.isfinite(sim.tau)) else None
             except (OverflowError, FloatingPointError, ValueError):
                 cache[key] = None
