@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import pytest
 
 from spacearm.offline.diagnosis.record import record_can, record_direct
 from spacearm.offline.diagnosis.recording_io import read_table

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spacearm.base.spatial import trans, xyz_rpy_to_transform
+from spacearm.base.spatial import xyz_rpy_to_transform
 from tests.vision.approach_stack import ApproachStack
 from tests.vision.views import pose_error
 

@@ -6,7 +6,6 @@ The pipeline keeps the better of SQPnP and AP3P because either alone misses now 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from spacearm.controller.vision.pnp import solve_pnp
 from tests.vision.views import pose_error, view
