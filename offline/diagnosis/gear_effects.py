@@ -65,19 +65,18 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
                 sims[log_value] = None
         return sims[log_value]
 
-    def predicted(log_value: float) -> np.ndarray | None:
-        sim = simulated(log_value)
-        if sim is None:
-            return None
-        out = np.sqrt(envelope(sim.tau[:, 0] - base_tau) ** 2 + noise ** 2)
-        return out if np.all(np.isfinite(out)) else None
+    def predicted_on(channel: str, base: np.ndarray, floor: float):
+        def predicted(log_value: float) -> np.ndarray | None:
+            sim = simulated(log_value)
+            if sim is None:
+                return None
+            out = np.sqrt(envelope(getattr(sim, channel)[:, 0] - base) ** 2 + floor ** 2)
+            return out if np.all(np.isfinite(out)) else None
+        return predicted
 
-    def predicted_q(log_value: float) -> np.ndarray | None:
-        sim = simulated(log_value)
-        if sim is None:
-            return None
-        out = np.sqrt(envelope(sim.q[:, 0] - base_q) ** 2 + q_noise ** 2)
-        return out if np.all(np.isfinite(out)) else None
+    predicted = predicted_on("tau", base_tau, noise)
+    if by_position:
+        predicted_q = predicted_on("q", base_q, q_noise)
 
     sizing, env_sized = (predicted_q, env_q_real) if by_position else (predicted, env_real)
 
