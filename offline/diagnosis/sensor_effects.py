@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacearm.offline.diagnosis.joint_units import units_of
+
 MIN_CHANGES = 30             # nonzero row-to-row changes needed to read a step
 ON_GRID = 0.95               # share of changes that must be whole multiples of the step
 GRID_TOLERANCE = 0.03        # of a step
@@ -56,15 +58,16 @@ def velocity_lag(q: np.ndarray, dq: np.ndarray, dt: float) -> tuple[int, float] 
 
 def sensor_findings(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, dt: float,
                     nominal: tuple[np.ndarray, np.ndarray] | None, quanta: tuple[list[float], list[float]] | None,
-                    active: list[int]) -> list[SensorFinding]:
+                    active: list[int], kinds: list[str] | None = None) -> list[SensorFinding]:
     """Findings for the joints in `active` (0-based). `nominal`: (q, dq) of the nominal
     replay, whose own velocity shift is the reference; `quanta`: the nominal sensors' steps
     (position, torque) per joint. Without them (another arm), only a velocity shift of 2
     cycles or more and torque steps of 1 mN m or more are named."""
     out: list[SensorFinding] = []
     for j in active:
-        for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, "rad"),
-                                              ("torque_quantisation", "tau", tau, 1, "N m")):
+        u = units_of(kinds[j] if kinds else "revolute")     # prismatic: m, N
+        for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, u.position),
+                                              ("torque_quantisation", "tau", tau, 1, u.effort)):
             step = quantum(real[:, j])
             if step is None:
                 continue
