@@ -121,3 +121,35 @@ def test_rail_friction_is_named_in_its_own_units(rail_arm: Path, effect: str, ke
     assert s["joints"][1]["kind"] == "revolute" and s["joints"][1]["effort_unit"] == "N m"
     units = {c["name"]: c["unit"] for c in s["channels"]}
     assert units["q_1"] == "m" and units["tau_1"] == "N" and units["tau_2"] == "N m"
+
+
+def test_console_diagnose_takes_the_rail_from_the_arm_file(rail_arm: Path, tmp_path: Path) -> None:
+    """record-sim and diagnose with --arm: the plant files state no kind, the arm file does;
+    the fitted plant file says prismatic and loads again."""
+    import json
+
+    import tomli_w
+    from typer.testing import CliRunner
+
+    from spacearm.console.main import app
+    from spacearm.firmware_sim.plant import load_plant_config
+    from spacearm.offline.diagnosis.trajectory import save_trajectory
+
+    for name, rail, noise in (("truth", {"viscous_friction": 400.0}, 0.5), ("nominal", {}, 0.0)):
+        (tmp_path / f"{name}.toml").write_text(tomli_w.dumps(_plant(rail, noise).model_dump(exclude_defaults=True)))
+    traj = _trajectory()
+    save_trajectory(tmp_path / "traj.csv", traj.t, traj.q)
+    runner = CliRunner()
+    res = runner.invoke(app, ["record-sim", "--plant", str(tmp_path / "truth.toml"), "--arm", str(rail_arm),
+                              "--trajectory", str(tmp_path / "traj.csv"), "--out", str(tmp_path / "rec.csv"),
+                              "--direct"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["diagnose", str(tmp_path / "rec.csv"), "--arm", str(rail_arm), "--nominal",
+                              str(tmp_path / "nominal.toml"), "--report", str(tmp_path / "diag"), "--json"])
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.output)
+    assert s["findings"][0]["joint"] == 1 and s["findings"][0]["unit"] == {"viscous_friction": "N s/m"}
+    assert s["joints"][0]["kind"] == "prismatic"
+    fitted = load_plant_config(tmp_path / "diag" / "plant_fitted.toml")
+    assert fitted.joints[0].kind == "prismatic"
+    assert fitted.joints[0].viscous_friction == pytest.approx(400.0, rel=0.15)
