@@ -153,3 +153,17 @@ def test_console_diagnose_takes_the_rail_from_the_arm_file(rail_arm: Path, tmp_p
     fitted = load_plant_config(tmp_path / "diag" / "plant_fitted.toml")
     assert fitted.joints[0].kind == "prismatic"
     assert fitted.joints[0].viscous_friction == pytest.approx(400.0, rel=0.15)
+
+
+def test_a_coarse_rail_encoder_is_judged_against_the_rails_own_step(rail_arm: Path) -> None:
+    """Steps of 0.1 mm on the rail are 100x its 1 um encoder (a revolute joint's 25 arcsec,
+    1.2e-4 rad, would have hidden them): named, in metres."""
+    truth = on_arm_drives(_plant({}, noise=0.5), rail_arm)
+    nominal = on_arm_drives(_plant({}, noise=0.0), rail_arm)
+    table = record_direct(truth, _trajectory(), None, hold_cycles=0)
+    table.q[:, 0] = np.round(table.q[:, 0] / 1e-4) * 1e-4
+    s = summary(diagnose(table, nominal))
+    found = [f for f in s["sensor_findings"] if f["joint"] == 1]
+    assert [f["effect"] for f in found] == ["position_quantisation"], s["verdict"]
+    assert found[0]["parameters"]["quantum"] == pytest.approx(1e-4, rel=0.01)
+    assert found[0]["unit"] == "m" and found[0]["text"].endswith("(the nominal sensor: 1e-06 m)")
