@@ -4,7 +4,6 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import tomli_w
 
 from spacearm.offline.diagnosis.analysis import Diagnosis

@@ -14,7 +14,7 @@ import pytest
 from spacearm.base.config.errors import ConfigError
 from spacearm.firmware_sim.plant import PlantConfig
 from spacearm.offline.diagnosis.analysis import diagnose
-from spacearm.offline.diagnosis.direct_sim import increments_per_unit, joint_settings, on_arm_drives, simulate
+from spacearm.offline.diagnosis.direct_sim import increments_per_unit, on_arm_drives, simulate
 from spacearm.offline.diagnosis.record import record_direct
 from spacearm.offline.diagnosis.report import summary
 from spacearm.offline.diagnosis.trajectory import Trajectory
@@ -113,7 +113,7 @@ def test_rail_friction_is_named_in_its_own_units(rail_arm: Path, effect: str, ke
     assert abs(fitted - size) <= 0.15 * size, s["verdict"]
     assert abs(fitted - size) <= 1.96 * stderr, f"{fitted} +- {1.96 * stderr} misses {size}"
     # the verdict states the rail's unit, never a revolute joint's
-    said = re.search(rf"joint 1: \w+ friction about [-\d.e+]+ \+- [-\d.e+]+ (N s/m|N m s/rad|N m|N)\b",
+    said = re.search(r"joint 1: \w+ friction about [-\d.e+]+ \+- [-\d.e+]+ (N s/m|N m s/rad|N m|N)\b",
                      s["verdict"])
     assert said is not None and said.group(1) == unit, s["verdict"]
     assert top["kind"] == "prismatic" and top["unit"][key] == unit
