@@ -109,7 +109,7 @@ def with_kinds(plant: PlantConfig, kinds: list[str], source: str) -> PlantConfig
             continue
         if "kind" in joints[i].model_fields_set:
             raise ConfigError(f"joint {i + 1}: the plant file says kind = {joints[i].kind}, the arm file {source} "
-                              f"says {kind}")
+                              f"says {kind} (give the recorded arm's own file, --arm)")
         joints[i] = joints[i].model_copy(update={"kind": kind})
         changed = True
     return plant.model_copy(update={"joints": joints}) if changed else plant
