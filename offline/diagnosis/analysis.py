@@ -33,6 +33,7 @@ from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_can
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
 from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, uncertain
+from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.sim_refit import refine_size
@@ -427,17 +428,18 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             for alt in alternatives.get(fit.index, []):
                 p, e = plant_parameters(alt)
                 alts.append(describe(alt, p, e, reversals, kind).split(": ", 1)[1] +
-                            _why_alike(quiet.dq[:, fit.index]))
+                            _why_alike(quiet.dq[:, fit.index], kind))
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
 
 
-def _why_alike(dq: np.ndarray) -> str:
+def _why_alike(dq: np.ndarray, kind: str = "revolute") -> str:
     from spacearm.offline.diagnosis.honesty import one_way, single_speed
     speed = single_speed(dq)
     if speed is not None:
-        return f" (the joint moved at one speed, about {speed:.3g} rad/s: these laws differ only between speeds)"
+        return (f" (the joint moved at one speed, about {speed:.3g} {units_of(kind).velocity}: these laws differ "
+                "only between speeds)")
     if one_way(dq):
         return " (the joint moved one way only: the laws differ at reversals and starts from rest)"
     return " (the recording gives no strong evidence between them: BIC within 6)"
