@@ -7,7 +7,12 @@ force/torque sensor reads ``Plant.wrench``; the end-effector mechanism is ``Plan
 
 ``Plant.step(dt)`` is called exactly once per SYNC by the simulator: nothing here runs on
 a wall-clock timer. Every physics effect is a parameter of the plant TOML, off (zero) by
-default, except the resolver quantisation (25 arcsec), which is the sensor's resolution.
+default, except the position sensor's quantisation (25 arcsec resolver; 1 um linear encoder),
+which is the sensor's resolution.
+
+A joint is revolute (the default) or prismatic (``kind``): a prismatic joint is a linear
+axis driven through a screw or rack, and every joint parameter is then in the axis' own SI
+units (m, N, N s/m, kg, the gear ratio in motor rad per m of travel).
 """
 from __future__ import annotations
 
@@ -16,10 +21,10 @@ import random
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Protocol
+from typing import Callable, Literal, Protocol
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.kinematics.forward import fk
@@ -34,37 +39,86 @@ from spacearm.firmware_sim.rigid_body_config import RigidBodyParams
 ARCSEC = math.pi / (180.0 * 3600.0)
 
 
+# A linear axis' position sensor: 1 um is the step of a common magnetic linear encoder (e.g.
+# RLS LM10 at 1 um resolution; optical scales reach 50 nm and below).
+LINEAR_ENCODER_QUANTUM = 1.0e-6
+
+
 class JointParams(StrictModel):
+    """One joint's drive train and load. Units: revolute / prismatic (``kind``)."""
+    kind: Literal["revolute", "prismatic"] = Field(
+        default="revolute", description="prismatic: a linear axis (screw or rack); q in m, loads in N")
     motor_inertia: float = Field(default=3.0e-4, gt=0.0, le=1.0, description="kg m^2, motor side")
-    link_inertia: float = Field(default=5.0, ge=0.0, le=1.0e6, description="kg m^2, joint side (constant)")
-    gear_ratio: float = Field(default=100.0, ge=1.0, le=10000.0, description="harmonic drive reduction")
+    link_inertia: float = Field(default=5.0, ge=0.0, le=1.0e6, description="kg m^2 (kg if prismatic), joint side "
+                                                                            "(constant)")
+    gear_ratio: float = Field(default=100.0, ge=1.0, le=10000.0,
+                              description="harmonic drive reduction (motor rad per m of travel if prismatic: "
+                                          "a 10 mm lead screw is 2 pi / 0.01 = 628)")
     gear_efficiency: float = Field(default=1.0, gt=0.0, le=1.0, description="off = 1.0")
-    viscous_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m s/rad at the joint; off = 0")
-    coulomb_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m at the joint; off = 0")
-    resolver_arcsec: float = Field(default=25.0, ge=0.0, le=3600.0, description="output resolver quantum; 0 = ideal")
+    viscous_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m s/rad (N s/m) at the joint; "
+                                                                                "off = 0")
+    coulomb_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m (N) at the joint; off = 0")
+    resolver_arcsec: float = Field(default=25.0, ge=0.0, le=3600.0,
+                                   description="output resolver quantum of a revolute joint; 0 = ideal")
+    encoder_quantum: float = Field(default=LINEAR_ENCODER_QUANTUM, ge=0.0, le=1.0e-2,
+                                   description="m, linear encoder step of a prismatic joint (instead of "
+                                               "resolver_arcsec); 0 = ideal")
     servo_bandwidth_hz: float = Field(default=15.0, gt=0.0, le=200.0)
     servo_damping: float = Field(default=1.0, gt=0.0, le=5.0)
-    initial_position: float = Field(default=0.0, ge=-20.0, le=20.0, description="rad")
+    initial_position: float = Field(default=0.0, ge=-20.0, le=20.0, description="rad (m)")
     temperature: float = Field(default=25.0, ge=-100.0, le=200.0, description="degC drive temperature")
     # --- hidden physical effects (firmware_sim/effects), each off by default ---
-    stribeck_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m static rise above Coulomb; off = 0")
-    stribeck_velocity: float = Field(default=0.01, gt=0.0, le=10.0, description="rad/s, Stribeck decay speed")
-    backlash: float = Field(default=0.0, ge=0.0, le=0.1, description="rad total dead band in the gear; off = 0")
+    stribeck_friction: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m (N) static rise above "
+                                                                                "Coulomb; off = 0")
+    stribeck_velocity: float = Field(default=0.01, gt=0.0, le=10.0, description="rad/s (m/s), Stribeck decay speed")
+    backlash: float = Field(default=0.0, ge=0.0, le=0.1, description="rad (m) total dead band in the gear; off = 0")
     joint_stiffness: float = Field(default=0.0, ge=0.0, le=1.0e6,
-                                   description="N m/rad motor-to-link elasticity; 0 = rigid (above 1e6 the "
+                                   description="N m/rad (N/m) motor-to-link elasticity; 0 = rigid (above 1e6 the "
                                                "2 ms physics sub-step is no longer stable)")
-    joint_damping: float = Field(default=0.0, ge=0.0, le=1.0e5, description="N m s/rad across the elastic gear")
-    te_amplitude: float = Field(default=0.0, ge=0.0, le=0.01, description="rad harmonic-drive transmission error")
+    joint_damping: float = Field(default=0.0, ge=0.0, le=1.0e5, description="N m s/rad (N s/m) across the elastic "
+                                                                            "gear")
+    te_amplitude: float = Field(default=0.0, ge=0.0, le=0.01, description="rad (m) transmission error")
     te_harmonic: float = Field(default=2.0, gt=0.0, le=10.0, description="cycles per wave-generator turn")
     te_phase: float = Field(default=0.0, ge=-7.0, le=7.0, description="rad")
-    encoder_bias: float = Field(default=0.0, ge=-0.1, le=0.1, description="rad added to the resolver reading")
+    encoder_bias: float = Field(default=0.0, ge=-0.1, le=0.1, description="rad (m) added to the position reading")
     feedback_latency_cycles: int = Field(default=0, ge=0, le=20, description="SYNC cycles the reported values lag")
     torque_limit: float = Field(default=0.0, ge=0.0, le=1.0e4, description="N m motor side saturation; 0 = none")
     gravity_torque: float = Field(default=0.0, ge=0.0, le=1.0e5,
-                                  description="N m load torque with the link horizontal (tau = G cos(q + angle)); off = 0")
-    gravity_angle: float = Field(default=0.0, ge=-7.0, le=7.0, description="rad, where the load torque peaks")
-    payload_lever: float = Field(default=0.0, ge=-10.0, le=10.0, description="m from this joint axis to the payload")
-    torque_noise: float = Field(default=0.0, ge=0.0, le=1.0e3, description="N m rms (joint side) on the reported torque")
+                                  description="revolute: N m load torque with the link horizontal (tau = G cos(q + "
+                                              "angle)); prismatic: N, the weight on the axis' slide (force along "
+                                              "the axis G cos(angle), whatever the position); off = 0")
+    gravity_angle: float = Field(default=0.0, ge=-7.0, le=7.0,
+                                 description="rad; revolute: where the load torque peaks; prismatic: the axis' "
+                                             "tilt from the vertical (0: vertical with +q up, the whole weight "
+                                             "pulls toward -q; pi/2: horizontal, no load)")
+    payload_lever: float = Field(default=0.0, ge=-10.0, le=10.0, description="m from this joint axis to the payload "
+                                                                             "(revolute only)")
+    torque_noise: float = Field(default=0.0, ge=0.0, le=1.0e3, description="N m (N) rms, joint side, on the "
+                                                                           "reported torque")
+
+    @model_validator(mode="after")
+    def _units_of_kind(self) -> "JointParams":
+        defaults = type(self).model_fields
+        if self.kind == "prismatic":
+            if self.resolver_arcsec != defaults["resolver_arcsec"].default:
+                raise ValueError("resolver_arcsec is a revolute joint's sensor: give a prismatic joint's position "
+                                 "step as encoder_quantum (m)")
+            if self.payload_lever != 0.0:
+                raise ValueError("payload_lever is a revolute joint's lever arm: a prismatic joint carries the "
+                                 "payload's weight along its axis without one")
+        elif self.encoder_quantum != defaults["encoder_quantum"].default:
+            raise ValueError('encoder_quantum is a linear encoder step (m): set kind = "prismatic" or give a '
+                             "revolute joint's step as resolver_arcsec")
+        return self
+
+    @property
+    def prismatic(self) -> bool:
+        return self.kind == "prismatic"
+
+    @property
+    def position_quantum(self) -> float:
+        """The position sensor's step in the joint's own unit (rad, or m if prismatic)."""
+        return self.encoder_quantum if self.prismatic else self.resolver_arcsec * ARCSEC
 
 
 class EndEffectorParams(StrictModel):
@@ -137,7 +191,7 @@ class JointModel:
     external_torque: float = 0.0       # N m at the joint from the environment (contact, later)
     controller: Controller | None = None
     max_motor_torque: float = math.inf  # drive torque limit, N m motor side
-    load_amplitude: float = 0.0        # N m gravity/payload load torque amplitude (set by Plant.create)
+    load_amplitude: float = 0.0        # N m (N) gravity/payload load amplitude (set by Plant.create)
     theta: float = math.nan            # motor angle in joint units (gear output before play/error)
     thetad: float = 0.0
     feedback: DelayLine | None = None  # reported (q, qd) lag the physics by whole SYNC cycles
@@ -164,7 +218,7 @@ class JointModel:
     @property
     def q_measured(self) -> float:
         q = self.q + self.params.encoder_bias
-        quantum = self.params.resolver_arcsec * ARCSEC
+        quantum = self.params.position_quantum
         if quantum <= 0.0:
             return q
         return round(q / quantum) * quantum
@@ -199,6 +253,9 @@ class JointModel:
     def _load(self) -> float:
         if self.load_amplitude == 0.0:
             return 0.0
+        if self.params.prismatic:
+            # a weight on a straight slide pulls along it the same at every position
+            return self.load_amplitude * math.cos(self.params.gravity_angle)
         return self.load_amplitude * math.cos(self.q + self.params.gravity_angle)
 
     def substep(self, s: float, h: float) -> None:
@@ -399,9 +456,12 @@ def _rigid_body_dynamics(config: PlantConfig, n_joints: int):
 
 
 def _load_amplitude(config: PlantConfig, p: JointParams) -> float:
-    """Gravity load torque amplitude on one joint: its own load plus the payload error."""
+    """Gravity load amplitude on one joint: its own load plus the payload error (on a
+    prismatic joint the payload rides on the slide: its whole weight, no lever)."""
     if not config.gravity:
         return 0.0
     payload = config.payload
+    if p.prismatic:
+        return p.gravity_torque + payload.mass_error * GRAVITY
     lever = p.payload_lever + (payload.com_error if p.payload_lever else 0.0)
     return p.gravity_torque + payload.mass_error * GRAVITY * lever

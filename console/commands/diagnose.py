@@ -229,7 +229,9 @@ def _diagnose_arm(table, urdf: Path, heldout_from: float | None, report: Path, s
         print(f"  not reported: {w}")
     print(f"  held-out from t = {result.heldout_start:.3g} s; torque RMS per joint, rigid-body model -> with findings:")
     for j in result.joints:
-        print(f"  tau_{j.joint + 1}: {j.rms_nominal:.3g} -> {j.rms_fitted:.3g} N m" + ("" if j.moved else " (did not move)"))
+        unit = "N" if j.kind == "prismatic" else "N m"
+        print(f"  tau_{j.joint + 1}: {j.rms_nominal:.3g} -> {j.rms_fitted:.3g} {unit}" + ("" if j.moved else
+                                                                                       " (did not move)"))
     print(f"report: {report / 'summary.json'}; {result.timings['total_s']:.1f} s")
     for line in data.get("experiment", {}).get("lines", []):
         print(line)

@@ -28,16 +28,17 @@ import numpy as np
 
 from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
                                             by_name)
-from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, simulate
+from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, joint_params, rated_joint_torque, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
 from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, uncertain
+from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
-from spacearm.firmware_sim.plant import ARCSEC, PlantConfig
+from spacearm.firmware_sim.plant import PlantConfig
 
 TRAIN_FRACTION = 0.6
 
@@ -160,8 +161,7 @@ def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
     is only known to a quantum, so this replay is as valid as the other, and how much the
     two differ is what the recording may differ from either without any missing physics."""
     n = table.q.shape[1]
-    quantum = np.array([(plant.joints[j] if j < len(plant.joints) else plant.joint).resolver_arcsec
-                        for j in range(n)]) * ARCSEC
+    quantum = np.array([joint_params(plant, j).position_quantum for j in range(n)])
     return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, dq_cmd=table.dq_cmd, t0=0.0)
 
 
@@ -312,9 +312,10 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     active = [j for j in range(n) if moved(table.q[:, j], quiet.dq[:, j])]
     alternatives: dict[int, list[ChannelFit]] = {}
     settings = drive_settings(nominal, n)
-    quanta = ([(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
-               for j in range(n)], [settings[j].rated_joint_torque / 1000.0 for j in range(n)])   # 6077h: per mille
-    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active)
+    quanta = ([joint_params(nominal, j).position_quantum for j in range(n)],   # torque: 6077h is per mille
+              [rated_joint_torque(settings[j], joint_params(nominal, j)) / 1000.0 for j in range(n)])
+    kinds = [joint_params(nominal, j).kind for j in range(n)]
+    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active, kinds)
     coarse_torque = {f.joint for f in sensors if f.effect == "torque_quantisation"}
     for j in active:
         report(f"fitting joint {j + 1}", 0.1 + 0.6 * j / n)
@@ -366,7 +367,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     report("held-out comparison", 0.85)
     while True:
         channels, before, after = _channel_results(table, nominal, sim, refit, train, tau_noise, null)
-        findings, rejected = _findings(fits, channels, before, quiet, t, alternatives)
+        findings, rejected = _findings(fits, channels, before, quiet, t, alternatives, kinds)
         if not rejected:
             break
         # an effect the held-out re-simulation does not confirm, or whose size is not known,
@@ -393,8 +394,7 @@ def _channel_results(table: RecordingTable, nominal: PlantConfig, sim: SimTraces
     n = table.q.shape[1]
     held = ~train
     channels, before, after = [], {}, {}
-    quantum = [(nominal.joints[j] if j < len(nominal.joints) else nominal.joint).resolver_arcsec * ARCSEC
-               for j in range(n)]
+    quantum = [joint_params(nominal, j).position_quantum for j in range(n)]
     null_sim = null_sim if null_sim is not None else null_replay(table, nominal)
     null = dict((name, real - nom) for name, real, nom, _ in _channels(null_sim, sim, sim))
     for name, real, nom, fitted in _channels(table, sim, refit):
@@ -417,7 +417,7 @@ def _channel_results(table: RecordingTable, nominal: PlantConfig, sim: SimTraces
 
 
 def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dict[str, np.ndarray],
-              quiet: SimTraces, t: np.ndarray, alternatives: dict[int, list[ChannelFit]]):
+              quiet: SimTraces, t: np.ndarray, alternatives: dict[int, list[ChannelFit]], kinds: list[str]):
     """Findings in words, and the fits that may not be reported (with the reason)."""
     findings, rejected = [], []
     for fit in fits:
@@ -425,7 +425,8 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         ch = next(c for c in channels if c.name == name)
         params, errs = plant_parameters(fit)
         reversals = _reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
-        text = describe(fit, params, errs, reversals)
+        kind = kinds[fit.index] if fit.channel != "wrench" else "revolute"
+        text = describe(fit, params, errs, reversals, kind)
         if not fit.by_envelope and uncertain(params, errs):
             rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
             continue
@@ -443,26 +444,28 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         if fit.channel == "tau":
             for alt in alternatives.get(fit.index, []):
                 p, e = plant_parameters(alt)
-                alts.append(describe(alt, p, e, reversals).split(": ", 1)[1] + _why_alike(quiet.dq[:, fit.index]))
+                alts.append(describe(alt, p, e, reversals, kind).split(": ", 1)[1] +
+                            _why_alike(quiet.dq[:, fit.index], kind))
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
 
 
-def _why_alike(dq: np.ndarray) -> str:
+def _why_alike(dq: np.ndarray, kind: str = "revolute") -> str:
     from spacearm.offline.diagnosis.honesty import one_way, single_speed
     speed = single_speed(dq)
     if speed is not None:
-        return f" (the joint moved at one speed, about {speed:.3g} rad/s: these laws differ only between speeds)"
+        return (f" (the joint moved at one speed, about {speed:.3g} {units_of(kind).velocity}: these laws differ "
+                "only between speeds)")
     if one_way(dq):
         return " (the joint moved one way only: the laws differ at reversals and starts from rest)"
     return " (the recording gives no strong evidence between them: BIC within 6)"
 
 
 def ideal_sensors(config: PlantConfig) -> PlantConfig:
-    joints = [j.model_copy(update={"resolver_arcsec": 0.0, "torque_noise": 0.0}) for j in config.joints]
-    return config.model_copy(update={"joints": joints, "joint": config.joint.model_copy(
-        update={"resolver_arcsec": 0.0, "torque_noise": 0.0})})
+    ideal = {"resolver_arcsec": 0.0, "encoder_quantum": 0.0, "torque_noise": 0.0}
+    joints = [j.model_copy(update=ideal) for j in config.joints]
+    return config.model_copy(update={"joints": joints, "joint": config.joint.model_copy(update=ideal)})
 
 
 def _stable_refit(table: RecordingTable, nominal: PlantConfig, fits: list[ChannelFit],

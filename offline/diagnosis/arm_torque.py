@@ -25,6 +25,7 @@ from scipy.signal import butter, filtfilt
 from spacearm.offline.diagnosis.candidates import STRIBECK_VELOCITIES, VELOCITY_DEADBAND
 from spacearm.offline.diagnosis.fitting import SIGNIFICANCE, ChannelFit, fit_features
 from spacearm.offline.diagnosis.honesty import MIN_CONFIRMED_REDUCTION, moved, single_speed, uncertain
+from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.rigid_body import ArmModel, base_columns, inverse_dynamics, regressor
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
@@ -46,6 +47,7 @@ class JointTorque:
     rms_nominal: float               # held-out, rigid-body model only
     rms_fitted: float                # held-out, with the reported findings
     noise: float
+    kind: str = "revolute"           # prismatic: the channel is a force, N
 
 
 @dataclass
@@ -139,25 +141,34 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x ** 2))) if len(x) else 0.0
 
 
-def _describe_friction(fit: ChannelFit, v: np.ndarray) -> tuple[str, dict, dict]:
+def joint_kinds(arm: ArmModel) -> list[str]:
+    """Each joint's kind from the URDF model (Pinocchio's prismatic joints: PX, PY, PZ,
+    PrismaticUnaligned)."""
+    return ["prismatic" if arm.model.joints[i].shortname().startswith("JointModelP") else "revolute"
+            for i in range(1, arm.model.njoints)]
+
+
+def _describe_friction(fit: ChannelFit, v: np.ndarray, kind: str = "revolute") -> tuple[str, dict, dict]:
+    u = units_of(kind)
     p = {c: float(x) for c, x in zip(fit.columns, fit.coef)}
     e = {c: float(x) for c, x in zip(fit.columns, fit.stderr)}
     words = []
     for effect, col, shape in zip(fit.effects, fit.columns, fit.shape):
         pm = f" +- {1.96 * e[col]:.2g}"
         if effect == "coulomb":
-            words.append(f"Coulomb friction {p[col]:.3g}{pm} N m")
+            words.append(f"Coulomb friction {p[col]:.3g}{pm} {u.effort}")
         elif effect == "viscous":
-            words.append(f"viscous friction {p[col]:.3g}{pm} N m s/rad")
+            words.append(f"viscous friction {p[col]:.3g}{pm} {u.damping}")
         elif effect == "offset":
-            words.append(f"torque offset {p[col]:.3g}{pm} N m")
+            words.append(f"{'force' if kind == 'prismatic' else 'torque'} offset {p[col]:.3g}{pm} {u.effort}")
         else:
             p["stribeck_velocity"] = float(shape)
-            words.append(f"stiction (Stribeck) {p[col]:.3g}{pm} N m fading above {shape:.3g} rad/s")
+            words.append(f"stiction (Stribeck) {p[col]:.3g}{pm} {u.effort} fading above {shape:.3g} {u.velocity}")
     text = f"joint {fit.index + 1}: " + " and ".join(words) + " (95 % intervals)"
     speed = single_speed(v)
     if speed is not None and {"coulomb", "viscous"} & set(fit.effects):
-        text += f"; the joint moved at one speed (about {speed:.3g} rad/s): Coulomb and viscous friction look alike"
+        text += (f"; the joint moved at one speed (about {speed:.3g} {u.velocity}): Coulomb and viscous friction "
+                 "look alike")
     return text, p, e
 
 
@@ -215,6 +226,7 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     tau_nom = inverse_dynamics(arm, table.q, v, a)
     timings["inverse_dynamics_s"] = time.perf_counter() - started
     r = table.tau - tau_nom
+    kinds = joint_kinds(arm)
     active = [j for j in range(n) if moved(table.q[:, j], v[:, j])]
     noise = [float(np.std(np.diff(r[:, j])) / math.sqrt(2)) for j in range(n)]
 
@@ -245,7 +257,7 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
         after = _rms((r - model - rb)[~train, j])
         fit = frictions.get(j)
         if fit is not None:
-            text, p, e = _describe_friction(fit, v[:, j])
+            text, p, e = _describe_friction(fit, v[:, j], kinds[j])
             before_j = _rms((r - rb)[~train, j])
             solo = _rms((r - rb)[~train, j] - fit.prediction[~train])
             if uncertain(p, e):
@@ -256,13 +268,13 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
                 after = before_j
             else:
                 findings.append(ArmFinding(fit.effects, j, p, e, text, 1 - solo / max(before_j, 1e-12)))
-        joints.append(JointTorque(j, j in active, before, after, noise[j]))
+        joints.append(JointTorque(j, j in active, before, after, noise[j], kinds[j]))
     if rb_text is not None:
         text, p, gain, effects = rb_text
         findings.append(ArmFinding(effects, None, p, {}, text, gain))
     findings.sort(key=lambda f: -f.heldout_reduction)
     # no nominal sensor to compare with: the recording's own steps and velocity shift
-    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active)
+    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active, kinds)
     timings["total_s"] = time.perf_counter() - started
     return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors)
 
@@ -276,7 +288,8 @@ def arm_summary(d: ArmDiagnosis) -> dict:
         "findings": [{"rank": i + 1, "effects": list(f.effects), "joint": None if f.joint is None else f.joint + 1,
                       "parameters": f.params, "stderr": f.stderr, "text": f.text,
                       "heldout_rms_reduction": f.heldout_reduction} for i, f in enumerate(d.findings)],
-        "joints": [{"joint": j.joint + 1, "moved": j.moved, "heldout_rms_nominal": j.rms_nominal,
+        "joints": [{"joint": j.joint + 1, "kind": j.kind, "unit": units_of(j.kind).effort, "moved": j.moved,
+                    "heldout_rms_nominal": j.rms_nominal,
                     "heldout_rms_fitted": j.rms_fitted, "noise": j.noise} for j in d.joints],
         "timings_s": d.timings,
     }

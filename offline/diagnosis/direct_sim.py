@@ -13,6 +13,11 @@ a plant made with ``on_arm_drives``, the arm file's ``[joints.drive]`` and joint
 to them exactly as the daemon applies them at bring-up (``with_drive_limits``). Drive faults
 (following error) are not modelled here: a replay that would fault says so through
 ``SimTraces.following_error_max``, beside the arm's window.
+
+A prismatic joint (plant ``kind``, set from the arm file's joint type by ``on_arm_drives``)
+is driven in its own units: m, N. Its drive's position and torque scaling go through the
+screw (the plant's gear ratio, motor rad per m), where a real CiA 402 drive has 6091h and
+the feed constant 6092h.
 """
 from __future__ import annotations
 
@@ -26,9 +31,10 @@ from pydantic import Field
 
 from spacearm.base.config.arm import load_arm_config
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSettings, NodeConfig, load_bus_config
+from spacearm.base.config.errors import ConfigError
 from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
-from spacearm.firmware_sim.plant import JointModel, Plant, PlantConfig
+from spacearm.firmware_sim.plant import JointModel, JointParams, Plant, PlantConfig
 
 FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
 FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
@@ -46,10 +52,10 @@ class SimTraces:
     q_cmd: np.ndarray       # (N, n)
     q: np.ndarray
     dq: np.ndarray
-    tau: np.ndarray         # joint side, N m
+    tau: np.ndarray         # joint side, N m (N on a prismatic joint)
     wrench: np.ndarray      # (N, 6)
-    following_error_max: float = 0.0     # rad, largest |reference - position| over the replay
-    following_error_window: float = math.inf   # rad, the arm's smallest window (supervision), if known
+    following_error_max: float = 0.0     # rad (m), largest |reference - position| over the replay
+    following_error_window: float = math.inf   # rad (m), the arm's smallest window (supervision), if known
 
 
 def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = None) -> list[JointSettings]:
@@ -87,15 +93,57 @@ def planned_velocity(q_cmd: np.ndarray, dt: float) -> np.ndarray:
 
 def on_arm_drives(plant: PlantConfig, arm_file: str | Path, bus_config: BusConfig | str | None = None) -> ArmPlant:
     """`plant` driven by the arm's drives: the bus file's drive model (scaling, rated torque),
-    one drive per arm joint, limited by the arm file as the daemon's bring-up limits them."""
+    one drive per arm joint, limited by the arm file as the daemon's bring-up limits them.
+    The arm file's joint types set the plant joints' kind (prismatic: m, N)."""
     arm = load_arm_config(arm_file)
     n = len(arm.joints)
+    plant = with_kinds(plant, [j.type for j in arm.joints], str(arm_file))
     padded = BusConfig(nodes=[NodeConfig(name=f"joint_{i + 1}", node_id=i + 1, device="joint_drive", joint=s)
                               for i, s in enumerate(joint_settings(bus_config, n)[:n])])
     limited = with_drive_limits(padded, [j.limits.lower for j in arm.joints], [j.limits.upper for j in arm.joints],
                                 [j.drive for j in arm.joints])
-    return ArmPlant(**dict(plant), drives=[node.joint for node in limited.joints],
-                    following_error=[j.drive.following_error for j in arm.joints])
+    drives = [node.joint for node in limited.joints]
+    for i, joint in enumerate(arm.joints):
+        params = joint_params(plant, i)
+        if params.prismatic:
+            # the drive's force limit (N) reaches the motor through the screw, not the bus file's gear
+            drives[i] = drives[i].model_copy(update={"max_torque": min(
+                float(joint.drive.torque) / rated_joint_torque(drives[i], params), 3.0)})
+    return ArmPlant(**dict(plant), drives=drives, following_error=[j.drive.following_error for j in arm.joints])
+
+
+def joint_params(config: PlantConfig, j: int) -> JointParams:
+    """Joint j's parameters (0-based): its own table, or the plant's default joint."""
+    return config.joints[j] if j < len(config.joints) else config.joint
+
+
+def with_kinds(plant: PlantConfig, kinds: list[str], source: str) -> PlantConfig:
+    """The plant with each joint's kind taken from the arm; a plant file that states the
+    other kind for a joint is refused (one line)."""
+    joints = [joint_params(plant, i) for i in range(max(len(kinds), len(plant.joints)))]
+    changed = False
+    for i, kind in enumerate(kinds):
+        if joints[i].kind == kind:
+            continue
+        if "kind" in joints[i].model_fields_set:
+            raise ConfigError(f"joint {i + 1}: the plant file says kind = {joints[i].kind}, the arm file {source} "
+                              f"says {kind} (give the recorded arm's own file, --arm)")
+        joints[i] = joints[i].model_copy(update={"kind": kind})
+        changed = True
+    return plant.model_copy(update={"joints": joints}) if changed else plant
+
+
+def rated_joint_torque(settings: JointSettings, params: JointParams) -> float:
+    """N m (N if prismatic) at the joint for 1000 per mille of 6077h. A prismatic joint's
+    drive scales through its screw (the plant's gear ratio, rad per m)."""
+    return settings.rated_torque * params.gear_ratio if params.prismatic else settings.rated_joint_torque
+
+
+def increments_per_unit(settings: JointSettings, params: JointParams) -> float:
+    """Position increments per rad (per m if prismatic) at the joint."""
+    if params.prismatic:
+        return settings.encoder_increments / settings.motor_revolutions * params.gear_ratio / (2.0 * math.pi)
+    return settings.increments_per_rad
 
 
 def drive_settings(config: PlantConfig, n: int) -> list[JointSettings]:
@@ -110,9 +158,9 @@ class _CspDrive:
 
     def __init__(self, joint: JointModel, settings: JointSettings, limits: tuple[float, float], dt: float):
         self.joint = joint
-        self.k = settings.increments_per_rad
+        self.k = increments_per_unit(settings, joint.params)
         self.rated_motor = settings.rated_torque
-        self.rated_joint = settings.rated_joint_torque
+        self.rated_joint = rated_joint_torque(settings, joint.params)
         self.vmax = settings.max_velocity
         self.lo, self.hi = limits
         self.dt = dt

@@ -8,6 +8,7 @@ import numpy as np
 
 from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS
+from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import PlantConfig
 
@@ -47,45 +48,53 @@ def plant_parameters(fit: ChannelFit) -> tuple[dict[str, float], dict[str, float
     return p, e
 
 
-def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversals: int | None = None) -> str:
+def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversals: int | None = None,
+             kind: str = "revolute") -> str:
     """The finding in a test engineer's words. `reversals`: velocity sign changes of the
     joint in the recording; without any, friction laws cannot be told apart (each is a
-    constant drag at constant speed) and the text says so."""
+    constant drag at constant speed) and the text says so. `kind`: the joint's (prismatic:
+    N, N s/m, m)."""
     where = f"joint {fit.index + 1}" if fit.channel != "wrench" else f"F/T {WRENCH_COLUMNS[fit.index]}"
     unit = "N" if fit.index < 3 else "N m"
+    u = units_of(kind)
     parts = []
     # +- is the 95 % interval (1.96 standard errors; the benchmark checks how often it holds)
     pm = lambda k: f" +- {CI95 * e[k]:.2g}" if k in e and np.isfinite(e[k]) else ""
     for effect in fit.effects:
         if effect == "coulomb":
-            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} N m, " + (
+            parts.append(f"Coulomb friction about {p['coulomb_friction']:.3g}{pm('coulomb_friction')} {u.effort}, " + (
                 "a constant drag (no velocity reversal in this recording: Coulomb, Stribeck and viscous friction "
                 "look alike here)" if reversals == 0 else "visible at every velocity reversal"))
         elif effect == "viscous":
-            parts.append(f"viscous friction about {p['viscous_friction']:.3g}{pm('viscous_friction')} N m s/rad, "
+            parts.append(f"viscous friction about {p['viscous_friction']:.3g}{pm('viscous_friction')} {u.damping}, "
                          "growing with speed")
         elif effect == "stribeck":
-            parts.append(f"stiction (Stribeck) {p['stribeck_friction']:.3g}{pm('stribeck_friction')} N m above "
-                         f"running friction, fading above about {p['stribeck_velocity']:.3g} rad/s: visible when "
-                         "the joint starts from rest")
+            parts.append(f"stiction (Stribeck) {p['stribeck_friction']:.3g}{pm('stribeck_friction')} {u.effort} "
+                         f"above running friction, fading above about {p['stribeck_velocity']:.3g} {u.velocity}: "
+                         "visible when the joint starts from rest")
+        elif effect == "gravity_load" and kind == "prismatic":
+            # the plant's load on a slide: G cos(angle), the same at every position
+            force = p["gravity_torque"] * math.cos(p["gravity_angle"])
+            parts.append(f"unmodelled load force along the axis (gravity / payload mass) about {force:.3g}"
+                         f"{pm('gravity_torque')} N")
         elif effect == "gravity_load":
             parts.append(f"unmodelled load torque (gravity / payload mass) {p['gravity_torque']:.3g}"
                          f"{pm('gravity_torque')} N m, depending on position, peak at q = "
                          f"{math.degrees(-p['gravity_angle']):.0f} deg")
         elif effect == "torque_saturation":
-            parts.append(f"drive torque saturates at about {p['torque_limit_joint']:.3g} N m (joint side) in the "
-                         "fastest accelerations")
+            parts.append(f"drive {'force' if kind == 'prismatic' else 'torque'} saturates at about "
+                         f"{p['torque_limit_joint']:.3g} {u.effort} (joint side) in the fastest accelerations")
         elif effect == "latency":
             n = p["feedback_latency_cycles"]
             parts.append(f"position feedback arrives {n} cycle{'s' if n > 1 else ''} late ({20 * n} ms at 50 Hz)")
         elif effect == "backlash":
             err = e.get("backlash", float("nan"))
             unc = f" +- {1e3 * CI95 * err:.1g}" if np.isfinite(err) else ""
-            parts.append(f"backlash (play in the gear) about {1e3 * p['backlash']:.2g}{unc} mrad: the drive hunts, "
-                         "torque ripple the nominal model lacks")
+            parts.append(f"backlash (play in the gear) about {1e3 * p['backlash']:.2g}{unc} {u.small_position}: the "
+                         "drive hunts, torque ripple the nominal model lacks")
         elif effect == "elasticity":
-            parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} N m/rad: "
-                         "the drive rings, torque ripple the nominal model lacks")
+            parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} "
+                         f"{u.stiffness}: the drive rings, torque ripple the nominal model lacks")
         elif effect == "ft_bias":
             parts.append(f"constant offset {p['bias']:.3g}{pm('bias')} {unit}")
         elif effect == "ft_drift":

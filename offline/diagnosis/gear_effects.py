@@ -15,7 +15,7 @@ from scipy.optimize import minimize_scalar
 
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, block_jackknife_stderr
-from spacearm.firmware_sim.plant import ARCSEC, PlantConfig
+from spacearm.firmware_sim.plant import PlantConfig
 
 # Play below about three resolver quanta (25 arcsec each) hunts no differently from the
 # resolver chatter a stick-slip joint makes, so the search starts there.
@@ -46,14 +46,14 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     env_real = envelope(residual)
     by_position = base_q is not None and q_residual is not None
     if by_position:
-        q_noise = joints[j].resolver_arcsec * ARCSEC / math.sqrt(12.0)
+        q_noise = joints[j].position_quantum / math.sqrt(12.0)
         env_q_real = envelope(q_residual)
     sims: dict[float, object] = {}
 
     def simulated(log_value: float):
         if log_value not in sims:
             p = joints[j].model_copy(update={key: float(math.exp(log_value)), "resolver_arcsec": 0.0,
-                                            "torque_noise": 0.0})
+                                            "encoder_quantum": 0.0, "torque_noise": 0.0})
             js = list(joints)
             js[j] = p
             try:
@@ -111,7 +111,7 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     stderr = value * rel
     if key == "backlash":
         # the play is read through the resolver: no better than one step (uniform error)
-        stderr = max(stderr, joints[j].resolver_arcsec * ARCSEC / math.sqrt(12.0))
+        stderr = max(stderr, joints[j].position_quantum / math.sqrt(12.0))
     fit = ChannelFit((effect,), "tau", j, np.array([value]), np.array([stderr]), (key,), (float("nan"),),
                      sse, sse0, before, after, 0.0 if significant else 1.0, WINDOW, pred, n, 1)
     return fit

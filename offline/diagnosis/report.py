@@ -4,35 +4,70 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import tomli_w
 
 from spacearm.offline.diagnosis.analysis import Diagnosis
+from spacearm.offline.diagnosis.direct_sim import joint_params
+from spacearm.offline.diagnosis.joint_units import parameter_units, units_of
 from spacearm.firmware_sim.plant import PlantConfig
 
 
 def summary(d: Diagnosis) -> dict:
+    kinds = joint_kinds(d)
     return {
         "verdict": d.verdict,
         "significant": bool(d.findings or d.unexplained or d.sensor_findings),
         "unexplained_channels": [c.name for c in d.unexplained],
         "heldout_from_s": d.heldout_start,
         "not_reported": d.not_reported,
+        "joints": [{"joint": j + 1, "kind": kind, "position_unit": units_of(kind).position,
+                    "effort_unit": units_of(kind).effort} for j, kind in enumerate(kinds)],
         "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
+                             "kind": kinds[f.joint], "unit": _sensor_unit(f.effect, kinds[f.joint]),
                              "text": f.text} for f in d.sensor_findings],
         "findings": [{
             "rank": i + 1, "effects": list(f.fit.effects), "channel": f.fit.channel,
             "joint": f.fit.index + 1 if f.fit.channel != "wrench" else None,
             "axis": f.fit.index if f.fit.channel == "wrench" else None,
+            **_units(f, kinds),
             "parameters": f.params, "stderr": f.stderr, "text": f.text, "score": f.score,
             "p_value": f.fit.p_value, "heldout_rms_reduction_residual_model": f.fit.heldout_reduction,
             "change_point_s": f.onset, "equally_good": f.alternatives} for i, f in enumerate(d.findings)],
-        "channels": [{"name": c.name, "noise": c.noise, "heldout_rms_before": c.rms_before,
+        "channels": [{"name": c.name, "unit": _channel_unit(c.name, kinds), "noise": c.noise,
+                      "heldout_rms_before": c.rms_before,
                       "heldout_rms_after": c.rms_after, "significant": c.significant, "metric": c.metric,
                       "mismatch_before": c.excess_before, "mismatch_after": c.excess_after,
                       "unexplained_from_s": c.onset} for c in d.channels],
         "timings_s": d.timings,
     }
+
+
+def joint_kinds(d: Diagnosis) -> list[str]:
+    """Each recorded joint's kind, from the plant the diagnosis replayed."""
+    n = sum(1 for c in d.channels if c.name.startswith("q_"))
+    return [joint_params(d.updated, j).kind for j in range(n)]
+
+
+def _units(f, kinds: list[str]) -> dict:
+    """A finding's joint kind and its parameters' units (F/T axes: N or N m)."""
+    if f.fit.channel == "wrench":
+        unit = "N" if f.fit.index < 3 else "N m"
+        return {"kind": None, "unit": {"bias": unit, "drift": f"{unit}/s"}}
+    kind = kinds[f.fit.index]
+    table = parameter_units(kind)
+    return {"kind": kind, "unit": {k: table[k] for k in f.params if k in table}}
+
+
+def _sensor_unit(effect: str, kind: str) -> str:
+    u = units_of(kind)
+    return {"position_quantisation": u.position, "torque_quantisation": u.effort}.get(effect, "s")
+
+
+def _channel_unit(name: str, kinds: list[str]) -> str:
+    if name.startswith(("q_", "tau_")):
+        u = units_of(kinds[int(name.split("_")[1]) - 1])
+        return u.position if name.startswith("q_") else u.effort
+    return "N" if name.startswith("f") else "N m"
 
 
 def write_plant(path: Path, config: PlantConfig, note: str) -> None:

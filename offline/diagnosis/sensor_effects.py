@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacearm.offline.diagnosis.joint_units import units_of
+
 MIN_CHANGES = 30             # nonzero row-to-row changes needed to read a step
 ON_GRID = 0.95               # share of changes that must be whole multiples of the step
 GRID_TOLERANCE = 0.03        # of a step
@@ -33,20 +35,24 @@ class SensorFinding:
     text: str
 
 
-def quantum(x: np.ndarray) -> float | None:
-    """The step a signal moves in, if it moves only in whole multiples of one step."""
+def quantum(x: np.ndarray, resolution: float | None = None) -> float | None:
+    """The step a signal moves in, if it moves only in whole multiples of one step. With the
+    nominal sensor's `resolution`, within half of it: a fine sensor (a 1 um linear encoder)
+    on a constant-speed motion changes by nearly the same amount every row, on a 3 % grid
+    of that change, without being coarse."""
     d = np.abs(np.diff(x))
     d = d[d > 1e-12 * max(1.0, float(np.max(np.abs(x))))]
     if len(d) < MIN_CHANGES:
         return None
     step = float(np.min(d[d >= np.percentile(d, 2)]))
     k = d / step
-    on_grid = np.mean(np.abs(k - np.round(k)) < GRID_TOLERANCE)
+    tolerance = GRID_TOLERANCE if not resolution else min(GRID_TOLERANCE, 0.5 * resolution / step)
+    on_grid = np.mean(np.abs(k - np.round(k)) < tolerance)
     # A joint at constant speed moves about the same whole number of fine steps every row, so
     # its changes can look like multiples of a coarse step; the values themselves then drift
     # off that coarse grid, which a quantised signal's values never do.
     level = (x - x[0]) / step
-    values_on_grid = np.mean(np.abs(level - np.round(level)) < GRID_TOLERANCE)
+    values_on_grid = np.mean(np.abs(level - np.round(level)) < tolerance)
     return step if on_grid >= ON_GRID and values_on_grid >= ON_GRID else None
 
 
@@ -66,16 +72,17 @@ def velocity_lag(q: np.ndarray, dq: np.ndarray, dt: float) -> tuple[int, float] 
 
 def sensor_findings(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, dt: float,
                     nominal: tuple[np.ndarray, np.ndarray] | None, quanta: tuple[list[float], list[float]] | None,
-                    active: list[int]) -> list[SensorFinding]:
+                    active: list[int], kinds: list[str] | None = None) -> list[SensorFinding]:
     """Findings for the joints in `active` (0-based). `nominal`: (q, dq) of the nominal
     replay, whose own velocity shift is the reference; `quanta`: the nominal sensors' steps
     (position, torque) per joint. Without them (another arm), only a velocity shift of 2
     cycles or more and torque steps of 1 mN m or more are named."""
     out: list[SensorFinding] = []
     for j in active:
-        for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, "rad"),
-                                              ("torque_quantisation", "tau", tau, 1, "N m")):
-            step = quantum(real[:, j])
+        u = units_of(kinds[j] if kinds else "revolute")     # prismatic: m, N
+        for effect, name, real, ref, unit in (("position_quantisation", "q", q, 0, u.position),
+                                              ("torque_quantisation", "tau", tau, 1, u.effort)):
+            step = quantum(real[:, j], quanta[ref][j] if quanta is not None else None)
             if step is None:
                 continue
             nominal_step = quanta[ref][j] if quanta is not None else None
