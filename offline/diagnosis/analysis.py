@@ -36,6 +36,7 @@ from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, u
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
+from spacearm.offline.diagnosis.breakaway import at_breakaway
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import PlantConfig
@@ -330,6 +331,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                               train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits, table.dq_cmd)
             fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits,
                                   table.dq_cmd)
+            fit = at_breakaway(fit, table.tau[:, j] - quiet.tau[:, j], quiet.dq[:, j], train, table.dt, tau_noise)
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])
@@ -436,9 +438,11 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             continue
         ch.significant = True
         if fit.by_envelope:
-            # the ripple's phase is not reproducible row by row: judge the fit by its envelope
+            # a ripple's phase or a slip's timing is not reproducible row by row: judge the fit
+            # by its envelope or breakaway peaks
             ch.metric, ch.rms_before, ch.rms_after, ch.excess_after = \
-                "envelope", fit.rms_heldout_before, fit.rms_heldout_after, 0.0
+                "envelope" if fit.judged_by == "samples" else fit.judged_by, fit.rms_heldout_before, \
+                fit.rms_heldout_after, 0.0
         explained = max(fit.rms_heldout_before ** 2 - fit.rms_heldout_after ** 2, 0.0)
         alts = []
         if fit.channel == "tau":

@@ -47,6 +47,7 @@ class ChannelFit:
     prediction: np.ndarray = field(repr=False, default=None)   # over all rows
     n_train: int = 0
     n_params: int = 0
+    judged_by: str = "samples"   # or "envelope", "breakaway": how its held-out figures were made
 
     def bic_at(self, block: int) -> float:
         """BIC with a given block length. Candidates on one channel must be compared at one
@@ -69,8 +70,9 @@ class ChannelFit:
 
     @property
     def by_envelope(self) -> bool:
-        """Fitted on the residual's RMS envelope (gear effects), not sample by sample."""
-        return self.effects[0] in ("backlash", "elasticity")
+        """Judged on a statistic of the residual, not sample by sample: its RMS envelope (gear
+        effects, whose ripple has no reproducible phase) or its breakaway peaks (stick-slip)."""
+        return self.judged_by != "samples" or self.effects[0] in ("backlash", "elasticity")
 
 
 def correlation_length(x: np.ndarray, cap: int = 100) -> int:
