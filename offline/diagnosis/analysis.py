@@ -324,6 +324,10 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
         if j in coarse_torque:
             # a coarse torque quantum clips small torques to zero: that is no drive saturation
             ranked = [f for f in ranked if f.effects != ("torque_saturation",)]
+        # a law whose size this recording cannot pin down (stiction on a one-way ramp) is neither
+        # chosen nor named beside the choice: chosen, it was dropped as unknown later and the
+        # joint left "unexplained"
+        ranked = [f for f in ranked if not uncertain(*plant_parameters(f))]
         fit = next((f for f in ranked if _simulates(table, nominal, f)), None)
         if fit is not None:
             alternatives[j] = equally_good(fit, ranked, quiet.dq[:, j])

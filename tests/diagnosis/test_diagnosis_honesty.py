@@ -59,6 +59,21 @@ def test_coulomb_at_one_speed_is_named_with_viscous_beside_it():
     assert "or equally well" in result.verdict
 
 
+def test_a_law_the_ramp_cannot_size_yields_to_one_it_can():
+    """Viscous drag on the wrist at one slow speed: stiction fitted best but its size was not
+    known (+- 450 N m), so it was dropped and the joint left "unexplained"; Coulomb and viscous
+    friction, both well sized, are named side by side instead."""
+    t = np.arange(0.0, 40.0, 0.02)
+    q = np.repeat(Q7[None, :6], len(t), axis=0)
+    q[:, 5] += np.clip((t - 1.0) * 0.037, 0.0, None)
+    result = diagnose(record_direct(plant(6, seed=9, j6={"viscous_friction": 232.0}), Trajectory(t, q), None,
+                                    hold_cycles=0), NOMINAL)
+    assert not result.unexplained
+    first = result.findings[0]
+    assert first.fit.index == 5 and set(first.fit.effects) <= {"coulomb", "viscous"}
+    named = " ".join([first.text] + first.alternatives)
+    assert "Coulomb" in named and "viscous" in named and not any("stiction" in a for a in first.alternatives)
+
 def test_designed_experiment_settles_coulomb_against_viscous():
     from spacearm.offline.diagnosis.experiment import design_experiment, joints_to_excite, limits_from_arm
     from spacearm.offline.diagnosis.honesty import MIN_TRAVEL
