@@ -161,6 +161,10 @@ class PlantConfig(StrictModel):
     rigid_body: RigidBodyParams | None = None   # coupled arm dynamics (firmware_sim/rigid_body.py); None = per joint
     seed: int = 0
 
+    def joint_params(self, j: int) -> JointParams:
+        """Joint j's parameters (0-based): its own table, or the plant's default joint."""
+        return self.joints[j] if j < len(self.joints) else self.joint
+
 
 def load_plant_config(path: str | Path | None) -> PlantConfig:
     return PlantConfig() if path is None else load_toml_model(path, PlantConfig)
@@ -371,7 +375,7 @@ class Plant:
         config = config or PlantConfig()
         joints = []
         for i in range(n_joints):
-            p = config.joints[i] if i < len(config.joints) else config.joint
+            p = config.joint_params(i)
             joints.append(JointModel(params=p, q=p.initial_position, temperature=p.temperature,
                                      load_amplitude=_load_amplitude(config, p),
                                      noise_rng=random.Random(config.seed * 1000 + i + 1)))

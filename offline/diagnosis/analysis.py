@@ -28,7 +28,7 @@ import numpy as np
 
 from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
                                             by_name)
-from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, joint_params, rated_joint_torque, simulate
+from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rated_joint_torque, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
@@ -162,7 +162,7 @@ def null_replay(table: RecordingTable, plant: PlantConfig) -> SimTraces:
     is only known to a quantum, so this replay is as valid as the other, and how much the
     two differ is what the recording may differ from either without any missing physics."""
     n = table.q.shape[1]
-    quantum = np.array([joint_params(plant, j).position_quantum for j in range(n)])
+    quantum = np.array([plant.joint_params(j).position_quantum for j in range(n)])
     return simulate(plant, table.q_cmd, table.dt, q0=table.q[0] + 0.5 * quantum, dq_cmd=table.dq_cmd, t0=0.0)
 
 
@@ -313,9 +313,9 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     active = [j for j in range(n) if moved(table.q[:, j], quiet.dq[:, j])]
     alternatives: dict[int, list[ChannelFit]] = {}
     settings = drive_settings(nominal, n)
-    quanta = ([joint_params(nominal, j).position_quantum for j in range(n)],   # torque: 6077h is per mille
-              [rated_joint_torque(settings[j], joint_params(nominal, j)) / 1000.0 for j in range(n)])
-    kinds = [joint_params(nominal, j).kind for j in range(n)]
+    quanta = ([nominal.joint_params(j).position_quantum for j in range(n)],   # torque: 6077h is per mille
+              [rated_joint_torque(settings[j], nominal.joint_params(j)) / 1000.0 for j in range(n)])
+    kinds = [nominal.joint_params(j).kind for j in range(n)]
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active, kinds)
     coarse_torque = {f.joint for f in sensors if f.effect == "torque_quantisation"}
     for j in active:
@@ -401,7 +401,7 @@ def _channel_results(table: RecordingTable, nominal: PlantConfig, sim: SimTraces
     n = table.q.shape[1]
     held = ~train
     channels, before, after = [], {}, {}
-    quantum = [joint_params(nominal, j).position_quantum for j in range(n)]
+    quantum = [nominal.joint_params(j).position_quantum for j in range(n)]
     null_sim = null_sim if null_sim is not None else null_replay(table, nominal)
     null = dict((name, real - nom) for name, real, nom, _ in _channels(null_sim, sim, sim))
     for name, real, nom, fitted in _channels(table, sim, refit):

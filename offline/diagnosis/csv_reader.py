@@ -14,7 +14,7 @@ import numpy as np
 from spacearm.offline.diagnosis.column_spec import ColumnSpec, alias
 from spacearm.offline.diagnosis.recording_io import RecordingFormatError, RecordingTable
 from spacearm.offline.diagnosis.time_base import sync_time_base, uniform
-from spacearm.controller.recording.csv_export import SYNC_COUNTER_MAX, WRENCH_COLUMNS
+from spacearm.controller.recording.csv_export import SYNC_COUNTER_MAX, WRENCH_COLUMNS, dq_cmd_columns
 
 MAX_BAD_FRACTION = 0.2       # a column with more unreadable cells than this is refused, not patched
 MAX_BYTES = 2_000_000_000
@@ -87,7 +87,7 @@ def _velocity_offset_columns(values: dict[str, np.ndarray], n: int, command: str
     """The names of the commanded velocity offset's columns dq_cmd_1..n, completed with zeros,
     when the recording has any (our CSV since the daemon records it); [] otherwise. With
     --command measured they are dropped: the measured motion's steps carry its velocity already."""
-    names = [f"dq_cmd_{i}" for i in range(1, n + 1)]
+    names = dq_cmd_columns(n)
     columns = {k: values.pop(k) for k in [k for k in values if k.startswith("dq_cmd_")]}
     if not any(k in columns for k in names):
         return []

@@ -104,7 +104,7 @@ def on_arm_drives(plant: PlantConfig, arm_file: str | Path, bus_config: BusConfi
                                 [j.drive for j in arm.joints])
     drives = [node.joint for node in limited.joints]
     for i, joint in enumerate(arm.joints):
-        params = joint_params(plant, i)
+        params = plant.joint_params(i)
         if params.prismatic:
             # the drive's force limit (N) reaches the motor through the screw, not the bus file's gear
             drives[i] = drives[i].model_copy(update={"max_torque": min(
@@ -112,15 +112,10 @@ def on_arm_drives(plant: PlantConfig, arm_file: str | Path, bus_config: BusConfi
     return ArmPlant(**dict(plant), drives=drives, following_error=[j.drive.following_error for j in arm.joints])
 
 
-def joint_params(config: PlantConfig, j: int) -> JointParams:
-    """Joint j's parameters (0-based): its own table, or the plant's default joint."""
-    return config.joints[j] if j < len(config.joints) else config.joint
-
-
 def with_kinds(plant: PlantConfig, kinds: list[str], source: str) -> PlantConfig:
     """The plant with each joint's kind taken from the arm; a plant file that states the
     other kind for a joint is refused (one line)."""
-    joints = [joint_params(plant, i) for i in range(max(len(kinds), len(plant.joints)))]
+    joints = [plant.joint_params(i) for i in range(max(len(kinds), len(plant.joints)))]
     changed = False
     for i, kind in enumerate(kinds):
         if joints[i].kind == kind:
@@ -206,7 +201,7 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         settings = list(settings) + [settings[-1]] * (n - len(settings))
     if limits is None and isinstance(config, ArmPlant) and config.drives:
         limits = [(s.lower, s.upper) for s in settings]     # 607Dh, as the daemon configures it
-    params = [config.joints[i] if i < len(config.joints) else config.joint for i in index]
+    params = [config.joint_params(i) for i in index]
     start = q_cmd[0] if q0 is None else np.asarray(q0, float)
     params = [p.model_copy(update={"initial_position": float(start[i])}) for i, p in zip(index, params)]
     plant = Plant.create(len(index), config.model_copy(update={"joints": params}))

@@ -105,7 +105,7 @@ def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversal
 def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
     """A copy of the nominal plant with the fitted effects switched on."""
     n = max([len(nominal.joints)] + [f.index + 1 for f in fits if f.channel != "wrench"])
-    joints = [nominal.joints[i] if i < len(nominal.joints) else nominal.joint for i in range(n)]
+    joints = [nominal.joint_params(i) for i in range(n)]
     bias, drift = list(nominal.ft.bias), list(nominal.ft.drift)
     for fit in fits:
         p, _ = plant_parameters(fit)

@@ -42,7 +42,7 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
     its envelope grows steadily with the size. The torque envelope still decides whether the
     effect is there and what it explains."""
     key, lo, hi = GEAR_EFFECTS[effect]
-    joints = [nominal.joints[i] if i < len(nominal.joints) else nominal.joint for i in range(q_cmd.shape[1])]
+    joints = [nominal.joint_params(i) for i in range(q_cmd.shape[1])]
     env_real = envelope(residual)
     by_position = base_q is not None and q_residual is not None
     if by_position:

@@ -38,7 +38,7 @@ class RecordSimError(RuntimeError):
 
 def starting_at(config: PlantConfig, q0: np.ndarray) -> PlantConfig:
     """The plant with its joints resting at the trajectory's first point (the run starts there)."""
-    joints = [config.joints[i] if i < len(config.joints) else config.joint for i in range(len(q0))]
+    joints = [config.joint_params(i) for i in range(len(q0))]
     return config.model_copy(update={"joints": [p.model_copy(update={"initial_position": float(q)})
                                                 for p, q in zip(joints, q0)]})
 

@@ -7,7 +7,6 @@ from pathlib import Path
 import tomli_w
 
 from spacearm.offline.diagnosis.analysis import Diagnosis
-from spacearm.offline.diagnosis.direct_sim import joint_params
 from spacearm.offline.diagnosis.joint_units import parameter_units, units_of
 from spacearm.firmware_sim.plant import PlantConfig
 
@@ -45,7 +44,7 @@ def summary(d: Diagnosis) -> dict:
 def joint_kinds(d: Diagnosis) -> list[str]:
     """Each recorded joint's kind, from the plant the diagnosis replayed."""
     n = sum(1 for c in d.channels if c.name.startswith("q_"))
-    return [joint_params(d.updated, j).kind for j in range(n)]
+    return [d.updated.joint_params(j).kind for j in range(n)]
 
 
 def _units(f, kinds: list[str]) -> dict:
