@@ -24,7 +24,7 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from spacearm.offline.diagnosis.direct_sim import simulate
-from spacearm.offline.diagnosis.fitting import ChannelFit, block_jackknife_stderr
+from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.firmware_sim.plant import PlantConfig
 
 # scale range searched around the linear estimate, per effect
@@ -68,17 +68,14 @@ def refine_size(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
 
 
 STICTION_START_STEP = 0.15              # log units: the search's first simplex around the linear fit
-STICTION_GRID = np.linspace(-0.2, 0.2, 5)   # log level offsets around the best pair, for the jackknife
-STICTION_DECAY_GRID = (-0.15, 0.0, 0.15)    # log decay-speed offsets (the pair moves together)
 
 
 def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
                     tau_real: np.ndarray, train: np.ndarray, apply, dq_cmd: np.ndarray | None = None) -> ChannelFit:
     """A Stribeck fit with its level and decay speed found together by replays of the joint
     on the training rows (Nelder-Mead on the logs, from the linear estimate). Its standard
-    error: a delete-a-block jackknife over a small grid of replays around the best pair,
-    each stretch's refit the lowest point of a quadratic surface through that grid; never
-    below the linear fit's. Left as it is when no replay beats the linear estimate's."""
+    error is the linear fit's (block jackknife, fitting.py), scaled with the level. Left as it
+    is when no replay beats the linear estimate's."""
     if fit.effects != ("stribeck",) or not train.any():
         return fit
     last = int(np.flatnonzero(train).max()) + 1
@@ -103,9 +100,9 @@ def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt
 
     rows = train[:last]
 
-    def error(x: np.ndarray, keep: np.ndarray = rows) -> float:
+    def error(x: np.ndarray) -> float:
         tau = replay_tau(float(x[0]), float(x[1]))
-        return math.inf if tau is None else float(np.mean((tau_real[:last] - tau)[keep] ** 2))
+        return math.inf if tau is None else float(np.mean((tau_real[:last] - tau)[rows] ** 2))
 
     start = np.array([math.log(level0), math.log(decay0)])
     linear = error(start)
@@ -115,28 +112,9 @@ def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt
                              "maxfev": 30})
     if not best.fun < linear:
         return fit
-    grid = [(best.x[0] + a, best.x[1] + b) for b in STICTION_DECAY_GRID for a in STICTION_GRID]
-    taus = [replay_tau(a, b) for a, b in grid]
-    spread = 0.0
-    if all(t is not None for t in taus):
-        design = np.array([[1.0, a, b, a * a, a * b, b * b] for a, b in grid]) - [0, *best.x, 0, 0, 0]
-        residuals = np.array([tau_real[:last] - t for t in taus])
-
-        def refit(keep_rows: np.ndarray) -> np.ndarray | None:
-            keep = np.zeros(last, bool)
-            keep[keep_rows] = True
-            loss = np.mean(residuals[:, keep] ** 2, axis=1)
-            c = np.linalg.lstsq(design, loss, rcond=None)[0]
-            hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
-            if np.any(np.linalg.eigvalsh(hessian) <= 0):
-                return None
-            offset = np.linalg.solve(hessian, -c[1:3])
-            return np.array([best.x[0] + float(np.clip(offset[0], STICTION_GRID[0], STICTION_GRID[-1]))])
-
-        spread = float(block_jackknife_stderr(refit, np.flatnonzero(rows), 1)[0])
     level, decay = math.exp(best.x[0]), math.exp(best.x[1])
     refined = _with(fit, level, decay)
-    refined.stderr = np.array([max(float(fit.stderr[0]) * level / level0, level * spread)])
+    refined.stderr = fit.stderr * level / level0
     return refined
 
 
