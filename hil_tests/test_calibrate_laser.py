@@ -1,7 +1,9 @@
 """On-orbit laser-ranger calibration end to end: simulator (with the hidden Table 2 errors and
 the ranger on a pseudo-terminal), daemon and `spacearm calibrate laser --apply` as separate
-processes on the loopback CAN hub. The calibrated arm file must cut the arm's true absolute
-position error (known only to the plant file) by at least 85 % over 50 random poses."""
+processes on the loopback CAN hub. The held-out distance residuals must drop to what the true
+geometry itself leaves on the same readings (resolver steps and ranger noise), and the calibrated
+arm file must cut the arm's true absolute position error (known only to the plant file) by at
+least 85 % over 50 random poses."""
 from __future__ import annotations
 
 import json
@@ -16,6 +18,7 @@ import pytest
 from spacearm.base.config.arm import load_arm_config
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
+from spacearm.firmware_sim.laser_ranger import tool_plane_distance
 from spacearm.firmware_sim.plant import load_plant_config
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.test_daemon_console import free_port
@@ -40,6 +43,20 @@ def tool_positions(model: KinematicModel, Q: np.ndarray) -> np.ndarray:
     return np.array([fk(model, data, q)[:3, 3].copy() for q in Q])
 
 
+def true_distances(Q: np.ndarray) -> np.ndarray:
+    """What a noise-free ranger would read at the measured angles Q on the arm as built."""
+    plant = load_plant_config(PLANT)
+    model = plant.geometry.true_model()
+    data = KinematicData(model)
+    q = np.zeros(model.nq)
+    distance = tool_plane_distance(lambda: fk(model, data, q), plant.laser.plane[:3], plant.laser.plane[3])
+    out = []
+    for row in Q:
+        q[:] = row
+        out.append(distance())
+    return np.array(out, float)
+
+
 def test_laser_calibration_on_the_daemon_cuts_absolute_error(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"laser-{free_port()}")
     sim = launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT)], bus_spec=bus, ready="nodes ready")
@@ -50,18 +67,27 @@ def test_laser_calibration_on_the_daemon_cuts_absolute_error(loopback_hub, launc
             "--no-record"], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     calibrated = tmp_path / "laser_arm_calibrated.toml"
     run = subprocess.run([sys.executable, "-m", "spacearm.console.main", "calibrate", "laser", "--port", port,
-                          "--arm", str(arm), "--configs", "40", "--validation", "10", "--apply", str(calibrated),
+                          "--arm", str(arm), "--configs", "40", "--validation", "20", "--apply", str(calibrated),
                           "--data-out", str(tmp_path / "readings.csv"), "--json", "--api", api],
                          capture_output=True, text=True, cwd=ROOT, env=child_env({}), timeout=600)
     assert run.returncode == 0, run.stderr[-3000:]
     summary = json.loads(run.stdout)
     assert summary["status"] == "converged" and summary["configurations"] >= 35
+    held = summary["validation"]
+    assert len(held) >= 18
+    after = np.array([p["residual_after"] for p in held])
+    assert np.sqrt(np.mean(after ** 2)) == pytest.approx(summary["validation_rms_after"])
+    # The floor: the true geometry's residuals on the same held-out readings. The resolvers' 25
+    # arcsec steps on a ~2 m arm leave ~0.2 mm RMS (up to ~1 mm on one posture), above the
+    # averaged ranger noise. The fit's own parameter error (26 parameters from 40 postures read
+    # through the same resolvers) comes on top: 1.1-1.7x the floor in six runs at load 0-4.
+    floor = np.array([p["h"] for p in held]) - true_distances(np.array([p["q"] for p in held]))
+    floor_rms = float(np.sqrt(np.mean(floor ** 2)))
     print(f"held-out distance residual RMS {summary['validation_rms_before'] * 1e3:.3f} mm -> "
-          f"{summary['validation_rms_after'] * 1e3:.3f} mm")
-    # Held-out laser residuals (all the routine itself can see) drop to the measurement floor:
-    # 25 arcsec resolver steps on a ~2 m arm are ~0.25 mm, above the averaged ranger noise.
+          f"{summary['validation_rms_after'] * 1e3:.3f} mm; the true geometry leaves {floor_rms * 1e3:.3f} mm "
+          f"({summary['validation_rms_after'] / floor_rms:.2f}x)")
     assert summary["validation_rms_after"] < 0.15 * summary["validation_rms_before"]
-    assert summary["validation_rms_after"] < 0.5e-3
+    assert summary["validation_rms_after"] < 2.5 * floor_rms
 
     config = load_arm_config(calibrated)
     assert config.calibration is not None and config.calibration.configurations == summary["configurations"]

@@ -109,6 +109,8 @@ def register(app: typer.Typer) -> None:
                     n_validation=validation, sigma=info.sigma / np.sqrt(repetitions), seed=seed,
                     progress=progress)
             except CalibrationRunError as exc:
+                if not as_json:
+                    print(file=sys.stderr)      # end the progress line
                 raise CommandFailed(str(exc)) from None
             if not as_json:
                 print(file=sys.stderr)
@@ -120,7 +122,13 @@ def register(app: typer.Typer) -> None:
         summary = {"configurations": len(result.Q), "skipped": result.skipped, "status": result.fit.status,
                    "residual_rms": result.residual_rms, "validation_rms_before": result.validation_rms_before,
                    "validation_rms_after": result.validation_rms_after, "seconds": result.seconds,
-                   "errors": result.errors, "applied_to": str(apply) if apply else None}
+                   "errors": result.errors, "applied_to": str(apply) if apply else None,
+                   # every held-out posture, so a poor figure can be traced to the postures behind it
+                   "validation": [{"q": [float(v) for v in q], "h": float(h), "residual_before": float(b),
+                                   "residual_after": float(a)}
+                                  for q, h, b, a in zip(result.Q_validation, result.h_validation,
+                                                        result.validation_residuals_before,
+                                                        result.validation_residuals_after)]}
         if as_json:
             print(json.dumps(summary))
             return
@@ -129,6 +137,10 @@ def register(app: typer.Typer) -> None:
         print(f"  identification residual RMS {result.residual_rms * 1e3:.4f} mm")
         print(f"  held-out distance residual RMS: nominal {result.validation_rms_before * 1e3:.4f} mm -> "
               f"calibrated {result.validation_rms_after * 1e3:.4f} mm")
+        if len(result.validation_residuals_after):
+            worst = int(np.argmax(np.abs(result.validation_residuals_after)))
+            print(f"  worst held-out posture: {result.validation_residuals_after[worst] * 1e3:+.4f} mm at q = "
+                  f"[{', '.join(f'{v:.4f}' for v in result.Q_validation[worst])}] rad")
         for name, v in sorted(result.errors.items()):
             print(f"  {name:<10} {_fmt_value(name, v):>16}")
         if apply is not None:

@@ -53,6 +53,8 @@ class LaserRunResult:
     validation_rms_after: float   # the same with the identified model, m
     seconds: float
     log: list[str] = field(default_factory=list)
+    validation_residuals_before: Array = field(default_factory=lambda: np.zeros(0))  # per held-out posture, m
+    validation_residuals_after: Array = field(default_factory=lambda: np.zeros(0))
 
 
 def nearest_neighbour_order(Q: Array, q_start: Array) -> Array:
@@ -88,6 +90,10 @@ def run_laser_calibration(setup: LaserSetup, move_to: MoveTo, measure: Measure, 
                           h_range: tuple[float, float] = (0.1, 2.8),
                           progress: Progress | None = None) -> LaserRunResult:
     t0 = time.monotonic()
+    n_free = len(setup.report.kept)
+    if m < n_free + 5:              # say so before an hour of moves, not after
+        raise CalibrationRunError(f"{m} identification postures cannot identify {n_free} parameters; "
+                                  f"use at least {n_free + 5}")
     rng = np.random.default_rng(seed)
     chosen, validation = plan_postures(setup, m, n_candidates, n_validation, rng, h_range)
     postures = np.vstack([chosen, validation])
@@ -107,7 +113,6 @@ def run_laser_calibration(setup: LaserSetup, move_to: MoveTo, measure: Measure, 
             continue
         (Qv if is_validation[k] else Q).append(q_measured)
         (hv if is_validation[k] else h).append(distance)
-    n_free = len(setup.report.kept)
     if len(Q) < n_free + 5:
         raise CalibrationRunError(f"only {len(Q)} valid identification readings for {n_free} parameters "
                                   f"({skipped} postures missed the plane); need at least {n_free + 5}")
@@ -120,12 +125,11 @@ def run_laser_calibration(setup: LaserSetup, move_to: MoveTo, measure: Measure, 
     errors = {name: float(fit.x[i] - nominal[i]) for i, name in enumerate(problem.names)
               if name in problem.free and abs(fit.x[i] - nominal[i]) > 0.0}
     residual = h - problem.predict(fit.x, Q)
-    before = after = float("nan")
-    if len(Qv):
-        before = float(np.sqrt(np.mean((hv - problem.predict(nominal, Qv)) ** 2)))
-        after = float(np.sqrt(np.mean((hv - problem.predict(fit.x, Qv)) ** 2)))
-    return LaserRunResult(Q, h, Qv, hv, skipped, fit, errors, float(np.sqrt(np.mean(residual ** 2))),
-                          before, after, time.monotonic() - t0, log)
+    held_before = hv - problem.predict(nominal, Qv) if len(Qv) else np.zeros(0)
+    held_after = hv - problem.predict(fit.x, Qv) if len(Qv) else np.zeros(0)
+    rms = lambda r: float(np.sqrt(np.mean(r ** 2))) if len(r) else float("nan")  # noqa: E731
+    return LaserRunResult(Q, h, Qv, hv, skipped, fit, errors, rms(residual), rms(held_before), rms(held_after),
+                          time.monotonic() - t0, log, held_before, held_after)
 
 
 def calibration_section(setup: LaserSetup, result: LaserRunResult, data: str = "") -> Calibration:
