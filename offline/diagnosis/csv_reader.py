@@ -17,6 +17,9 @@ from spacearm.offline.diagnosis.time_base import sync_time_base, uniform
 from spacearm.controller.recording.csv_export import SYNC_COUNTER_MAX, WRENCH_COLUMNS, dq_cmd_columns
 
 MAX_BAD_FRACTION = 0.2       # a column with more unreadable cells than this is refused, not patched
+# No angle, length, speed, torque or force of an arm reaches this in SI units; a cell that does
+# is corrupt (a lost delimiter joining two numbers), and left in it would swamp every fit.
+IMPLAUSIBLE = 1e9
 MAX_BYTES = 2_000_000_000
 COMMAND_MODES = ("recorded", "measured")
 
@@ -153,12 +156,15 @@ def read_any_csv(path: str | Path, specs: list[ColumnSpec] | None = None, comman
         with np.errstate(all="ignore"):
             x = raw * spec.scale + spec.offset
         x[~np.isfinite(x)] = np.nan
+        huge = np.abs(x) > IMPLAUSIBLE if ours != "t" else np.zeros(len(x), bool)  # t may count from an epoch
+        x[huge] = np.nan
         bad = int(np.isnan(x).sum())
         if bad > MAX_BAD_FRACTION * len(x):
             raise RecordingFormatError(f"{path}: column for {ours} ({spec.describe(header).split('<- ')[1]}): "
                                        f"{bad} of {len(x)} cells empty or not numbers")
         values[ours] = x
-        report.columns.append(spec.describe(header) + (f"  ({bad} unreadable cells)" if bad else ""))
+        note = f"{bad} unreadable cells" + (f", {int(huge.sum())} of them beyond +-{IMPLAUSIBLE:.0e}" if huge.any() else "")
+        report.columns.append(spec.describe(header) + (f"  ({note})" if bad else ""))
     if ragged:
         report.notes.append(f"{ragged} rows have fewer than {width} fields (missing cells bridged)")
 

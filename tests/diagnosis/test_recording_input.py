@@ -84,3 +84,15 @@ def test_dry_run_prints_how_each_column_was_read(tmp_path):
     assert res.exit_code == 0, res.output
     assert "t        <- column 1 ('time')" in res.output and "tau_1    <- column 4 ('torque1')" in res.output
     assert "not in the recording (taken as 0, not compared): dq_1" in res.output
+
+
+def test_a_cell_no_arm_can_reach_is_bridged_like_an_unreadable_one(tmp_path):
+    """A lost delimiter joins two numbers into 1e+300-like cells; left in, they swamp every fit."""
+    t = 0.02 * np.arange(100)
+    tau = 5 * np.sin(t)
+    rows = np.column_stack([t, np.sin(t), np.sin(t), tau])
+    rows[40, 3] = 3.1e300
+    path = write(tmp_path / "rec.csv", rows, header=["t", "q_cmd_1", "q_1", "tau_1"])
+    table, report = read_any_csv(path, {})
+    assert np.all(np.abs(table.tau) < 10) and abs(table.tau[40, 0] - tau[40]) < 0.05
+    assert "1 unreadable cells, 1 of them beyond +-1e+09" in "\n".join(report.lines())
