@@ -5,7 +5,6 @@ dataclasses below and commands in SI units back into PDO bytes.
 """
 from __future__ import annotations
 
-import math
 import struct
 from dataclasses import dataclass
 
@@ -40,10 +39,10 @@ class JointState:
     node_id: int
     state: State = State.NOT_READY_TO_SWITCH_ON
     statusword: int = 0
-    position: float = 0.0          # rad
-    velocity: float = 0.0          # rad/s
-    torque: float = 0.0            # N m at the joint (motor torque x gear ratio)
-    following_error: float = 0.0   # rad
+    position: float = 0.0          # rad (m on a linear axis)
+    velocity: float = 0.0          # rad/s (m/s)
+    torque: float = 0.0            # N m at the joint (motor torque x gear ratio); N along a linear axis
+    following_error: float = 0.0   # rad (m)
     temperature: float = float("nan")  # degC (nan: the drive's configuration names no such object)
     brake_engaged: bool | None = True  # None: not reported
     error_code: int = 0
@@ -158,8 +157,9 @@ class JointDriver(DeviceDriver):
     def __init__(self, cfg, bus, object_dictionary):
         super().__init__(cfg, bus, object_dictionary)
         self.settings = cfg.joint
-        self.k = self.settings.increments_per_rad          # increments per joint radian
-        self.rated_joint_torque = self.settings.rated_joint_torque   # N m at the joint per 1000 per mille
+        self.scale = self.settings.scale                  # the wire's factor group (axis_scale.py)
+        self.k = self.scale.per_unit                      # increments per joint rad (m on a linear axis)
+        self.rated_joint_torque = self.scale.rated_joint  # N m (N if linear) at the joint per 1000 per mille
         self.axis = Cia402Axis(cfg.label)
         self.target: float | None = None        # rad, CSP target requested by the caller
         self.velocity_ff = 0.0                   # rad/s
@@ -186,24 +186,13 @@ class JointDriver(DeviceDriver):
         self.rpdo_values[(od.MODES_OF_OPERATION, 0)] = mode
 
     def hardware_objects(self):
-        s = self.settings
-        return [(od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments),
-                (od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions),
-                (od.GEAR_RATIO, 1, s.gear_motor_revolutions),
-                (od.GEAR_RATIO, 2, s.gear_shaft_revolutions),
-                (od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000))]
+        return self.scale.wire_objects()
 
     def use_hardware(self, values):
-        """Scaling from the drive's own 608Fh/6091h/6076h where it reported them."""
-        s = self.settings
-        get = lambda index, sub, default: values.get((index, sub)) or default  # noqa: E731 (0 = not usable)
-        increments = get(od.POSITION_ENCODER_RESOLUTION, 1, s.encoder_increments)
-        motor_revs = get(od.POSITION_ENCODER_RESOLUTION, 2, s.motor_revolutions)
-        gear_motor = get(od.GEAR_RATIO, 1, s.gear_motor_revolutions)
-        gear_shaft = get(od.GEAR_RATIO, 2, s.gear_shaft_revolutions)
-        rated = get(od.MOTOR_RATED_TORQUE, 0, round(s.rated_torque * 1000)) / 1000.0
-        self.k = increments / motor_revs * gear_motor / gear_shaft / (2.0 * math.pi)
-        self.rated_joint_torque = rated * gear_motor / gear_shaft
+        """Scaling from the drive's own 608Fh/6091h/6092h/6076h where it reported them."""
+        self.scale = self.settings.scale.with_reported(values)
+        self.k = self.scale.per_unit
+        self.rated_joint_torque = self.scale.rated_joint
 
     def config_writes(self):
         s, k = self.settings, self.k

@@ -123,7 +123,7 @@ def joint_drive() -> tuple[str, list[Obj]]:
 
 # The second drive model: a smaller wrist drive of another make. One RPDO and two TPDOs, no
 # heartbeat consumer (1016h), an encoder of 2^17 increments behind a 160:1 gear, and its
-# hardware data (608Fh, 6091h, 6076h) read-only; its default TPDO2 maps its own temperature.
+# hardware data (608Fh, 6091h, 6092h, 6076h) read-only; its default TPDO2 maps its own temperature.
 COMPACT_RPDOS = [[(od.CONTROLWORD, 0, 16), (od.TARGET_POSITION, 0, 32)]]
 COMPACT_TPDOS = [[(od.STATUSWORD, 0, 16), (od.POSITION_ACTUAL, 0, 32), (od.MODES_OF_OPERATION_DISPLAY, 0, 8)],
                  [(od.VELOCITY_ACTUAL, 0, 32), (od.TORQUE_ACTUAL, 0, 16), (od.DRIVE_TEMPERATURE, 0, 16)]]
@@ -175,6 +175,12 @@ def drive_objects(scaling_access: str, encoder: int, gear: int, rated_torque: in
         Obj(od.GEAR_RATIO, "Gear ratio", ARRAY,
             subs={0: Var("Number of entries", UNSIGNED8, "ro", 2),
                   1: Var("Motor revolutions", UNSIGNED32, scaling_access, gear, low=1),
+                  2: Var("Shaft revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
+        # 6092h: travel per shaft revolution of a linear axis (feed in um, axis_scale.py); a
+        # rotary axis does not use it. Default: a 10 mm lead screw.
+        Obj(od.FEED_CONSTANT, "Feed constant", ARRAY,
+            subs={0: Var("Number of entries", UNSIGNED8, "ro", 2),
+                  1: Var("Feed", UNSIGNED32, scaling_access, 10_000, low=1),
                   2: Var("Shaft revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
         v(od.VELOCITY_OFFSET, "Velocity offset", INTEGER32, "rw", 0, pdo=True),
         v(od.TORQUE_OFFSET, "Torque offset", INTEGER16, "rw", 0, pdo=True),

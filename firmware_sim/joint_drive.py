@@ -17,6 +17,7 @@ from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_FAULT_R
                                  SW_TARGET_REACHED, SW_WARNING, Command, State, decode_controlword)
 from canopen.sdo import SdoAbortedError
 
+from spacearm.base.canopen.axis_scale import FEED_UNIT
 from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 
 from spacearm.firmware_sim.node import SimNode
@@ -73,10 +74,13 @@ class JointDriveNode(SimNode):
 
     # ------------------------------------------------------------------ scaling
     def _scale(self) -> float:
-        """Increments per joint radian from 608Fh and 6091h."""
+        """Increments per joint radian from 608Fh and 6091h; per metre on a linear axis (a
+        prismatic plant joint), whose shaft revolution is 6092h's feed (axis_scale.py)."""
         enc = self.param(od.POSITION_ENCODER_RESOLUTION, 1) / self.param(od.POSITION_ENCODER_RESOLUTION, 2)
         gear = self.param(od.GEAR_RATIO, 1) / self.param(od.GEAR_RATIO, 2)
-        return enc * gear / (2.0 * math.pi)
+        if not self.joint.params.prismatic:
+            return enc * gear / (2.0 * math.pi)
+        return enc * gear / (self.param(od.FEED_CONSTANT, 1) * FEED_UNIT / self.param(od.FEED_CONSTANT, 2))
 
     def _rated_torque(self) -> float:
         return self.param(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)

@@ -88,6 +88,7 @@ PROFILE_DECELERATION = 0x6084
 QUICK_STOP_DECELERATION = 0x6085
 POSITION_ENCODER_RESOLUTION = 0x608F  # sub 1 encoder increments, sub 2 motor revolutions
 GEAR_RATIO = 0x6091                   # sub 1 motor revolutions, sub 2 shaft revolutions
+FEED_CONSTANT = 0x6092                # sub 1 feed (um here, see axis_scale.py), sub 2 shaft revolutions
 VELOCITY_OFFSET = 0x60B1
 TORQUE_OFFSET = 0x60B2
 INTERPOLATION_TIME_PERIOD = 0x60C2    # sub 1 value, sub 2 index (10^index s)

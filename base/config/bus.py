@@ -1,10 +1,12 @@
 """Schema of a bus file (configs/bus/*.toml): which nodes are on the CAN bus and how
 the controller configures them at bring-up.
 
-All quantities are SI (s, rad, rad/s, N, N m) except where a key names its unit.
+All quantities are SI (s, rad, rad/s, N, N m) except where a key names its unit; a linear
+axis' joint drive (feed_constant given) is in m, m/s, m/s^2 and N instead of rad and N m.
 Wire scaling of the joint drives uses the CiA 402 objects 608Fh (position encoder
-resolution) and 6091h (gear ratio): increments per joint radian =
-encoder_increments / motor_revolutions * gear_motor_revolutions / gear_shaft_revolutions / (2 pi).
+resolution), 6091h (gear ratio) and, on a linear axis, 6092h (feed constant): increments per
+joint unit = encoder_increments / motor_revolutions * gear_motor_revolutions /
+gear_shaft_revolutions / (2 pi rad, or feed_constant m); see base/canopen/axis_scale.py.
 """
 from __future__ import annotations
 
@@ -15,6 +17,8 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from spacearm.base.canopen.axis_scale import AxisScale, feed_counts
+from spacearm.base.config.errors import ConfigError
 from spacearm.base.config.loader import StrictModel, load_toml_model
 from spacearm.base.paths import CONFIGS
 
@@ -59,6 +63,11 @@ class JointSettings(StrictModel):
     motor_revolutions: int = Field(default=1, ge=1, le=2**16, description="608Fh.2")
     gear_motor_revolutions: int = Field(default=100, ge=1, le=2**20, description="6091h.1")
     gear_shaft_revolutions: int = Field(default=1, ge=1, le=2**20, description="6091h.2")
+    feed_constant: float | None = Field(
+        default=None, ge=1.0e-6, le=1.0,
+        description="m of travel per shaft revolution (6092h; a screw's lead): the joint is a linear axis and "
+                    "every position, speed, limit and window of this drive is in m, its torque a force in N; "
+                    "none: a rotary joint, 2 pi rad per shaft revolution")
     rated_torque: float = Field(default=1.5, gt=0.0, le=1000.0, description="N m, motor side (6076h)")
     max_torque: float = Field(default=1.0, gt=0.0, le=3.0, description="fraction of rated torque (6072h)")
     following_error_window: float = Field(default=0.01, gt=0.0, le=1.0, description="rad (6065h)")
@@ -82,12 +91,26 @@ class JointSettings(StrictModel):
             raise ValueError(f"lower ({self.lower}) must be less than upper ({self.upper})")
         if not self.profile_velocity <= self.max_velocity:
             raise ValueError("profile_velocity must not exceed max_velocity")
+        if self.feed_constant is not None and abs(feed_counts(self.feed_constant) * 1e-6 - self.feed_constant) > 1e-12:
+            raise ValueError(f"feed_constant {self.feed_constant} m is not a whole number of micrometres "
+                             f"(6092h carries um per shaft revolution)")
         return self
 
     @property
+    def scale(self) -> AxisScale:
+        """The configured wire scaling (the drive's own reported values replace it at bring-up)."""
+        return AxisScale(self.encoder_increments, self.motor_revolutions, self.gear_motor_revolutions,
+                         self.gear_shaft_revolutions, self.rated_torque,
+                         None if self.feed_constant is None else feed_counts(self.feed_constant))
+
+    @property
+    def linear(self) -> bool:
+        return self.feed_constant is not None
+
+    @property
     def increments_per_rad(self) -> float:
-        return (self.encoder_increments / self.motor_revolutions * self.gear_motor_revolutions
-                / self.gear_shaft_revolutions / (2.0 * math.pi))
+        """Increments per joint unit: per rad, or per m on a linear axis."""
+        return self.scale.per_unit
 
     @property
     def gear_ratio(self) -> float:
@@ -95,8 +118,9 @@ class JointSettings(StrictModel):
 
     @property
     def rated_joint_torque(self) -> float:
-        """N m at the joint output for 1000 per mille (motor rated torque times gear ratio)."""
-        return self.rated_torque * self.gear_ratio
+        """N m at the joint output for 1000 per mille (motor rated torque times gear ratio);
+        N along a linear axis (through the screw)."""
+        return self.scale.rated_joint
 
 
 class EndEffectorSettings(StrictModel):
@@ -200,6 +224,19 @@ class BusConfig(StrictModel):
 
 
 DEFAULT_BUS_CONFIG = CONFIGS / "bus" / "arm.toml"
+
+
+def check_axis_kinds(bus: BusConfig, kinds: list[str], arm_source: str) -> None:
+    """Refuse (one line) a joint drive whose kind of axis disagrees with the arm file's joint:
+    a prismatic joint needs its drive's feed constant (without it the drive would be scaled
+    in rad), a revolute joint must not have one."""
+    for i, (node, kind) in enumerate(zip(bus.joints, kinds)):
+        if kind == "prismatic" and not node.joint.linear:
+            raise ConfigError(f"joint {i + 1} is prismatic in {arm_source} but its drive {node.label} has no "
+                              f"[nodes.joint] feed_constant (m per shaft revolution, 6092h)")
+        if kind != "prismatic" and node.joint.linear:
+            raise ConfigError(f"joint {i + 1} is {kind} in {arm_source} but its drive {node.label} has a "
+                              f"feed_constant ({node.joint.feed_constant} m): only a linear axis has one")
 
 
 def load_bus_config(path: str | Path = DEFAULT_BUS_CONFIG) -> BusConfig:

@@ -33,7 +33,7 @@ from spacearm.controller.cycle import Command, Finding, MachineState, Measuremen
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner
-from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, load_bus_config
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, check_axis_kinds, load_bus_config
 from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
 
 
@@ -90,7 +90,9 @@ class Daemon:
         self.core = ControllerCore(self.supervisor, names, options.period)
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
-        bus_config = with_drive_limits(load_bus_config(options.bus_config), self.model.q_min, self.model.q_max,
+        bus_config = load_bus_config(options.bus_config)
+        check_axis_kinds(bus_config, [j.type for j in self.arm.joints], str(options.arm))
+        bus_config = with_drive_limits(bus_config, self.model.q_min, self.model.q_max,
                                        [j.drive for j in self.arm.joints])
         lockstep = options.clock == "lockstep"
         # Real time: wait for this SYNC's TPDOs at most 40 % of the period (8 ms at 20 ms),
