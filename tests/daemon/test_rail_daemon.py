@@ -1,0 +1,87 @@
+"""The daemon drives the ORU test bed on its linear rail (configs/*/oru_testbed_on_rail.toml)
+over the CAN path in one process (virtual bus, lockstep): the rail's drive scaled with its
+feed constant, a move of the rail to a target in metres, held, and the recording's q and
+tau of the rail in m and N (the force that holds the slide's weight on the plant's ramp)."""
+from __future__ import annotations
+
+import threading
+import time
+import uuid
+
+import pytest
+
+from spacearm.controller.recording.mcap_reader import read_recording
+from tests.canopen.test_linear_axis import ARM, BUS, PLANT, RATED_FORCE, rail_hold
+
+GOAL = 0.55      # m, from the plant's 0.3 m
+STEP = 1.0e-6    # m, the rail's encoder and wire increment
+
+
+def run_rail_daemon(runs) -> tuple[dict, object]:
+    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+    from spacearm.firmware_sim.runner import start_simulator
+    bus = f"virtual:rail-{uuid.uuid4().hex[:8]}"
+    sim = start_simulator(bus, BUS, plant=PLANT)
+    daemon = Daemon(DaemonOptions(bus=bus, arm=ARM, bus_config=BUS, clock="lockstep", api=None, record_dir=runs))
+    try:
+        daemon.start()
+        threading.Thread(target=daemon.run, daemon=True).start()
+        key = daemon.lease.take("test")
+        call = lambda cmd, **args: daemon.handlers.handle(None, cmd, {"lease": key, **args})   # noqa: E731
+        call("enable")
+        deadline = time.monotonic() + 120      # only ends a hung test: lockstep runs as fast as it can
+        while daemon.status()["state"] != "enabled":
+            assert time.monotonic() < deadline, daemon.status()["stop_reason"]
+            time.sleep(0.02)
+        home = [j["q"] for j in daemon.status()["joints"]]
+        finished = daemon.status()["motions_finished"]
+        call("move_joints", q=[GOAL] + home[1:])
+        while daemon.status()["motions_finished"] == finished:
+            assert time.monotonic() < deadline, daemon.status()["stop_reason"]
+            time.sleep(0.02)
+        held_from = daemon.status()["cycle"]
+        while daemon.status()["cycle"] < held_from + 100:            # hold 2 s of controller time
+            time.sleep(0.02)
+        status = daemon.status()
+        assert status["state"] == "enabled", status["stop_reason"]
+    finally:
+        daemon.request_stop()
+        time.sleep(0.1)
+        daemon.shutdown()
+        sim.stop()
+    [path] = runs.glob("*.mcap")
+    return status, (read_recording(path), held_from)
+
+
+def check_rail_recording(cycles: list[dict], held_from: int) -> None:
+    """The rail's recorded q (m) and tau (N): it reached GOAL and held it, pushing up the ramp."""
+    low, high, stiffness = rail_hold()
+    held = [c for c in cycles if c["cycle"] >= held_from]
+    assert len(held) >= 50
+    for c in held:
+        assert c["q_cmd"][0] == pytest.approx(GOAL, abs=1e-9)
+        droop = GOAL - c["q"][0]
+        # PD servo droop under the slide's weight along the ramp +- static friction (0.15..0.18 mm),
+        # one encoder step either way; far inside the 5 mm following-error window
+        assert low / stiffness - STEP <= droop <= high / stiffness + STEP, droop
+        assert low - RATED_FORCE / 1000 <= c["tau"][0] <= high + RATED_FORCE / 1000, c["tau"][0]
+    moving = [c for c in cycles if c["cycle"] < held_from and abs(c["dq"][0]) > 0.05]
+    assert moving, "the rail never moved faster than 0.05 m/s"
+    assert max(c["q"][0] for c in cycles) < GOAL + 0.005        # no overshoot beyond the window
+
+
+def test_daemon_moves_the_rail_in_metres_and_records_newtons(tmp_path):
+    status, (recording, held_from) = run_rail_daemon(tmp_path)
+    assert status["arm"] == "oru_testbed_on_rail"
+    assert status["joints"][0]["q"] == pytest.approx(GOAL, abs=0.5e-3)
+    cycles = [m.data for m in recording.topic("/cycle")]
+    check_rail_recording(cycles, held_from)
+
+
+def test_daemon_refuses_a_rail_without_feed_constant_in_one_line(tmp_path):
+    from spacearm.base.config.errors import ConfigError
+    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
+    with pytest.raises(ConfigError) as info:
+        Daemon(DaemonOptions(bus="virtual:unused", arm=ARM, bus_config=BUS.parent / "arm.toml", clock="lockstep",
+                             api=None, record_dir=None))
+    assert "joint 1 is prismatic" in str(info.value) and "\n" not in str(info.value)
