@@ -177,10 +177,10 @@ def drive_objects(scaling_access: str, encoder: int, gear: int, rated_torque: in
                   1: Var("Motor revolutions", UNSIGNED32, scaling_access, gear, low=1),
                   2: Var("Shaft revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
         # 6092h: travel per shaft revolution of a linear axis (feed in um, axis_scale.py); a
-        # rotary axis does not use it. Default: a 10 mm lead screw.
+        # rotary axis does not use it. Default: a 5 mm lead screw.
         Obj(od.FEED_CONSTANT, "Feed constant", ARRAY,
             subs={0: Var("Number of entries", UNSIGNED8, "ro", 2),
-                  1: Var("Feed", UNSIGNED32, scaling_access, 10_000, low=1),
+                  1: Var("Feed", UNSIGNED32, scaling_access, 5_000, low=1),
                   2: Var("Shaft revolutions", UNSIGNED32, scaling_access, 1, low=1)}),
         v(od.VELOCITY_OFFSET, "Velocity offset", INTEGER32, "rw", 0, pdo=True),
         v(od.TORQUE_OFFSET, "Torque offset", INTEGER16, "rw", 0, pdo=True),

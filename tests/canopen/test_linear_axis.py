@@ -118,7 +118,7 @@ def test_rail_boots_moves_in_metres_and_holds_its_weight(rail):
     net, sim = rail
     net.boot()
     drive = sim.node("joint_1")
-    assert [drive.get(od.FEED_CONSTANT, s) for s in (1, 2)] == [10_000, 1]       # written at bring-up
+    assert [drive.get(od.FEED_CONSTANT, s) for s in (1, 2)] == [10_000, 1]       # written at bring-up (EDS: 5000)
     assert drive.get(od.POSITION_ENCODER_RESOLUTION, 1) == 10_000
     assert net.joints[0].k == pytest.approx(1.0e6)
     assert net.cycle().joint_positions[0] == 0.3                                 # brake on
@@ -145,7 +145,7 @@ def test_rail_boots_moves_in_metres_and_holds_its_weight(rail):
 
 def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path):
     """The compact drive model (read-only 608Fh/6091h/6092h: 2^17 increments, 160:1, its default
-    10 mm lead) on the rail: the master uses what the drive reports, not the bus file's."""
+    5 mm lead) on the rail: the master uses what the drive reports, not the bus file's."""
     text = BUS.read_text().replace('device = "joint_drive"\nheartbeat_period = 0.1\n[nodes.joint]\n'
                                    'temperature_object = "0x2000"\nbrake_object = "0x2001"\nfeed_constant = 0.01',
                                    'device = "joint_drive"\nheartbeat_period = 0.1\neds = "joint_drive_compact.eds"\n'
@@ -158,8 +158,8 @@ def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path
     net = ArmNetwork(vbus, cfg)
     try:
         net.boot()
-        assert "0x6092:01=10000" in net.bringup["joint_1"].read_only
-        assert net.joints[0].k == pytest.approx((1 << 17) * 160 / 0.01)
+        assert "0x6092:01=5000" in net.bringup["joint_1"].read_only
+        assert net.joints[0].k == pytest.approx((1 << 17) * 160 / 0.005)
         start = net.enable_all().joint_positions
         state = net.move_to([start[0] + 0.05] + start[1:], 1.0, settle_cycles=40)
         assert state.joint_positions[0] == pytest.approx(start[0] + 0.05, abs=0.5e-3)
