@@ -10,6 +10,8 @@ variant, a heartbeat consumer (1016h), so that the master is tried against:
     exact_pdos    exactly one RPDO and one TPDO
     consumer      a 1016h heartbeat consumer (all the others have none)
     vendor_2000   vendor objects of its own at 2000h/2001h (not temperature/brake)
+    linear_ro     a linear axis: 608Fh / 6091h / 6092h (feed constant) read-only, a lead other
+                  than our bus file's
 
 The 402 constants are written out here from the standard on purpose (not imported from
 drivers/): the point is a second, independent reading of CiA 402.
@@ -46,6 +48,7 @@ class Variant:
     vendor: bool = False
     encoder_increments: int = 1 << 20
     gear: int = 100
+    feed: int | None = None             # 6092h.1 (um per shaft revolution): a linear axis
 
 
 VARIANTS = {
@@ -55,6 +58,8 @@ VARIANTS = {
     "exact_pdos": Variant("exact_pdos", pdos=(1, 1)),
     "consumer": Variant("consumer", consumer=True),
     "vendor_2000": Variant("vendor_2000", vendor=True),
+    # a 20 mm lead behind 1:1 and 10 000 increments: metres only match if the master reads 6092h
+    "linear_ro": Variant("linear_ro", ro_scaling=True, encoder_increments=10_000, gear=1, feed=20_000),
 }
 
 _scheduler_lock = threading.Lock()
@@ -99,7 +104,11 @@ class DurandDrive:
             gear = Array(Variable(DT.UNSIGNED32, "ro", 0), 2, name="Gear ratio")
             od[0x6091] = gear
             od[0x6076] = Variable(DT.UNSIGNED32, "ro", 2000, name="Motor rated torque")
-            for index, values in ((0x608F, (variant.encoder_increments, 1)), (0x6091, (variant.gear, 1))):
+            scaling = [(0x608F, (variant.encoder_increments, 1)), (0x6091, (variant.gear, 1))]
+            if variant.feed is not None:
+                od[0x6092] = Array(Variable(DT.UNSIGNED32, "ro", 0), 2, name="Feed constant")
+                scaling.append((0x6092, (variant.feed, 1)))
+            for index, values in scaling:
                 for sub, value in enumerate(values, start=1):
                     od.write(index, sub, value)
         if variant.vendor:

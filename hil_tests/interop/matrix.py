@@ -11,14 +11,14 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from spacearm.base.config.bus import BusConfig, BusSettings, NodeConfig, PdoLayout
+from spacearm.base.config.bus import BusConfig, BusSettings, JointSettings, NodeConfig, PdoLayout
 from spacearm.drivers.errors import DriverError
 from spacearm.drivers.network import ArmNetwork
 from hil_tests.interop.durand_drive import VARIANTS, DurandDrive, Variant
 
 CHECKS = ("boot", "enable", "csp_move", "emcy", "heartbeat_loss")
 NODE_ID = 5
-MOVE = 0.3          # rad, the CSP move every drive must track
+MOVE = 0.3          # rad (m on a linear axis), the CSP move every drive must track
 
 
 def layout(variant: Variant) -> PdoLayout:
@@ -30,8 +30,10 @@ def layout(variant: Variant) -> PdoLayout:
 
 
 def bus_config(variant: Variant, eds: Path) -> BusConfig:
+    # a linear drive's bus file says a 10 mm lead: the drive's own read-only 6092h must win
+    joint = JointSettings(feed_constant=0.01) if variant.feed is not None else None
     node = NodeConfig(name="joint_1", node_id=NODE_ID, device="joint_drive", heartbeat_period=0.1,
-                      eds=str(eds), pdo=layout(variant))
+                      eds=str(eds), pdo=layout(variant), joint=joint)
     return BusConfig(bus=BusSettings(), nodes=[node])
 
 
@@ -77,10 +79,11 @@ def run_variant(name: str, workdir: Path | None = None) -> Result:
         state = net.move_to([MOVE], 0.4)
         joint = net.joints[0]
         raw = net.sdo_read("joint_1", 0x6064, 0)
-        expected_raw = round(MOVE * variant.encoder_increments * variant.gear / (2 * math.pi))
+        travel, unit = (2 * math.pi, "rad") if variant.feed is None else (variant.feed * 1e-6, "m")
+        expected_raw = round(MOVE * variant.encoder_increments * variant.gear / travel)
         ok = abs(state.joints[0].position - MOVE) < 1e-5 and abs(raw - expected_raw) <= 1
-        result.record("csp_move", ok, f"{state.joints[0].position:.6f} rad, 6064h={raw} "
-                                      f"(drive scaling {expected_raw}), k={joint.k:.1f}/rad")
+        result.record("csp_move", ok, f"{state.joints[0].position:.6f} {unit}, 6064h={raw} "
+                                      f"(drive scaling {expected_raw}), k={joint.k:.1f}/{unit}")
         net.poll_events()
         drive.raise_fault(0x8611)
         for _ in range(3):
