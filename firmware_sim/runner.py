@@ -21,6 +21,7 @@ import can
 
 from spacearm.base.canopen import od, peer_timing
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
+from spacearm.base.config.errors import ConfigError
 from spacearm.base.transport import frame_sender, frames_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
@@ -82,6 +83,7 @@ class Simulator:
         joint_index = 0
         for cfg in self.config.nodes:
             if cfg.device == "joint_drive":
+                _check_kind(cfg, self.plant, joint_index)
                 node = JointDriveNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant, joint_index)
                 joint_index += 1
             elif cfg.device == "end_effector":
@@ -417,6 +419,16 @@ class Simulator:
 TIMER_MAX_SLEEP = 0.010   # s
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
+
+
+def _check_kind(cfg, plant: Plant, joint: int) -> None:
+    """A drive with a feed constant scales a linear axis: its plant joint must be prismatic
+    (and the other way round), or the drive and the master would count different units."""
+    prismatic = plant.joints[joint].params.prismatic
+    if prismatic != cfg.joint.linear:
+        raise ConfigError(f"{cfg.label}: the plant's joint {joint + 1} is {plant.joints[joint].params.kind} but "
+                          f"the bus file {'gives' if cfg.joint.linear else 'gives no'} feed_constant (a linear "
+                          f"axis has one, a rotary one not)")
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,

@@ -130,13 +130,16 @@ def with_kinds(plant: PlantConfig, kinds: list[str], source: str) -> PlantConfig
 
 def rated_joint_torque(settings: JointSettings, params: JointParams) -> float:
     """N m (N if prismatic) at the joint for 1000 per mille of 6077h. A prismatic joint's
-    drive scales through its screw (the plant's gear ratio, rad per m)."""
-    return settings.rated_torque * params.gear_ratio if params.prismatic else settings.rated_joint_torque
+    drive scales through its screw: its feed constant where the bus file gives one (as on the
+    CAN path), else the plant's gear ratio (rad per m)."""
+    if params.prismatic and not settings.linear:
+        return settings.rated_torque * params.gear_ratio
+    return settings.rated_joint_torque
 
 
 def increments_per_unit(settings: JointSettings, params: JointParams) -> float:
     """Position increments per rad (per m if prismatic) at the joint."""
-    if params.prismatic:
+    if params.prismatic and not settings.linear:
         return settings.encoder_increments / settings.motor_revolutions * params.gear_ratio / (2.0 * math.pi)
     return settings.increments_per_rad
 

@@ -167,3 +167,15 @@ def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path
     finally:
         net.close()
         sim.stop()
+
+
+def test_simulator_refuses_a_feed_constant_on_a_rotary_plant_joint(vbus):
+    with pytest.raises(ConfigError, match="node 1 'joint_1'.*plant's joint 1 is revolute.*gives feed_constant"):
+        Simulator(vbus, load_bus_config(BUS), ROOT / "configs/plant/oru_testbed_nominal.toml")
+
+
+def test_direct_path_scales_the_rail_as_the_can_path_does():
+    from spacearm.offline.diagnosis.direct_sim import increments_per_unit, rated_joint_torque
+    settings, params = load_bus_config(BUS).joints[0].joint, load_plant_config(PLANT).joint_params(0)
+    assert increments_per_unit(settings, params) == pytest.approx(1.0e6)
+    assert rated_joint_torque(settings, params) == pytest.approx(RATED_FORCE)
