@@ -18,12 +18,12 @@ CYCLE_SCHEMA: dict[str, Any] = {
         "t": {"type": "number", "description": "controller time, s"},
         "sync": {"type": "integer", "description": "CANopen SYNC counter (1..240)"},
         "cycle": {"type": "integer", "description": "cycle number since start (gaps = skipped)"},
-        "q_cmd": {**NUMBER_ARRAY, "description": "rad"},
-        "dq_cmd": {**NUMBER_ARRAY, "description": "rad/s, velocity offset (60B1h) sent with q_cmd; "
+        "q_cmd": {**NUMBER_ARRAY, "description": "rad (m for a prismatic joint)"},
+        "dq_cmd": {**NUMBER_ARRAY, "description": "rad/s (m/s), velocity offset (60B1h) sent with q_cmd; "
                                                   "absent in recordings made before it was recorded"},
-        "q": {**NUMBER_ARRAY, "description": "rad"},
-        "dq": {**NUMBER_ARRAY, "description": "rad/s"},
-        "tau": {**NUMBER_ARRAY, "description": "N m"},
+        "q": {**NUMBER_ARRAY, "description": "rad (m for a prismatic joint)"},
+        "dq": {**NUMBER_ARRAY, "description": "rad/s (m/s)"},
+        "tau": {**NUMBER_ARRAY, "description": "N m (N along a prismatic joint)"},
         "wrench": {**NUMBER_ARRAY, "description": "fx fy fz (N) tx ty tz (N m)"},
         "end_effector": {"type": "string"},
         "state": {"type": "string"},

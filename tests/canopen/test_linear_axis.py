@@ -7,6 +7,7 @@ rated motor torque 3.2 N m = 2011 N along the rail; the plant lays it on a 30 de
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -104,14 +105,23 @@ def _od():
     return canopen.import_od(str(load_bus_config(BUS).joints[0].eds_path), 1)
 
 
-@pytest.fixture
-def rail(vbus):
-    cfg = _limited()
+@contextmanager
+def rail_on(vbus: str, bus_path: Path = BUS):
+    """The simulated rail arm and our master on one virtual bus, the arm file's limits applied."""
+    cfg = _limited(bus_path)
     sim = Simulator(vbus, cfg, PLANT).start()
     net = ArmNetwork(vbus, cfg)
-    yield net, sim
-    net.close()
-    sim.stop()
+    try:
+        yield net, sim
+    finally:
+        net.close()
+        sim.stop()
+
+
+@pytest.fixture
+def rail(vbus):
+    with rail_on(vbus) as pair:
+        yield pair
 
 
 def test_rail_boots_moves_in_metres_and_holds_its_weight(rail):
@@ -151,12 +161,10 @@ def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path
                                    'device = "joint_drive"\nheartbeat_period = 0.1\neds = "joint_drive_compact.eds"\n'
                                    'pdo = { rpdo = [["0x6040", "0x607A"]], tpdo = [["0x6041", "0x6064", "0x6061"], '
                                    '["0x606C", "0x6077", "0x2000"]] }\n[nodes.joint]\nfeed_constant = 0.02', 1)
+    assert "joint_drive_compact.eds" in text and "feed_constant = 0.02" in text
     path = tmp_path / "rail_compact.toml"
     path.write_text(text)
-    cfg = _limited(path)
-    sim = Simulator(vbus, cfg, PLANT).start()
-    net = ArmNetwork(vbus, cfg)
-    try:
+    with rail_on(vbus, path) as (net, sim):
         net.boot()
         assert "0x6092:01=5000" in net.bringup["joint_1"].read_only
         assert net.joints[0].k == pytest.approx((1 << 17) * 160 / 0.005)
@@ -164,9 +172,6 @@ def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path
         state = net.move_to([start[0] + 0.05] + start[1:], 1.0, settle_cycles=40)
         assert state.joint_positions[0] == pytest.approx(start[0] + 0.05, abs=0.5e-3)
         assert sim.plant.joints[0].q == pytest.approx(start[0] + 0.05, abs=0.5e-3)
-    finally:
-        net.close()
-        sim.stop()
 
 
 def test_simulator_refuses_a_feed_constant_on_a_rotary_plant_joint(vbus):
