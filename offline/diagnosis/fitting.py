@@ -108,11 +108,14 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
         if not 0.5 < gain[0] < 1.5:          # the shape must explain the residual at its own size
             sse = np.inf
     else:
-        coef, sse = _lstsq(X[train], y[train])
         scale = np.sqrt(np.mean(X[train] ** 2, axis=0))
-        if np.any(scale < 1e-6 * max(float(scale.max()), 1e-300)) or np.any(scale == 0.0):
-            sse = np.inf                     # the recording never excites this shape
-        elif any(c < 0.0 for c, name in zip(coef, columns) if name in POSITIVE):
+        whole = np.sqrt(np.mean(X ** 2, axis=0))     # a shape the held-out rows excite but these do not
+        if np.any(scale < 1e-6 * np.maximum(max(float(scale.max()), 1e-300), whole)) or np.any(scale == 0.0):
+            # the recording never excites this shape: a least-squares coefficient would be noise
+            coef, sse = np.zeros(X.shape[1]), np.inf
+        else:
+            coef, sse = _lstsq(X[train], y[train])
+        if any(c < 0.0 for c, name in zip(coef, columns) if name in POSITIVE):
             sse = np.inf                     # friction that pushes the joint along is not friction
     pred = X @ coef
     n = int(train.sum())

@@ -138,3 +138,19 @@ def test_stick_slip_stiction_is_read_from_the_breakaway_torque():
     print(f"stiction true 27 fitted {fitted:.4g} +- {half:.2g} ({first.fit.judged_by})")
     assert first.fit.judged_by == "breakaway"
     assert abs(fitted - 27.0) <= 0.15 * 27.0 and abs(fitted - 27.0) <= half
+
+
+def test_a_shape_the_fitting_rows_do_not_excite_is_refused_not_blown_up():
+    """Stribeck's narrow bump only where the held-out rows start the joint: on the fitting rows
+    the column is ~1e-300, and a least-squares coefficient of 1e281 overflowed the held-out RMS."""
+    import warnings
+    x = np.zeros((80, 1))
+    x[60:, 0] = 0.5
+    x[:40, 0] = 1e-300
+    y = np.sin(np.arange(80.0))
+    train = np.arange(80) < 40
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        fit = fit_features(("stribeck",), "tau", 0, ("stribeck_friction",), (0.0025,), x, y, train)
+    assert fit.sse_train == math.inf and fit.p_value == 1.0 and np.all(fit.coef == 0.0)
+    assert math.isfinite(fit.rms_heldout_after) and fit.rms_heldout_after == fit.rms_heldout_before
