@@ -4,35 +4,21 @@ feed constant, a move of the rail to a target in metres, held, and the recording
 tau of the rail in m and N (the force that holds the slide's weight on the plant's ramp)."""
 from __future__ import annotations
 
-import threading
 import time
-import uuid
 
 import pytest
 
 from spacearm.controller.recording.mcap_reader import read_recording
 from tests.canopen.test_linear_axis import ARM, BUS, PLANT, RATED_FORCE, rail_hold
+from tests.daemon.lockstep_daemon import enabled_daemon
 
 GOAL = 0.55      # m, from the plant's 0.3 m
 STEP = 1.0e-6    # m, the rail's encoder and wire increment
 
 
 def run_rail_daemon(runs) -> tuple[dict, object]:
-    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
-    from spacearm.firmware_sim.runner import start_simulator
-    bus = f"virtual:rail-{uuid.uuid4().hex[:8]}"
-    sim = start_simulator(bus, BUS, plant=PLANT)
-    daemon = Daemon(DaemonOptions(bus=bus, arm=ARM, bus_config=BUS, clock="lockstep", api=None, record_dir=runs))
-    try:
-        daemon.start()
-        threading.Thread(target=daemon.run, daemon=True).start()
-        key = daemon.lease.take("test")
-        call = lambda cmd, **args: daemon.handlers.handle(None, cmd, {"lease": key, **args})   # noqa: E731
-        call("enable")
+    with enabled_daemon(PLANT, arm=ARM, bus_config=BUS, record_dir=runs) as (daemon, call):
         deadline = time.monotonic() + 120      # only ends a hung test: lockstep runs as fast as it can
-        while daemon.status()["state"] != "enabled":
-            assert time.monotonic() < deadline, daemon.status()["stop_reason"]
-            time.sleep(0.02)
         home = [j["q"] for j in daemon.status()["joints"]]
         finished = daemon.status()["motions_finished"]
         call("move_joints", q=[GOAL] + home[1:])
@@ -44,11 +30,6 @@ def run_rail_daemon(runs) -> tuple[dict, object]:
             time.sleep(0.02)
         status = daemon.status()
         assert status["state"] == "enabled", status["stop_reason"]
-    finally:
-        daemon.request_stop()
-        time.sleep(0.1)
-        daemon.shutdown()
-        sim.stop()
     [path] = runs.glob("*.mcap")
     return status, (read_recording(path), held_from)
 

@@ -104,24 +104,10 @@ def test_pause_and_resume_stay_within_the_acceleration_limits(kind):
 
 def test_pause_and_resume_commands_leave_events():
     """Through the daemon's own oru.* commands on a lockstep daemon over the virtual bus."""
-    import threading
     import time
-    import uuid
-    from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
-    from spacearm.firmware_sim.runner import start_simulator
-    bus = f"virtual:pause-{uuid.uuid4().hex[:8]}"
-    sim = start_simulator(bus, plant="configs/oru/plant_cell.toml")
-    daemon = Daemon(DaemonOptions(bus=bus, clock="lockstep", api=None, record_dir=None))
-    try:
-        daemon.start()
-        threading.Thread(target=daemon.run, daemon=True).start()
-        key = daemon.lease.take("test")
-        call = lambda cmd, **args: daemon.handlers.handle(None, cmd, {"lease": key, **args})   # noqa: E731
-        call("enable")
+    from tests.daemon.lockstep_daemon import enabled_daemon
+    with enabled_daemon("configs/oru/plant_cell.toml", timeout=60) as (daemon, call):
         deadline = time.monotonic() + 60
-        while daemon.status()["state"] != "enabled":
-            assert time.monotonic() < deadline
-            time.sleep(0.02)
         call("oru.run", stages=[1])
         time.sleep(0.5)
         assert call("oru.pause") == "pausing"
@@ -132,8 +118,3 @@ def test_pause_and_resume_commands_leave_events():
         time.sleep(0.2)
         messages = [e["message"] for e in daemon.status()["events"] if e["kind"] == "oru"]
         assert messages == ["pause: ORU changeout pausing", "resume: ORU changeout resuming"]
-    finally:
-        daemon.request_stop()
-        time.sleep(0.1)
-        daemon.shutdown()
-        sim.stop()
