@@ -26,13 +26,13 @@ from typing import Callable
 
 import numpy as np
 
-from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, JOINT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals,
-                                            by_name)
+from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, TORQUE_PAIRS, VELOCITY_DEADBAND, Signals, by_name,
+                                                   joint_candidates)
 from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rated_joint_torque, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
-from spacearm.offline.diagnosis.honesty import confirmed, equally_good, moved, uncertain
+from spacearm.offline.diagnosis.honesty import confirmed, count_reversals, equally_good, moved, uncertain
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
@@ -202,8 +202,8 @@ def _best_for_channel(fits: list[ChannelFit]) -> ChannelFit | None:
 
 
 def _torque_fits(table: RecordingTable, sim: SimTraces, quiet: SimTraces, j: int,
-                 train: np.ndarray) -> list[ChannelFit]:
-    """Significant torque-channel explanations of joint j, best first."""
+                 train: np.ndarray, kind: str = "revolute") -> list[ChannelFit]:
+    """Significant torque-channel explanations of joint j (of this kind), best first."""
     s = _signals(table, quiet, j)
     y = table.tau[:, j] - sim.tau[:, j]
     # Rows where the nominal joint rests are left out of the fits: with static friction the
@@ -221,7 +221,7 @@ def _torque_fits(table: RecordingTable, sim: SimTraces, quiet: SimTraces, j: int
     held = ~train & (np.abs(s.dq) > VELOCITY_DEADBAND)
     if held.sum() < 0.2 * (~train).sum():
         held = ~train
-    fits = {c.effect: fit_candidate(c, s, y, fit_rows, j, held) for c in JOINT_CANDIDATES if c.channel == "tau"}
+    fits = {c.effect: fit_candidate(c, s, y, fit_rows, j, held) for c in joint_candidates(kind) if c.channel == "tau"}
     ranked = _ranked(list(fits.values()))
     if not ranked:
         return []
@@ -229,8 +229,8 @@ def _torque_fits(table: RecordingTable, sim: SimTraces, quiet: SimTraces, j: int
     pairs = []
     for a, b in TORQUE_PAIRS:
         if best.effects[0] in (a, b):
-            pairs.append(fit_pair(by_name(a), by_name(b), s, y, fit_rows, j, fits[a].shape[0], fits[b].shape[0],
-                                  held))
+            pairs.append(fit_pair(by_name(a, kind), by_name(b, kind), s, y, fit_rows, j, fits[a].shape[0],
+                                  fits[b].shape[0], held))
     pair = _best_for_channel(pairs)
     block = common_block([best, pair]) if pair is not None else 1
     # a second effect must earn its place: lower BIC and clearly lower held-out error
@@ -263,13 +263,6 @@ def _latency_fit(table: RecordingTable, sim: SimTraces, j: int, train: np.ndarra
     s = _signals(table, sim, j)
     y = table.q[:, j] - sim.q[:, j]
     return _best_for_channel([fit_candidate(by_name("latency"), s, y, train, j)])
-
-
-def _reversals(v: np.ndarray) -> int:
-    """Velocity sign changes between real motions (a quarter of the top speed: the servo's
-    settling wiggle from the first measured position is no reversal)."""
-    moving = v[np.abs(v) > max(VELOCITY_DEADBAND, 0.25 * float(np.max(np.abs(v))))]
-    return int(np.count_nonzero(np.diff(np.sign(moving))))
 
 
 def _onset(t: np.ndarray, residual: np.ndarray, noise: float) -> float | None:
@@ -320,7 +313,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     coarse_torque = {f.joint for f in sensors if f.effect == "torque_quantisation"}
     for j in active:
         report(f"fitting joint {j + 1}", 0.1 + 0.6 * j / n)
-        ranked = _torque_fits(table, sim, quiet, j, train)
+        ranked = _torque_fits(table, sim, quiet, j, train, kinds[j])
         if j in coarse_torque:
             # a coarse torque quantum clips small torques to zero: that is no drive saturation
             ranked = [f for f in ranked if f.effects != ("torque_saturation",)]
@@ -431,7 +424,7 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         name = _channel_name(fit)
         ch = next(c for c in channels if c.name == name)
         params, errs = plant_parameters(fit)
-        reversals = _reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
+        reversals = count_reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
         kind = kinds[fit.index] if fit.channel != "wrench" else "revolute"
         text = describe(fit, params, errs, reversals, kind)
         if not fit.by_envelope and uncertain(params, errs):
@@ -454,14 +447,18 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             for alt in alternatives.get(fit.index, []):
                 p, e = plant_parameters(alt)
                 alts.append(describe(alt, p, e, reversals, kind).split(": ", 1)[1] +
-                            _why_alike(quiet.dq[:, fit.index], kind))
+                            _why_alike(quiet.dq[:, fit.index], kind, fit, alt))
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
 
 
-def _why_alike(dq: np.ndarray, kind: str = "revolute") -> str:
-    from spacearm.offline.diagnosis.honesty import one_way, single_speed
+def _why_alike(dq: np.ndarray, kind: str = "revolute", best: ChannelFit | None = None,
+               alt: ChannelFit | None = None) -> str:
+    from spacearm.offline.diagnosis.honesty import one_way, same_drag, single_speed
+    if best is not None and alt is not None and same_drag(best, alt, dq):
+        return (" (the joint moved one way only: a constant force along the axis and friction are the same drag "
+                "there; they differ at reversals and at rest)")
     speed = single_speed(dq)
     if speed is not None:
         return (f" (the joint moved at one speed, about {speed:.3g} {units_of(kind).velocity}: these laws differ "

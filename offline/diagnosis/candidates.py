@@ -77,13 +77,26 @@ FT_CANDIDATES: tuple[Candidate, ...] = (
     Candidate("ft_drift", "wrench", ("bias", "drift"), (), lambda s, _: np.column_stack([np.ones(len(s.t)), s.t])),
 )
 
+# A prismatic joint's load: the plant's G cos(angle) along the axis, the same at every position
+# (plant.py). One constant column; cos(q) and -sin(q) of a position in metres only stand in for
+# a constant over a short stroke and trade off against each other over a long one.
+LOAD_FORCE = Candidate("gravity_load", "tau", ("load_force",), (), lambda s, _: np.ones((len(s.t), 1)))
+
+
+def joint_candidates(kind: str = "revolute") -> tuple[Candidate, ...]:
+    """The catalogue for one joint of this kind ("revolute" or "prismatic")."""
+    if kind != "prismatic":
+        return JOINT_CANDIDATES
+    return tuple(LOAD_FORCE if c.effect == "gravity_load" else c for c in JOINT_CANDIDATES)
+
+
 # Pairs on one joint's torque channel (two effects at once): features side by side.
 TORQUE_PAIRS: tuple[tuple[str, str], ...] = (("coulomb", "viscous"), ("coulomb", "gravity_load"),
                                              ("viscous", "gravity_load"), ("stribeck", "viscous"))
 
 
-def by_name(name: str) -> Candidate:
-    for c in JOINT_CANDIDATES + FT_CANDIDATES:
+def by_name(name: str, kind: str = "revolute") -> Candidate:
+    for c in joint_candidates(kind) + FT_CANDIDATES:
         if c.effect == name:
             return c
     raise KeyError(name)

@@ -10,7 +10,7 @@ from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
-from spacearm.firmware_sim.plant import PlantConfig
+from spacearm.firmware_sim.plant import JointParams, PlantConfig
 
 CI95 = 1.96
 
@@ -28,6 +28,12 @@ def plant_parameters(fit: ChannelFit) -> tuple[dict[str, float], dict[str, float
             p["stribeck_friction"], e["stribeck_friction"] = float(coef["stribeck_friction"]), \
                 float(err["stribeck_friction"])
             p["stribeck_velocity"] = float(shape)
+        elif effect == "gravity_load" and "load_force" in coef:
+            # a slide's load: the plant's G cos(angle) along the axis, so |F| at angle 0 (pulls
+            # toward -q, the servo pushes +F) or pi (pulls toward +q)
+            force = float(coef["load_force"])
+            p["gravity_torque"], p["gravity_angle"] = abs(force), 0.0 if force >= 0.0 else math.pi
+            e["gravity_torque"] = float(err["load_force"])
         elif effect == "gravity_load":
             c, s = coef["load_cos"], coef["load_sin"]
             amp = float(math.hypot(c, s))
@@ -113,6 +119,8 @@ def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
             bias[fit.index] += p.get("bias", 0.0)
             drift[fit.index] += p.get("drift", 0.0)
             continue
+        if "gravity_torque" in p and joints[fit.index].prismatic:
+            p = _on_the_slide(joints[fit.index], p)
         update = {}
         for key, value in p.items():
             if key == "torque_limit_joint":
@@ -124,3 +132,11 @@ def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
         joints[fit.index] = joints[fit.index].model_copy(update=update)
     return nominal.model_copy(update={"joints": joints,
                                       "ft": nominal.ft.model_copy(update={"bias": tuple(bias), "drift": tuple(drift)})})
+
+
+def _on_the_slide(nominal: JointParams, p: dict[str, float]) -> dict[str, float]:
+    """A fitted load force on a prismatic joint added to the nominal one (a known weight on a
+    vertical rail stays when a payload's is found missing): only G cos(angle), the force along
+    the axis, acts on a slide, so the sum is written as its size at angle 0 or pi."""
+    along = nominal.gravity_torque * math.cos(nominal.gravity_angle) + p["gravity_torque"] * math.cos(p["gravity_angle"])
+    return p | {"gravity_torque": abs(along), "gravity_angle": 0.0 if along >= 0.0 else math.pi}

@@ -113,6 +113,10 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
         if np.any(scale < 1e-6 * np.maximum(max(float(scale.max()), 1e-300), whole)) or np.any(scale == 0.0):
             # the recording never excites this shape: a least-squares coefficient would be noise
             coef, sse = np.zeros(X.shape[1]), np.inf
+        elif _one_shape(X[train] / scale):
+            # two effects of one shape on these rows (a constant force and Coulomb friction on a
+            # one-way motion): how the fit splits it between them would be arbitrary
+            coef, sse = np.zeros(X.shape[1]), np.inf
         else:
             coef, sse = _lstsq(X[train], y[train])
         if any(c < 0.0 for c, name in zip(coef, columns) if name in POSITIVE):
@@ -138,6 +142,14 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
     return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
                       block, pred, n, k)
+
+
+def _one_shape(X: np.ndarray) -> bool:
+    """Whether the (scaled) columns are linearly dependent: one shape in two names."""
+    if X.shape[1] < 2:
+        return False
+    sv = np.linalg.svd(X, compute_uv=False)
+    return bool(sv[-1] < 1e-9 * sv[0])
 
 
 def _excited_lstsq(X: np.ndarray, y: np.ndarray, rows: np.ndarray) -> np.ndarray | None:

@@ -36,11 +36,20 @@ def one_way(dq: np.ndarray) -> bool:
     return len(v) > 0 and bool(np.all(v > 0) or np.all(v < 0))
 
 
+def count_reversals(v: np.ndarray) -> int:
+    """Velocity sign changes between real motions (a quarter of the top speed: the servo's
+    settling wiggle from the first measured position is no reversal)."""
+    moving = v[np.abs(v) > max(VELOCITY_DEADBAND, 0.25 * float(np.max(np.abs(v))))]
+    return int(np.count_nonzero(np.diff(np.sign(moving))))
+
+
 def equally_good(best: ChannelFit, ranked: list[ChannelFit], dq: np.ndarray) -> list[ChannelFit]:
     """Other explanations of the same channel that the recording cannot tell from the best:
     BIC within EQUAL_EVIDENCE of it (at one block length), or, at one speed, the other friction law (Coulomb
     and viscous friction are both a constant drag there), or, one way only, Coulomb for
-    Stribeck and back (the stiction bump needs starts from rest in both directions to show)."""
+    Stribeck and back (the stiction bump needs starts from rest in both directions to show),
+    or a constant force along a slide for friction and back (see same_drag). At most two laws,
+    and a constant force beside them: the one explanation that is no friction at all."""
     out: list[ChannelFit] = []
     block = common_block([best] + ranked)
     friction_only = set(best.effects) <= set(FRICTION)
@@ -49,10 +58,27 @@ def equally_good(best: ChannelFit, ranked: list[ChannelFit], dq: np.ndarray) -> 
             continue
         close = f.bic_at(block) - best.bic_at(block) < EQUAL_EVIDENCE
         same_family = friction_only and set(f.effects) <= set(FRICTION) and len(f.effects) == 1
-        if close or (same_family and (single_speed(dq) is not None or one_way(dq))):
+        if close or (same_family and (single_speed(dq) is not None or one_way(dq))) or same_drag(best, f, dq):
             if all(set(f.effects) != set(o.effects) for o in out):
                 out.append(f)
-    return out[:2]
+    return [f for f in out if not constant_force(f)][:2] + [f for f in out if constant_force(f)]
+
+
+def constant_force(fit: ChannelFit) -> bool:
+    """A load fitted as one constant force along a prismatic joint's axis."""
+    return fit.effects == ("gravity_load",) and "load_force" in fit.columns
+
+
+def same_drag(a: ChannelFit, b: ChannelFit, dq: np.ndarray) -> bool:
+    """Whether one of the two is a constant force along a slide and the other a friction law
+    the motion cannot tell from it: one way only, Coulomb friction is the same constant (and
+    Stribeck friction with it, see above), and at one speed viscous friction too. One way:
+    no reversal between real motions (the servo's settling wiggle at the start is none)."""
+    if count_reversals(dq) > 0 or constant_force(a) == constant_force(b):
+        return False
+    friction = b if constant_force(a) else a
+    return friction.effects in (("coulomb",), ("stribeck",)) or \
+        (friction.effects == ("viscous",) and single_speed(dq) is not None)
 
 
 def uncertain(values: dict[str, float], errors: dict[str, float]) -> bool:

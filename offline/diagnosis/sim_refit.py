@@ -29,7 +29,7 @@ from spacearm.firmware_sim.plant import PlantConfig
 
 # scale range searched around the linear estimate, per effect
 SCALE_RANGE = {"coulomb": (0.7, 1.4), "viscous": (0.7, 1.4), "gravity_load": (0.7, 1.4)}
-SIZE_COLUMNS = ("coulomb_friction", "viscous_friction", "load_cos", "load_sin")
+SIZE_COLUMNS = ("coulomb_friction", "viscous_friction", "load_cos", "load_sin", "load_force")
 
 
 def refine_size(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,
