@@ -138,5 +138,6 @@ def _on_the_slide(nominal: JointParams, p: dict[str, float]) -> dict[str, float]
     """A fitted load force on a prismatic joint added to the nominal one (a known weight on a
     vertical rail stays when a payload's is found missing): only G cos(angle), the force along
     the axis, acts on a slide, so the sum is written as its size at angle 0 or pi."""
-    along = nominal.gravity_torque * math.cos(nominal.gravity_angle) + p["gravity_torque"] * math.cos(p["gravity_angle"])
+    along = nominal.gravity_torque * math.cos(nominal.gravity_angle) + \
+        p["gravity_torque"] * math.cos(p["gravity_angle"])
     return p | {"gravity_torque": abs(along), "gravity_angle": 0.0 if along >= 0.0 else math.pi}

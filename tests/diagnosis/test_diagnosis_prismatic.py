@@ -291,15 +291,26 @@ def test_one_way_a_load_force_is_named_beside_friction(rail_arm: Path) -> None:
 
 
 def test_the_load_candidate_is_one_constant_column_on_a_slide_only() -> None:
-    """Revolute joints keep the cos/sin load; a slide's is one constant force (N), and no pair
-    is padded with a column the slide never has."""
-    from spacearm.offline.diagnosis.candidates import JOINT_CANDIDATES, by_name, joint_candidates
+    """Revolute joints keep the cos/sin load; a slide's is one constant force (N). Beside
+    Coulomb friction on a one-way motion it is the same column: that pair is refused (its
+    split would be arbitrary), and fitted where the motion turns."""
+    from spacearm.offline.diagnosis.candidates import JOINT_CANDIDATES, Signals, by_name, joint_candidates
+    from spacearm.offline.diagnosis.fitting import fit_pair
     assert joint_candidates("revolute") is JOINT_CANDIDATES
     assert by_name("gravity_load").columns == ("load_cos", "load_sin")
     slide = by_name("gravity_load", "prismatic")
     assert slide.columns == ("load_force",)
     assert [c.effect for c in joint_candidates("prismatic")] == [c.effect for c in JOINT_CANDIDATES]
-    from spacearm.offline.diagnosis.candidates import Signals
-    t = np.arange(0.0, 1.0, 0.02)
-    columns = slide.features(Signals(t, 0.2 + 0.5 * t, np.full_like(t, 0.5), np.zeros_like(t), 0.02), float("nan"))
-    assert columns.shape == (len(t), 1) and np.all(columns == 1.0)
+    t = np.arange(0.0, 40.0, 0.02)
+    train = t < 24.0
+    rng = np.random.default_rng(3)
+    for v, refused in ((np.full_like(t, 0.05), True), (0.1 * np.cos(0.5 * t), False)):
+        s = Signals(t, 0.3 + np.cumsum(v) * 0.02, v, np.zeros_like(t), 0.02)
+        assert np.all(slide.features(s, float("nan")) == 1.0)
+        y = 20.0 * np.sign(v) + 50.0 + rng.normal(0.0, 0.5, len(t))
+        pair = fit_pair(by_name("coulomb", "prismatic"), slide, s, y, train, 0, float("nan"), float("nan"))
+        assert pair.columns == ("coulomb_friction", "load_force")
+        if refused:
+            assert not np.isfinite(pair.sse_train) and not pair.significant
+        else:
+            assert pair.coef == pytest.approx([20.0, 50.0], rel=0.02)
