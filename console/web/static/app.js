@@ -318,23 +318,27 @@ function setupCamera(camera) {
   img.alt = "eye-in-hand camera";
   $("camera").innerHTML = "";
   $("camera").appendChild(img);
-  // Each new frame shown: [page s, camera frame number, the ORU task line at the time]
-  // (what the operator saw during which subtask; the web HIL test reads it).
+  // Each new frame shown: [page s, camera frame number, the ORU task line at the time, its
+  // decoded width in px] (what the operator saw during which subtask; the web HIL test reads
+  // it). Counted once decoded: a frame replaced before it loaded was never on the screen.
   spacearm.cameraFrames = [];
-  const shown = seq => {
+  const shown = (seq, width) => {
     const f = spacearm.cameraFrames, last = f[f.length - 1];
     if (last && last[1] === seq) return;
-    f.push([performance.now() / 1000, seq, $("task").textContent]);
+    f.push([performance.now() / 1000, seq, $("task").textContent, width]);
     if (f.length > 5000) f.shift();
   };
+  let previous = null;
   const next = async () => {
     try {
       const r = await fetch("/api/camera.png?t=" + Date.now(), { cache: "no-store" });
       if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      const seq = parseInt(r.headers.get("X-Frame-Seq") || "0", 10);
       const url = URL.createObjectURL(await r.blob());
-      img.onload = () => URL.revokeObjectURL(url);
+      img.onload = () => shown(seq, img.naturalWidth);
       img.src = url;
-      shown(parseInt(r.headers.get("X-Frame-Seq") || "0", 10));
+      if (previous) URL.revokeObjectURL(previous);   // shown or abandoned: either way done with
+      previous = url;
       setTimeout(next, 200);
     } catch (err) {
       setTimeout(next, 1000);
