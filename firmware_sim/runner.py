@@ -20,8 +20,7 @@ from pathlib import Path
 import can
 
 from spacearm.base.canopen import od, peer_timing
-from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
-from spacearm.base.config.errors import ConfigError
+from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, check_axis_kinds, load_bus_config
 from spacearm.base.transport import frame_sender, frames_sender, open_bus
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
@@ -78,12 +77,13 @@ class Simulator:
         else:
             plant_config = plant if isinstance(plant, PlantConfig) else load_plant_config(plant)
             self.plant = Plant.create(len(self.config.joints), plant_config)
+        # the drive and the master must count the same units: a linear axis has a feed constant
+        check_axis_kinds(self.config, [j.params.kind for j in self.plant.joints], "the plant")
         self.dt = self.config.bus.sync_period
         self.nodes: dict[int, SimNode] = {}
         joint_index = 0
         for cfg in self.config.nodes:
             if cfg.device == "joint_drive":
-                _check_kind(cfg, self.plant, joint_index)
                 node = JointDriveNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant, joint_index)
                 joint_index += 1
             elif cfg.device == "end_effector":
@@ -419,16 +419,6 @@ class Simulator:
 TIMER_MAX_SLEEP = 0.010   # s
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
-
-
-def _check_kind(cfg, plant: Plant, joint: int) -> None:
-    """A drive with a feed constant scales a linear axis: its plant joint must be prismatic
-    (and the other way round), or the drive and the master would count different units."""
-    prismatic = plant.joints[joint].params.prismatic
-    if prismatic != cfg.joint.linear:
-        raise ConfigError(f"{cfg.label}: the plant's joint {joint + 1} is {plant.joints[joint].params.kind} but "
-                          f"the bus file {'gives' if cfg.joint.linear else 'gives no'} feed_constant (a linear "
-                          f"axis has one, a rotary one not)")
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,

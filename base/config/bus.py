@@ -227,9 +227,10 @@ DEFAULT_BUS_CONFIG = CONFIGS / "bus" / "arm.toml"
 
 
 def check_axis_kinds(bus: BusConfig, kinds: list[str], arm_source: str) -> None:
-    """Refuse (one line) a joint drive whose kind of axis disagrees with the arm file's joint:
-    a prismatic joint needs its drive's feed constant (without it the drive would be scaled
-    in rad), a revolute joint must not have one."""
+    """Refuse (one line) a joint drive whose kind of axis disagrees with its joint's (the arm
+    file's for the master, the plant's for the simulator): a prismatic joint needs its drive's
+    feed constant (without it the drive would be scaled in rad), a revolute joint must not
+    have one."""
     for i, (node, kind) in enumerate(zip(bus.joints, kinds)):
         if kind == "prismatic" and not node.joint.linear:
             raise ConfigError(f"joint {i + 1} is prismatic in {arm_source} but its drive {node.label} has no "

@@ -175,7 +175,7 @@ def test_a_rail_drive_with_read_only_scaling_reports_its_own_feed(vbus, tmp_path
 
 
 def test_simulator_refuses_a_feed_constant_on_a_rotary_plant_joint(vbus):
-    with pytest.raises(ConfigError, match="node 1 'joint_1'.*plant's joint 1 is revolute.*gives feed_constant"):
+    with pytest.raises(ConfigError, match="joint 1 is revolute in the plant but its drive node 1 'joint_1'.*has a feed_constant"):
         Simulator(vbus, load_bus_config(BUS), ROOT / "configs/plant/oru_testbed_nominal.toml")
 
 
