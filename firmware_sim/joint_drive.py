@@ -2,6 +2,15 @@
 servo loop on the shared plant joint, following-error window, software position and
 velocity limits, torque limit, holding brake, drive temperature.
 
+Stopping as CiA 402 drives do: quick stop (605Ah option 1/5 on the slow-down ramp 6084h, 2/6
+on the quick-stop ramp 6085h; 1/2 then switch on disabled, 5/6 stay in quick stop active,
+0 power off at once), halt (6040h bit 8, 605Dh 1: 6084h, 2: 6085h; stays enabled) and the
+fault reaction (605Eh 0: power off, 1: 6084h, 2: 6085h). A ramp starts from the joint's
+measured position and speed, never from the interpolator's reference, whose speed in CSP
+carries the velocity offset on top of the position steps (twice the motion's speed). The
+power-off brake closes BRAKE_ENGAGE_TIME after the drive lets go; on a controlled stop
+the drive holds the joint at rest until it has, then leaves operation.
+
 Controlword/target values are latched at SYNC (synchronous RPDOs, CiA 301 transmission
 type 1); then the plant advances one SYNC period with this drive's servo loop running at
 the plant's sub-step rate; then the actual values are written to the OD and sampled
@@ -24,6 +33,11 @@ from spacearm.firmware_sim.node import SimNode
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
+
+# Spring-applied holding brake: from power off (or a controlled stop's request) to holding.
+# Our choice for the ORU test bed's joint brakes (the paper names the brake, not its timing).
+BRAKE_ENGAGE_TIME = 0.03  # s
+HALT_OPTION = 0x605D      # not in every EDS: absent, halt uses the slow-down ramp (option 1)
 
 ENERGISED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
@@ -56,6 +70,10 @@ class JointDriveNode(SimNode):
         self.pp_halt = False
         self.q_end = self.q_ref
         self.torque_ff = 0.0
+        self.halt = False
+        self.ramp_quick = True                 # the ramp running is 6085h's (else 6084h's)
+        self._ramp_from_actual = False         # the next servo step starts the ramp from the measurement
+        self.brake_closing = 0.0               # s the brake has been closing (power off / stop done)
         self.joint.brake_engaged = True
         self._update_od()
 
@@ -134,7 +152,17 @@ class JointDriveNode(SimNode):
                 self.pp_d = self.param(od.PROFILE_DECELERATION) / k
         self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
         self.qs_dec = self.param(od.QUICK_STOP_DECELERATION) / k
-        self.joint.brake_engaged = self.state not in ENERGISED
+        self.slow_dec = self.param(od.PROFILE_DECELERATION) / k
+        halt = bool(cw & CW_HALT) and self.state == State.OPERATION_ENABLED and self.mode == od.MODE_CSP
+        if halt and not self.halt:
+            option = self.param(HALT_OPTION) if HALT_OPTION in self.od else 1
+            self._start_ramp(quick=option == 2)
+        self.halt = halt
+        self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
+
+    def _start_ramp(self, quick: bool) -> None:
+        self.ramp_quick = quick
+        self._ramp_from_actual = True
 
     def _servo(self, s: float, q_meas: float, qd: float) -> float:
         """Position loop at the sub-step rate; returns motor torque (N m)."""
@@ -143,9 +171,12 @@ class JointDriveNode(SimNode):
             self.v_ref = 0.0
             return 0.0
         h = self._h
-        if self.state in (State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE) or \
+        if self.state in (State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE) or self.halt or \
                 (self.mode == od.MODE_PROFILE_POSITION and self.pp_halt):
-            dv = self.qs_dec * h if self.state != State.OPERATION_ENABLED else self.pp_d * h
+            if self._ramp_from_actual:
+                self._ramp_from_actual = False
+                self.q_ref, self.v_ref = q_meas, qd
+            dv = (self.ramp_dec if self.state != State.OPERATION_ENABLED or self.halt else self.pp_d) * h
             self.v_ref = 0.0 if abs(self.v_ref) <= dv else self.v_ref - math.copysign(dv, self.v_ref)
             self.q_ref += self.v_ref * h
         elif self.mode == od.MODE_CSP:
@@ -166,12 +197,7 @@ class JointDriveNode(SimNode):
 
     def on_sync_end(self, dt: float) -> None:
         j = self.joint
-        if self.state == State.FAULT_REACTION_ACTIVE and self.v_ref == 0.0:
-            self.state = State.FAULT
-        if self.state == State.QUICK_STOP_ACTIVE and self.v_ref == 0.0 and \
-                self.param(od.QUICK_STOP_OPTION) in (1, 2, 3, 4):
-            self.state = State.SWITCH_ON_DISABLED
-        j.brake_engaged = self.state not in ENERGISED
+        self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
         err = self.q_ref - j.q_measured
         window = self.param(od.FOLLOWING_ERROR_WINDOW) / self._k
@@ -189,6 +215,23 @@ class JointDriveNode(SimNode):
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
         self._update_od()
+
+    def _stop_and_brake(self, dt: float) -> None:
+        """End a finished ramp and time the brake: a controlled stop at rest holds the joint
+        until the brake has closed, then leaves operation; power off lets the joint go at once
+        and the brake closes BRAKE_ENGAGE_TIME later."""
+        at_rest = self.v_ref == 0.0 and not self._ramp_from_actual
+        option = self.param(od.QUICK_STOP_OPTION)
+        letting_go = (self.state == State.FAULT_REACTION_ACTIVE and at_rest) or \
+                     (self.state == State.QUICK_STOP_ACTIVE and at_rest and option in (1, 2, 3, 4))
+        if self.state not in ENERGISED or letting_go:
+            self.brake_closing += dt
+        else:
+            self.brake_closing = 0.0
+        engaged = self.brake_closing >= BRAKE_ENGAGE_TIME - 1e-9
+        if letting_go and engaged:
+            self.state = State.FAULT if self.state == State.FAULT_REACTION_ACTIVE else State.SWITCH_ON_DISABLED
+        self.joint.brake_engaged = engaged
 
     def _update_od(self) -> None:
         k = self._scale()
@@ -262,7 +305,7 @@ class JointDriveNode(SimNode):
             elif cmd == Command.DISABLE_VOLTAGE:
                 new = State.SWITCH_ON_DISABLED                                    # 9
             elif cmd == Command.QUICK_STOP:
-                new = State.QUICK_STOP_ACTIVE                                     # 11
+                new = self._quick_stop()                                          # 11
         elif s == State.QUICK_STOP_ACTIVE:
             if cmd == Command.DISABLE_VOLTAGE:
                 new = State.SWITCH_ON_DISABLED                                    # 12
@@ -277,6 +320,16 @@ class JointDriveNode(SimNode):
             self.fe_time = 0.0
         self.state = new
 
+    def _quick_stop(self) -> State:
+        """Transition 11 by 605Ah: the ramp its option names, or (0) power off at once."""
+        if self.faults.ignore_quick_stop:
+            return State.OPERATION_ENABLED          # fault injection: a drive that does not stop
+        option = self.param(od.QUICK_STOP_OPTION)
+        if option == 0:
+            return State.SWITCH_ON_DISABLED
+        self._start_ramp(quick=option not in (1, 5))
+        return State.QUICK_STOP_ACTIVE
+
     def _fault(self, code: int, register_bits: int = 0, emcy: bool = True) -> None:
         if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):
             if code != self.error_code:           # a further, different error while in fault
@@ -286,8 +339,10 @@ class JointDriveNode(SimNode):
                     self.emcy(code, od.ERR_REG_PROFILE | register_bits)
             return
         self.error_code = code
-        if self.state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
+        reaction = self.param(od.FAULT_REACTION_OPTION) if od.FAULT_REACTION_OPTION in self.od else 2
+        if self.state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE) and reaction != 0:
             self.state = State.FAULT_REACTION_ACTIVE                              # 13
+            self._start_ramp(quick=reaction == 2)
         else:
             self.state = State.FAULT                                              # 13 + 14
         self.put(od.ERROR_CODE, 0, code)

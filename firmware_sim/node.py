@@ -91,6 +91,7 @@ class Faults:
     corrupt_tx: int = 0             # truncate this many of the next transmitted PDOs by one byte
     ignore_sync: bool = False       # TPDOs stop (node otherwise alive)
     frozen: bool = False            # sensor values stop updating, TPDOs go on (frozen sensor)
+    ignore_quick_stop: bool = False # a joint drive stays in operation on a quick stop command
 
 
 @dataclass

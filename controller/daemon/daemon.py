@@ -93,7 +93,8 @@ class Daemon:
         bus_config = load_bus_config(options.bus_config)
         check_axis_kinds(bus_config, [j.type for j in self.arm.joints], str(options.arm))
         bus_config = with_drive_limits(bus_config, self.model.q_min, self.model.q_max,
-                                       [j.drive for j in self.arm.joints])
+                                       [j.drive for j in self.arm.joints],
+                                       [j.limits.acceleration for j in self.arm.joints])
         lockstep = options.clock == "lockstep"
         # Real time: wait for this SYNC's TPDOs at most 40 % of the period (8 ms at 20 ms),
         # leaving the rest to compute and write; a silent node costs a bounded share of the

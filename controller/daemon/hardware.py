@@ -30,17 +30,25 @@ DRIVE_LIMIT_MARGIN = 0.05  # rad
 # budget) was starved: its missing process data is reported as `late_cycle`, not counted as loss.
 LATE_CYCLE_SLACK = 0.5
 
+# 605Ah: quick-stop ramp (6085h), then switch on disabled: the drive's own stop is category 1
+QUICK_STOP_OPTION = 2
+
 # Network event kinds the supervisor treats as faults (others are informational).
 FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingCode.BOOTUP, "emcy": FindingCode.EMCY,
                 "fault_reset_failed": FindingCode.FAULT}
 
 
-def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits] = ()) -> BusConfig:
+def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits] = (),
+                      deceleration: Sequence[float] = ()) -> BusConfig:
     """The bus configuration with each joint drive's limits taken from the arm file: 607Dh
     position limits (outside the arm's, see DRIVE_LIMIT_MARGIN) and, where the arm file gives
     its drives ([joints.drive]), 607Fh maximum velocity, 6072h maximum torque and, where stated,
     6065h following-error window, so the drives (simulated or real) enforce the arm's own
-    limits, not a test bed's."""
+    limits, not a test bed's. `deceleration` (the arm file's acceleration limits) becomes each
+    drive's quick-stop ramp 6085h with 605Ah = 2 (ramp, then power off and brake): a stop the
+    drive makes on its own (node lost, fault, the master gone) keeps the arm's deceleration
+    limit, as the controller's own stop does (controller/daemon/stops.py). Bring-up writes them
+    where the drive's EDS has the objects."""
     nodes, joint = [], 0
     for node in bus.nodes:
         if node.device == "joint_drive":
@@ -55,6 +63,9 @@ def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits
                 if "following_error" in drive.model_fields_set:
                     # only where the arm file states it: the test bed's drives keep their 6065h
                     limits["following_error_window"] = float(drive.following_error)
+            if joint < len(deceleration):
+                limits["quick_stop_deceleration"] = float(deceleration[joint])
+                limits["quick_stop_option"] = QUICK_STOP_OPTION
             node = node.model_copy(update={"joint": settings.model_copy(update=limits)})
             joint += 1
         nodes.append(node)

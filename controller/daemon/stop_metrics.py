@@ -1,0 +1,98 @@
+"""What a stop did to a joint, judged from recorded positions only (issue 28's bounds).
+
+The speed is the difference of consecutive measured positions over their cycle times, never
+the drive's reported velocity or anything the controller commanded: a recording shows what
+the joint physically did. Speeds are differences over at least
+20 ms (one 50 Hz cycle, five 4 ms cycles), so a resolver step is a few per cent of the limit.
+Bounds for a stop from speed v with deceleration limit a at cycle period T: peak speed after
+the stop at most min(v, limit) + 5 % of the limit (quantisation),
+deceleration monotonic, distance within (v^2 / 2a + v T) + 10 %, time to rest within v / a + 2 T.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SPEED_TOLERANCE = 0.05     # of the pre-stop speed or limit: encoder quantisation in a difference
+DISTANCE_TOLERANCE = 0.10
+REST_TOLERANCE = 2.5e-4    # rad: a joint that stays within two resolver steps of its final position is at rest
+
+
+@dataclass(frozen=True)
+class StopFigures:
+    joint: int
+    v_stop: float            # rad/s, |dq| of the last cycle before the stop
+    peak: float              # rad/s, largest |dq| from the stop on
+    limit: float             # rad/s
+    distance: float          # rad travelled from the stop to rest
+    distance_bound: float
+    time_to_rest: float      # s (inf: never at rest in the recording)
+    time_bound: float
+    worst_rise: float        # rad/s: the largest cycle-to-cycle increase of |dq| after the stop
+    reversed: float          # rad/s: the largest speed against the pre-stop direction
+
+    def problems(self, speed_tolerance: float = SPEED_TOLERANCE) -> list[str]:
+        """Each bound the stop broke, in words; empty when it stayed inside all of them."""
+        out = []
+        quantum = speed_tolerance * self.limit        # what a resolver step does to a difference
+        allowed = min(self.v_stop, self.limit) + quantum
+        if self.peak > allowed:
+            out.append(f"joint {self.joint + 1}: peak {self.peak:.4f} rad/s after the stop above "
+                       f"{allowed:.4f} (pre-stop {self.v_stop:.4f}, limit {self.limit:.4f})")
+        if self.worst_rise > quantum:
+            out.append(f"joint {self.joint + 1}: speed rose by {self.worst_rise:.4f} rad/s in one cycle while stopping")
+        if self.reversed > quantum:
+            out.append(f"joint {self.joint + 1}: moved back at {self.reversed:.4f} rad/s")
+        if self.distance > self.distance_bound:
+            out.append(f"joint {self.joint + 1}: stopping distance {1e3 * self.distance:.1f} mrad above "
+                       f"{1e3 * self.distance_bound:.1f} mrad")
+        if self.time_to_rest > self.time_bound:
+            out.append(f"joint {self.joint + 1}: at rest after {self.time_to_rest:.3f} s, bound {self.time_bound:.3f} s")
+        return out
+
+    def row(self) -> dict:
+        return {"joint": self.joint + 1, "v_stop": self.v_stop, "peak/limit": self.peak / self.limit,
+                "distance": self.distance, "distance_bound": self.distance_bound,
+                "time": self.time_to_rest, "time_bound": self.time_bound}
+
+
+def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarray, a_limit: np.ndarray,
+                 period: float, joints: list[int] | None = None) -> list[StopFigures]:
+    """Figures per joint (all, or `joints`) for a stop at controller time `t_stop`: t (n,) and
+    q (n, dof) are the recording's cycle times and measured positions."""
+    t = np.asarray(t, float)
+    q = np.asarray(q, float)
+    k = int(np.searchsorted(t, t_stop - 1e-9))
+    if k < 0.02 / period or k >= len(t) - 0.04 / period:
+        raise ValueError(f"stop at {t_stop:.3f} s is not inside the recording ({t[0]:.3f}..{t[-1]:.3f} s)")
+    span = max(1, int(round(0.02 / period)))
+    dq = (q[span:] - q[:-span]) / (t[span:] - t[:-span])[:, None]    # dq[i]: t[i]..t[i+span]
+    out = []
+    for j in (range(q.shape[1]) if joints is None else joints):
+        v = dq[:, j]
+        v_stop = abs(v[k - span])
+        direction = np.sign(v[k - span]) or 1.0
+        after = v[k:]
+        speed = np.abs(after)
+        rest = _rest_index(q[k:, j])
+        distance = abs(q[k + rest, j] - q[k, j]) if rest is not None else abs(q[-1, j] - q[k, j])
+        along = after * direction
+        out.append(StopFigures(
+            joint=j, v_stop=float(v_stop), peak=float(speed.max()), limit=float(v_limit[j]),
+            distance=float(distance),
+            distance_bound=(1.0 + DISTANCE_TOLERANCE) * (v_stop ** 2 / (2.0 * a_limit[j]) + v_stop * period),
+            time_to_rest=float(t[k + rest] - t[k]) if rest is not None else float("inf"),
+            time_bound=float(v_stop / a_limit[j] + 2.0 * period),
+            worst_rise=float(max(0.0, np.max(np.diff(np.concatenate([[v_stop], speed]))))),
+            reversed=float(max(0.0, -along.min()))))
+    return out
+
+
+def _rest_index(q: np.ndarray) -> int | None:
+    """First index from which q stays within REST_TOLERANCE of its last value (None if it moves
+    until the end of the recording, judged by the last few samples)."""
+    if len(q) < 3 or abs(q[-1] - q[-3]) > REST_TOLERANCE:
+        return None
+    away = np.flatnonzero(np.abs(q - q[-1]) > REST_TOLERANCE)
+    return int(away[-1] + 1) if away.size else 0
