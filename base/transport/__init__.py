@@ -6,6 +6,8 @@
     loopback:HOST:PORT           channel "default" on the hub at HOST:PORT
     loopback:NAME@HOST:PORT      channel NAME on the hub at HOST:PORT
     socketcan:CHANNEL            Linux SocketCAN (vcan0 in tests, can0 on hardware)
+    SPEC_A+SPEC_B                a redundant pair of lines of one transport, e.g.
+                                 virtual:arm-a+virtual:arm-b (redundant.py)
 
 No transport delivers a node's own frames back to it (receive_own_messages=False), like a
 real CAN controller.
@@ -253,6 +255,14 @@ def open_bus(spec: str, **kwargs) -> can.BusABC:
     transports have no hub; the option is dropped).
     """
     hub_reports = kwargs.pop("hub_reports", False)
+    from .redundant import PAIR_SEPARATOR, open_pair, split_pair
+
+    if isinstance(spec, str) and PAIR_SEPARATOR in spec:
+        try:
+            split_pair(spec)
+        except ValueError as exc:
+            raise BusSpecError(str(exc)) from None
+        return open_pair(spec, open_bus, hub_reports=hub_reports, **kwargs)
     kind, rest = parse_bus_spec(spec)
     if kind == "virtual":
         # receive_own_messages=False: like a real controller, a node does not see its own frames.

@@ -1,0 +1,238 @@
+"""A redundant pair of CAN lines as one python-can bus: `A+B`.
+
+    virtual:arm-a+virtual:arm-b           two in-process buses
+    loopback:arm-a+loopback:arm-b         two channels of the loopback hub
+    socketcan:vcan0+socketcan:vcan1       two SocketCAN interfaces
+
+Line 0 (A) is the nominal line, line 1 (B) the redundant one; both use one transport kind.
+The pair models ECSS-E-ST-50-15C's two bus access architectures in one class:
+
+* parallel access (the master): frames of both lines are received, each tagged with its
+  line (`rx_line()` in the receiving thread, `rx_observers(line, can_id, data, t)`), and
+  every frame is sent on the active line (`active`), which the master's redundancy manager
+  moves (drivers/line_redundancy.py);
+* selective access (each simulated node): `tx_router(can_id) -> line` sends a frame on the
+  line its sender listens on (None: on both, for frames of no node), and the simulator
+  delivers a received frame only to the nodes listening on its line
+  (firmware_sim/line_selection.py).
+
+Faults of one line (line_faults.py: cut, babble, stuck_dominant, error_passive,
+intermittent) are applied where a frame enters the line, so every receiver loses the same
+frame, and again on receipt for the deterministic ones (a cut line also cuts frames of a
+plain bus attached to it).
+
+Why a thread-local for the receive line: python-can's Listener API has no place for it,
+and the pair delivers each frame in the thread that reads it (the sender's thread on the
+in-process bus, the Notifier's otherwise), so the line of the frame being handled is the
+one this thread set last.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable
+
+import can
+
+from .line_faults import LineFault, line_fault
+
+PAIR_SEPARATOR = "+"
+LINE_NAMES = ("A", "B")
+_READ_POLL = 0.1   # s: a line reader's recv timeout, bounds shutdown
+
+_rx = threading.local()
+
+
+def rx_line() -> int | None:
+    """The line (0 = A, 1 = B) of the frame this thread is delivering, None off a pair."""
+    return getattr(_rx, "line", None)
+
+
+def split_pair(spec: str) -> tuple[str, str] | None:
+    """'KIND:A+KIND:B' -> ('KIND:A', 'KIND:B'); None for a single line. Raises ValueError."""
+    if PAIR_SEPARATOR not in spec:
+        return None
+    parts = [p.strip() for p in spec.split(PAIR_SEPARATOR)]
+    if len(parts) != 2 or not all(parts):
+        raise ValueError(f"bus '{spec}': a redundant pair is two lines, e.g. virtual:arm-a+virtual:arm-b")
+    kinds = {p.partition(":")[0] for p in parts}
+    if len(kinds) != 1:
+        raise ValueError(f"bus '{spec}': both lines of a pair use one transport (got {', '.join(sorted(kinds))})")
+    if parts[0] == parts[1]:
+        raise ValueError(f"bus '{spec}': the two lines of a pair must differ")
+    return parts[0], parts[1]
+
+
+class _LineListener(can.Listener):
+    """Delivers one line's frames to an application listener in the sender's thread
+    (the in-process bus), tagged with the line."""
+
+    def __init__(self, pair: "RedundantBus", line: int, target: can.Listener):
+        self.pair, self.line, self.target = pair, line, target
+        self._on_frame = getattr(target, "on_frame", None)
+
+    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        if self.pair._rx_blocked(self.line):
+            return
+        self.pair._observe(self.line, can_id, data, timestamp)
+        previous, _rx.line = rx_line(), self.line
+        try:
+            if self._on_frame is not None:
+                self._on_frame(can_id, data, timestamp)
+            else:
+                self.target.on_message_received(can.Message(
+                    timestamp=timestamp, arbitration_id=can_id, data=data, is_extended_id=False, check=False))
+        finally:
+            _rx.line = previous
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if self.pair._rx_blocked(self.line):
+            return
+        self.pair._observe(self.line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        previous, _rx.line = rx_line(), self.line
+        try:
+            self.target.on_message_received(msg)
+        finally:
+            _rx.line = previous
+
+    def on_error(self, exc: Exception) -> None:
+        self.target.on_error(exc)
+
+
+class RedundantBus(can.BusABC):
+    """Two lines as one bus (see the module docstring). `open_line(spec, **kwargs)` opens
+    one line (base/transport.open_bus)."""
+
+    def __init__(self, spec_a: str, spec_b: str, open_line: Callable[..., can.BusABC], **kwargs):
+        from . import frame_sender, frames_sender
+
+        self.specs = (spec_a, spec_b)
+        first = open_line(spec_a, **kwargs)
+        try:
+            second = open_line(spec_b, **kwargs)
+        except Exception:
+            first.shutdown()
+            raise
+        self.lines: tuple[can.BusABC, can.BusABC] = (first, second)
+        self.faults: tuple[LineFault, LineFault] = (line_fault(spec_a), line_fault(spec_b))
+        self.active = 0
+        self.tx_router: Callable[[int], int | None] | None = None
+        self.rx_observers: list[Callable[[int, int, bytes, float], None]] = []
+        self.tx_observers: list[Callable[[int, int], None]] = []
+        self.sent = [0, 0]
+        self._senders = tuple(frame_sender(line) for line in self.lines)
+        self._batch_senders = tuple(frames_sender(line) for line in self.lines)
+        self._queue: queue.Queue = queue.Queue()
+        self._closing = threading.Event()
+        self.channel_info = self.channel_id = f"{spec_a}{PAIR_SEPARATOR}{spec_b}"
+        super().__init__(channel=self.channel_info)
+        self._readers = [threading.Thread(target=self._read, args=(i,), name=f"can-line-{LINE_NAMES[i]}",
+                                          daemon=True) for i in (0, 1)]
+        for reader in self._readers:
+            reader.start()
+
+    # ------------------------------------------------------------------ receive
+    def _rx_blocked(self, line: int) -> bool:
+        return self.faults[line].mode in ("cut", "babble", "stuck_dominant") and not self._closing.is_set()
+
+    def _observe(self, line: int, can_id: int, data: bytes, timestamp: float) -> None:
+        for observer in self.rx_observers:
+            observer(line, can_id, data, timestamp)
+
+    def _read(self, line: int) -> None:
+        bus = self.lines[line]
+        while not self._closing.is_set():
+            try:
+                msg = bus.recv(_READ_POLL)
+            except (can.CanError, OSError, ValueError):
+                if self._closing.is_set():
+                    return
+                continue
+            if msg is not None:
+                self._queue.put((line, msg))
+
+    def _recv_internal(self, timeout):
+        try:
+            line, msg = self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None, False
+        if self._rx_blocked(line) and not msg.is_error_frame:
+            return None, False
+        self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        _rx.line = line
+        return msg, False
+
+    # ------------------------------------------------------------------ transmit
+    def _tx_lines(self, can_id: int) -> tuple[int, ...]:
+        router = self.tx_router
+        if router is None:
+            return (self.active,)
+        line = router(can_id)
+        return (0, 1) if line is None else (line,)
+
+    def _admit(self, line: int, can_id: int, data: bytes) -> bool:
+        """The frame enters the line unless the line's fault keeps it off (then what
+        receivers see instead is sent)."""
+        for observer in self.tx_observers:
+            observer(line, can_id)
+        fault = self.faults[line]
+        if not fault.active or fault.passes():
+            self.sent[line] += 1
+            return True
+        for rid, rdata, error in fault.replacement():
+            try:
+                if error:
+                    self.lines[line].send(can.Message(is_error_frame=True, arbitration_id=0, data=b"",
+                                                      is_extended_id=False))
+                else:
+                    self._senders[line](rid, rdata)
+            except can.CanError:
+                pass     # a transport that cannot carry error frames: the frame is just lost
+        return False
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        data = bytes(msg.data)
+        for line in self._tx_lines(msg.arbitration_id):
+            if self._admit(line, msg.arbitration_id, data):
+                self.lines[line].send(msg, timeout)
+
+    def send_frame(self, can_id: int, data: bytes) -> None:
+        for line in self._tx_lines(can_id):
+            if self._admit(line, can_id, data):
+                self._senders[line](can_id, data)
+
+    def send_frames(self, frames) -> None:
+        """A burst of (can_id, data): each line's share in one write, order kept per line."""
+        per_line: tuple[list, list] = ([], [])
+        for can_id, data in frames:
+            for line in self._tx_lines(can_id):
+                if self._admit(line, can_id, data):
+                    per_line[line].append((can_id, data))
+        for line in (0, 1):
+            if per_line[line]:
+                self._batch_senders[line](per_line[line])
+
+    # ------------------------------------------------------------------ lifecycle
+    def shutdown(self) -> None:
+        if self._closing.is_set():
+            return
+        self._closing.set()
+        for reader in self._readers:
+            reader.join(2 * _READ_POLL + 0.5)
+        for line in self.lines:
+            line.shutdown()
+        super().shutdown()
+
+
+class InlineRedundantBus(RedundantBus):
+    """A pair of in-process buses: listeners may take frames inline in the sender's thread."""
+
+    def add_inline_listener(self, listener: can.Listener) -> None:
+        for i, line in enumerate(self.lines):
+            line.add_inline_listener(_LineListener(self, i, listener))
+
+
+def open_pair(spec: str, open_line: Callable[..., can.BusABC], **kwargs) -> RedundantBus:
+    a, b = split_pair(spec)
+    inline = a.partition(":")[0] == "virtual"
+    return (InlineRedundantBus if inline else RedundantBus)(a, b, open_line, **kwargs)
