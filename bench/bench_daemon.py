@@ -23,6 +23,7 @@ import argparse
 import os
 import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -36,6 +37,7 @@ sys.path.insert(0, str(ROOT))
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions  # noqa: E402
 from spacearm.base.runtime.priority import use_normal  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
+from bench.reference_work import pdo_floor_seconds, reference_loop_seconds  # noqa: E402
 
 POLLER = """
 import sys, time
@@ -52,6 +54,10 @@ print(n)
 ORU = ("configs/arm/oru_testbed_6dof.toml", "configs/bus/arm.toml", "configs/plant/oru_testbed_nominal.toml")
 PANDA = ("configs/arm/panda.toml", "configs/bus/panda.toml", "configs/plant/panda_nominal.toml")  # rigid body, 7 joints
 
+
+# lockstep cycle wall time as a share of the reference loop's, per row (issue 35)
+REFERENCE_TARGETS = {"virtual, recording on": 0.0023, "loopback, recording on": 0.0034,
+                     "virtual, recording on, Panda rigid body": 0.0033}
 
 _HUB: list = []
 
@@ -93,6 +99,13 @@ def start_sim(bus: str, rt_priority: int, arm: tuple[str, str, str] = ORU):
         if "nodes ready" in line:
             break
     return (lambda: (proc.terminate(), proc.wait(10))), None, proc.pid
+
+
+def node_frames(sim) -> int:
+    """CAN frames the in-process simulated nodes received and sent so far (0 out of process)."""
+    if sim is None:
+        return 0
+    return sum(node.stats.rx_frames + node.stats.tx_frames for node in sim.nodes.values())
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -149,12 +162,14 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
         wall = time.monotonic()
         own_cpu = time.process_time()
         sim_process_cpu = process_cpu(sim_pid) if sim is None else 0.0
+        frames = node_frames(sim)
         steal = CpuSteal()
         load = os.getloadavg()[0]
         daemon.run(max_cycles=cycles)
         wall = time.monotonic() - wall
         own_cpu = time.process_time() - own_cpu
         sim_process_cpu = process_cpu(sim_pid) - sim_process_cpu if sim is None else None
+        frames = node_frames(sim) - frames
         steal_fraction = steal.fraction()
         load = max(load, os.getloadavg()[0])
         sampler_stop.set()
@@ -169,6 +184,7 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
                 # nothing is injected: any stop is a false fault (code), late cycles are excused misses
                 "stop": daemon.core.stop_reason, "late_cycles": daemon.hardware.late_cycles,
                 "starved_checks": daemon.hardware.network.stats.starved_checks,
+                "frames_per_cycle": frames / max(1, s.cycles) if sim is not None else None,
                 "polls": polls, "rss_start": rss_start, "rss_end": rss_mb(),
                 "rss_mid": memory[len(memory) // 2] if memory else rss_start}
     finally:
@@ -202,12 +218,15 @@ def main() -> None:
     # and loopback (simulator in its own process, frames through the hub).
     # Recording on as the daemon runs by default; once off to show what recording costs.
     # Then the rigid-body plant (Pinocchio) with 7 joints: the Panda of the any-arm issue.
+    # The reference workloads are timed before and after the lockstep runs, in this process.
+    reference = [] if args.realtime_only else [reference_loop_seconds()]
     locks = [] if args.realtime_only else [
         (f"{kind}, recording {'on' if rec else 'off'}", run(kind, "lockstep", 0.02, args.lockstep_cycles, 0, rec))
         for kind, rec in (("virtual", records), ("virtual", None), ("loopback", records))]
     if not args.realtime_only:
         locks.append(("virtual, recording on, Panda rigid body",
                       run("virtual", "lockstep", 0.02, args.lockstep_cycles, 0, records, PANDA)))
+        reference.append(reference_loop_seconds())
     shutil.rmtree(records, ignore_errors=True)
     for hub in _HUB:
         hub.stop()
@@ -238,19 +257,38 @@ def main() -> None:
             (f"real time {name}: daemon RSS start / mid / end",
              f"{r['rss_start']:.1f} / {r['rss_mid']:.1f} / {r['rss_end']:.1f} MB", "no growth", ""),
         ]
+    if reference:
+        ref_wall = statistics.median(r[0] for r in reference)
+        ref_cpu = statistics.median(r[1] for r in reference)
+        rows.append(("reference loop (s += i*i, 2e6 i) wall / CPU, median before+after",
+                     f"{ms(ref_wall)} / {ms(ref_cpu)}", "", ""))
     for kind, lock in locks:
         speedup = lock["cycles"] * lock["period"] / lock["wall"]
         nodes = lock["joints"] + 2
-        target = 20 if "Panda" in kind else 25
-        rows.append((f"lockstep speed-up over real time ({nodes} nodes, {kind})",
+        wall_per_cycle = lock["wall"] / lock["cycles"]
+        cpu_per_cycle = lock["process_cpu"] / lock["cycles"]
+        # Targets in reference units (issue 35): 3x below the slower machine's measured cost,
+        # 2.51 / 3.73 / 3.65 ms per cycle against its ~370 ms reference loop.
+        target = REFERENCE_TARGETS.get(kind)
+        # Judged on CPU (process CPU per cycle against the loop's CPU): on a busy machine both wall
+        # figures stretch, but by how much depends on how many threads each keeps runnable.
+        share = cpu_per_cycle / ref_cpu
+        rows.append((f"lockstep cycle / reference loop ({nodes} nodes, {kind})",
+                     f"{100 * share:.3f} % CPU, {100 * wall_per_cycle / ref_wall:.3f} % wall",
+                     f"<= {100 * target:.2f} %" if target else "", share <= target if target else ""))
+        if lock["frames_per_cycle"]:
+            floor_wall, _ = pdo_floor_seconds(round(lock["frames_per_cycle"] * 1000))
+            rows.append(("  cycle / PDO floor (same frames packed+unpacked with struct)",
+                         f"{wall_per_cycle / (floor_wall / 1000):.0f}x ({lock['frames_per_cycle']:.1f} frames/cycle)",
+                         "", ""))
+        rows.append((f"  speed-up over real time (for information)",
                      f"{speedup:.1f}x ({lock['cycles']} cycles in {lock['wall']:.1f} s, "
-                     f"{1e3 * lock['wall'] / lock['cycles']:.2f} ms/cycle)", f">= {target}x", speedup >= target))
+                     f"{1e3 * wall_per_cycle:.2f} ms/cycle)", "", ""))
         rows.append(("  machine load / host CPU steal", f"{lock['load']:.1f} / {100 * lock['steal']:.1f} %", "", ""))
         rows.append(("  false faults (stops, nothing injected) / late cycles / starved checks",
                      ("0" if lock["stop"] is None else f"1: [{lock['stop'].code.value}]")
                      + f" / {lock['late_cycles']} / {lock['starved_checks']}", "0", lock["stop"] is None))
-        rows.append(("  process CPU per cycle (all threads)", ms(lock["process_cpu"] / lock["cycles"]),
-                     "<= 0.8 ms" if target == 25 else "", ""))
+        rows.append(("  process CPU per cycle (all threads)", ms(cpu_per_cycle), "", ""))
         if lock["sim_process_cpu"] is not None:     # loopback: the simulator is its own process
             rows.append(("  simulator process CPU per cycle (all threads)",
                          ms(lock["sim_process_cpu"] / lock["cycles"]), "", ""))
@@ -258,6 +296,11 @@ def main() -> None:
             if samples:
                 rows.append((f"  CPU per cycle, {label}: median / p99",
                              f"{ms(percentile(samples, 0.5))} / {ms(percentile(samples, 0.99))}", "", ""))
+    by_kind = dict(locks)
+    if "virtual, recording on" in by_kind and "virtual, recording off" in by_kind:
+        on, off = (by_kind[k]["wall"] / by_kind[k]["cycles"] for k in ("virtual, recording on", "virtual, recording off"))
+        rows.append(("recording's share of the lockstep cycle (8 nodes, virtual)", f"{100 * (on - off) / on:.0f} %",
+                     "<= 10 %", (on - off) / on <= 0.10))
     print(f"machine: {platform.platform()} | {os.cpu_count()} cores | python {platform.python_version()} | "
           f"real-time transport {args.transport} | load {os.getloadavg()[0]:.2f} at the end | "
           f"real-time runs: {realtime[0][1]['scheduling'] if realtime else '-'}")
