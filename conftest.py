@@ -1,0 +1,35 @@
+"""Suite-wide report: wall time beside CPU time (this process and every child it reaped: the
+simulators, daemons, hubs and the vcan VM) and the machine's speed, from the reference loop of
+bench/reference_work.py timed once at the start. A suite that fits a 3x slower machine is read
+off these lines: CPU minutes scale with the machine, wall minutes also with its load."""
+from __future__ import annotations
+
+import os
+import resource
+import time
+
+_started: dict[str, float] = {}
+
+
+def _cpu_seconds() -> float:
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def pytest_sessionstart(session):
+    from bench.reference_work import reference_loop_seconds
+    _started["wall"], _started["cpu"] = time.monotonic(), _cpu_seconds()
+    _started["reference_wall"], _started["reference_cpu"] = reference_loop_seconds(repeats=1)
+    _started["load"] = os.getloadavg()[0]
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus, config):
+    if "wall" not in _started:
+        return
+    wall, cpu = time.monotonic() - _started["wall"], _cpu_seconds() - _started["cpu"]
+    terminalreporter.write_sep("-", "suite time")
+    terminalreporter.write_line(
+        f"wall {wall / 60:.1f} min, CPU {cpu / 60:.1f} min (pytest and the children it reaped) on "
+        f"{os.cpu_count()} cores; reference loop {1e3 * _started['reference_wall']:.0f} ms wall / "
+        f"{1e3 * _started['reference_cpu']:.0f} ms CPU at the start (the slower machine: 320-420 ms); "
+        f"load {_started['load']:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
