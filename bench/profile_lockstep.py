@@ -60,7 +60,45 @@ def profile_in_process(args) -> None:
     print(f"{args.cycles} lockstep cycles, recording {'on' if args.record else 'off'}, load {os.getloadavg()[0]:.1f}: "
           f"{1e3 * cpu / args.cycles:.2f} ms thread CPU per cycle (profiled), "
           f"{stats.total_calls / args.cycles:.0f} Python calls per cycle")
+    print_parts(stats, args.cycles)
     stats.sort_stats("tottime").print_stats(args.top)
+
+
+# Which part of the cycle a function belongs to, by where it lives (first match wins).
+PARTS = (
+    ("simulator: plant physics", ("firmware_sim/plant", "firmware_sim/rigid_body", "firmware_sim/effects",
+                                  "firmware_sim/contact")),
+    ("simulator: drives (CiA 402, servo)", ("firmware_sim/joint_drive", "firmware_sim/end_effector",
+                                            "firmware_sim/ft_sensor")),
+    ("simulator: object dictionary, PDO/SDO engine", ("firmware_sim/node", "firmware_sim/sdo_session")),
+    ("simulator: SYNC routing", ("firmware_sim/",)),
+    ("bus: transport and frame delivery", ("base/transport", "site-packages/can/")),
+    ("master: PDO decode/encode, device drivers", ("drivers/",)),
+    ("controller: recording hand-off", ("controller/recording", "controller/daemon/recorder")),
+    ("controller: supervision", ("controller/daemon/supervision",)),
+    ("controller: daemon cycle, modes, planning", ("controller/",)),
+    ("kinematics and spatial math", ("base/kinematics", "base/spatial")),
+    ("other spacearm code", ("/work/", "spacearm")),
+)
+
+
+def part_of(filename: str) -> str:
+    for part, places in PARTS:
+        if any(place in filename for place in places):
+            return part
+    return "Python built-ins and libraries"
+
+
+def print_parts(stats: pstats.Stats, cycles: int) -> None:
+    """Own (exclusive) CPU per cycle grouped by part of the cycle: the bench's docstring table."""
+    own: Counter = Counter()
+    for (filename, _line, _name), (_cc, _nc, tottime, _ct, _callers) in stats.stats.items():
+        own[part_of(filename)] += tottime
+    total = sum(own.values())
+    print(f"\n{'part of the cycle (own CPU, profiled)':<48} {'ms/cycle':>9} {'share':>7}")
+    for part, seconds in own.most_common():
+        print(f"{part:<48} {1e3 * seconds / cycles:9.3f} {100 * seconds / total:6.1f} %")
+    print()
 
 
 def own_samples(raw: Path) -> tuple[Counter, int]:
