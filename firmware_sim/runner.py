@@ -145,17 +145,21 @@ class Simulator:
             self.laser.start()
         return self
 
-    def attach_camera(self, sink, scene=None, frame_rate: float | None = None, render_process: bool = False):
+    def attach_camera(self, sink, scene=None, frame_rate: float | None = None, render_process: bool | None = None):
         """Serve the eye-in-hand camera from this plant into `sink` (ShmFrameRing for another
-        process, LocalFrameSource in-process); renders on its own thread, with render_process
-        (a ring only) in a child process (firmware_sim/camera/render_process.py). Not the default:
-        on this shared machine (load 15-21) the child, competing for the same CPU share, starved
-        the nodes' heartbeats at its start-up, or, niced, kept lockstep cycles waiting > 2 s."""
+        process, LocalFrameSource in-process). render_process (default: whenever the sink is a
+        shared-memory ring) renders in a child process (firmware_sim/camera/render_process.py):
+        a render thread here, at normal priority, held the GIL the nodes' SCHED_FIFO threads
+        wait for and was preempted holding it by any other process, a priority inversion that
+        made the nodes 100+ ms late beside two CPU-bound processes (bench/bench_realtime.py gil).
+        A LocalFrameSource (in-process tests) renders on a thread here."""
         from spacearm.firmware_sim.camera.service import CameraService
         from spacearm.base.config.scene import DEFAULT_SCENE
         # the camera sees the cell the contact world is built from (the plant's store errors included)
         scene = scene or getattr(self.plant.environment, "scene", None) or DEFAULT_SCENE
         self.camera = CameraService.from_files(self.plant, sink, scene, frame_rate)
+        if render_process is None:
+            render_process = hasattr(sink, "name")
         if render_process:
             self.camera.use_render_process()
         self.camera.start()

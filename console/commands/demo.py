@@ -13,6 +13,7 @@ hidden errors (configs/plant/oru_cell_errors.toml). `--no-vision` flies 2 and 8 
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 from pathlib import Path
@@ -29,6 +30,7 @@ from spacearm.controller.recording.csv_export import export_csv
 from spacearm.offline.scenarios.changeout import ChangeoutFailed, run_changeout, start_camera
 from spacearm.offline.scenarios.checkout import CheckoutFailed, run_checkout
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
 from spacearm.drivers.errors import DriverError
 from spacearm.firmware_sim.runner import start_simulator
 
@@ -42,13 +44,18 @@ def register(app: typer.Typer) -> None:
              job: str = typer.Option("changeout", help="changeout (ORU paper Table 1, four stages) or "
                                                        "checkout (the arm's functional checkout)."),
              bus_config: Path = typer.Option(None, help="Bus file; default: configs/oru/bus_shared_machine.toml "
-                                                        "(changeout: 0.25 s heartbeats, as the ORU HIL tests use, "
-                                                        "since the camera renders in this process) or the standard one."),
+                                                        "(changeout: 0.25 s heartbeats, as the ORU HIL tests use) "
+                                                        "or the standard one."),
              clock: str = typer.Option("realtime", help="realtime (20 ms wall-clock cycle) or lockstep (fast)."),
              record_dir: Path = typer.Option(Path("runs"), help="Where the recording goes."),
              vision: bool = typer.Option(True, help="closed-loop approach on the camera (changeout); "
                                                     "--no-vision: open loop to the nominal pre-contact pose."),
-             stages: str = typer.Option("", help="changeout stages to run, e.g. 1,2 (default: all four).")) -> None:
+             stages: str = typer.Option("", help="changeout stages to run, e.g. 1,2 (default: all four)."),
+             rt_priority: int = typer.Option(50, "--rt-priority", min=0, max=99,
+                                             help="SCHED_FIFO priority of the cycle and the simulated nodes with "
+                                                  "--clock realtime, as `daemon` runs its cycle (0: normal "
+                                                  "scheduling); vision runs 10 below, the camera renders in its "
+                                                  "own process at normal priority")) -> None:
         """Main job: boot the simulated arm over CAN, run the ORU changeout, summarise."""
         if job not in ("changeout", "checkout"):
             raise CommandFailed(f"--job: expected changeout or checkout, got {job!r}")
@@ -61,8 +68,20 @@ def register(app: typer.Typer) -> None:
         console = Console()
         bus = f"virtual:demo-{time.monotonic_ns()}"
         console.print(f"[bold]spacearm[/] main job: simulated devices + daemon on [cyan]{bus}[/] ({clock} clock)")
+        realtime = clock == "realtime" and rt_priority > 0
+        if realtime:
+            # Before the nodes' threads start (they inherit it), as `daemon` does for its cycle:
+            # the nodes and the cycle share this interpreter, so every thread in it that can hold
+            # the GIL runs at this priority too (bench/bench_realtime.py gil: a normal-priority
+            # thread preempted while it holds the GIL kept a FIFO thread waiting 100+ ms).
+            sys.setswitchinterval(GIL_SWITCH_INTERVAL)
+            problem = use_fifo(rt_priority)
+            if problem:
+                console.print(f"scheduling: {problem}")
+        nodes_scheduling = describe()
         simulator = start_simulator(bus, bus_config, plant)
         daemon = None
+        scheduling = ""
         ring = None
         try:
             camera = None
@@ -71,7 +90,8 @@ def register(app: typer.Typer) -> None:
                 console.print(f"camera: {simulator.camera.period * 1e3:.0f} ms exposures rendered into shared memory "
                               f"[cyan]{camera}[/] (spacearm console-web --camera {camera} shows them)")
             daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock,
-                                          api=None, record_dir=record_dir, camera=camera))
+                                          api=None, record_dir=record_dir, camera=camera,
+                                          rt_priority=rt_priority if realtime else 0))
             started = time.monotonic()
             daemon.start()
             console.print(f"CAN network up: {daemon.hardware.node_count} nodes booted, configured by SDO "
@@ -97,6 +117,7 @@ def register(app: typer.Typer) -> None:
                     result = run_checkout(daemon, on_progress)
             daemon.request_stop()
             cycle_thread.join(timeout=5)
+            scheduling = scheduling_line(daemon, simulator, nodes_scheduling)
         except (CheckoutFailed, ChangeoutFailed, DriverError, ApiError) as exc:
             raise CommandFailed(str(exc)) from None
         finally:
@@ -107,6 +128,7 @@ def register(app: typer.Typer) -> None:
             if ring is not None:
                 ring.close()
         (_changeout_summary if job == "changeout" else _summary)(console, result)
+        console.print(scheduling)
         if result.recording:
             csv_path = Path(result.recording).with_suffix(".csv")
             exported = export_csv(result.recording, csv_path)
@@ -116,9 +138,23 @@ def register(app: typer.Typer) -> None:
 
 
 CHANGEOUT_PLANT = "configs/plant/oru_cell_errors.toml"
-# The camera renders (50-200 ms a frame) in this process beside the nodes and the daemon: on a
-# loaded 2-core machine the standard 0.1 s heartbeats were lost (0.25 s silences) in lockstep.
+# When the camera rendered in this process beside the nodes and the daemon, the standard 0.1 s
+# heartbeats were lost (0.25 s silences) in lockstep on a loaded 2-core machine; it renders in
+# its own process now, and the main job keeps the ORU HIL tests' bus.
 CHANGEOUT_BUS = Path("configs/oru/bus_shared_machine.toml")
+
+
+def scheduling_line(daemon: Daemon, simulator, nodes: str) -> str:
+    """Which scheduling each part of the main job had."""
+    parts = [f"cycle {daemon.scheduling}", f"simulated nodes {nodes}"]
+    vision = getattr(daemon, "vision", None)
+    if vision is not None:
+        parts.append(f"vision {getattr(vision, 'scheduling', 'in the cycle (lockstep)')}")
+    camera = simulator.camera
+    if camera is not None:
+        renderer = camera.render_process
+        parts.append(f"camera renderer {renderer.scheduling() if renderer is not None else 'a thread here, normal'}")
+    return "scheduling: " + "; ".join(parts)
 
 
 def _changeout_summary(console: Console, result) -> None:

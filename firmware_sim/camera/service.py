@@ -209,7 +209,11 @@ class CameraService:
         return min(self.sites, key=off_axis)
 
     def _run(self) -> None:
-        use_normal()   # rendering takes tens of ms: never at the nodes' real-time priority
+        if self.render_process is None:
+            use_normal()   # rendering takes tens of ms: never at the nodes' real-time priority
+        # else this thread only passes exposures to the render process and waits without the GIL:
+        # it keeps the nodes' priority, so the little it holds the GIL it is never preempted by
+        # ordinary processes while a node waits for it
         while True:
             with self._wake:
                 while not self._pending and not self._stop:

@@ -1,0 +1,240 @@
+"""Real time on a busy machine: what delays a SCHED_FIFO loop, and the stack beside other work.
+
+    .venv/bin/python bench/bench_realtime.py gil [--seconds 20]         # what delays a FIFO 50 thread
+    .venv/bin/python bench/bench_realtime.py render [--frames 30]       # simulated camera CPU per frame
+    .venv/bin/python bench/bench_realtime.py changeout [--runs 5]       # separate processes, stage 1, real time
+    .venv/bin/python bench/bench_realtime.py mainjob                    # `spacearm demo`, real time, camera
+
+Every section runs beside two CPU-bound processes (hil_tests/cpu_load.py, nice 0) and prints the
+load average and the CPU steal of its own interval beside each figure.
+
+The finding (section `gil`, 15 s per row beside two CPU-bound processes, load 11.6-14.5, steal
+0.6-1.8 %, switch interval 0.5 ms): a thread at SCHED_FIFO 50 waking every 20 ms, as the cycle
+and the simulator's timer do, is late by
+
+    neighbour thread in its interpreter          late p99   max      wakes > 5 ms of ~750
+    none                                          0.8 ms    81 ms     1
+    camera renderer thread, normal priority      47.5 ms   111 ms    57
+    vision worker thread, normal priority       100.0 ms   244 ms   167
+    vision worker thread, SCHED_FIFO 40           0.7 ms    85 ms     5
+    camera renderer in a child process            0.4 ms     9 ms     1
+
+and of its worst wakes with a neighbour thread, under 8 ms was its own wait for a core
+(run-queue delay, /proc/thread-self/schedstat) and none was the host's (CPU steal): the rest
+was the wait for the GIL. The renderer and the pipeline hold the GIL only between their NumPy
+and OpenCV calls (each drops it) and CPython makes a holder hand it over within the switch
+interval - but only while the holder runs. At normal priority on a loaded machine it is
+preempted while it holds the GIL, and the FIFO thread, blocked on the GIL (asleep, so it
+preempts no one), waits until the scheduler gives the holder a core again: a priority
+inversion as long as the load's time slices, not the work. Any normal-priority thread of a
+real-time process does this, whatever it computes; what it computes decides how often. Hence
+nothing runs at normal priority in a process with a real-time loop: the camera renders in its
+own process (firmware_sim/camera/render_process.py, the default for a shared-memory ring), the
+thread that hands it exposures keeps the nodes' priority, `demo` runs its nodes, cycle and
+every thread beside them at SCHED_FIFO, and the daemon's vision worker stays in the daemon at
+FIFO 40 (its row is the same as no neighbour at all). The single late wakes of 80+ ms with no
+neighbour thread at all are neither the core nor the GIL: the host (a vCPU not running for a
+while, below the 10 ms resolution of steal), the floor every row shares.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from hil_tests.cpu_load import CpuLoad  # noqa: E402
+from hil_tests.harness import CpuSteal  # noqa: E402
+from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, use_fifo, use_normal  # noqa: E402
+
+PERIOD = 0.020          # s, the control cycle
+PROBE_PRIORITY = 50     # the cycle's and the simulator's SCHED_FIFO priority
+
+
+def conditions(steal: CpuSteal) -> str:
+    """Load average and CPU steal since the last call: printed beside every figure."""
+    return f"load {os.getloadavg()[0]:.1f}, steal {100 * steal.fraction():.1f} %"
+
+
+def host_steal() -> float:
+    """s of CPU time the hypervisor gave to other guests so far, the most of any of our CPUs
+    (/proc/stat steal, in USER_HZ ticks: 10 ms steps)."""
+    with open("/proc/stat") as f:
+        return max(int(line.split()[8]) for line in f if line.startswith("cpu") and line[3].isdigit()) / 100.0
+
+
+def run_queue_wait() -> float:
+    """s the calling thread has waited for a core so far (Linux schedstat run-queue delay)."""
+    try:
+        with open("/proc/thread-self/schedstat") as f:
+            return int(f.read().split()[1]) * 1e-9
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+
+
+class Probe:
+    """A thread at SCHED_FIFO 50 that wakes every PERIOD, as the cycle does, and splits each
+    wake's lateness into its wait for a core (schedstat), the host's (CPU steal on a vCPU while
+    it slept, 10 ms steps) and the rest: the GIL, the only other thing a sleeping Python thread
+    waits for before its next bytecode."""
+
+    def __init__(self):
+        self.late: list[float] = []
+        self.core: list[float] = []
+        self.host: list[float] = []
+        self.scheduling = ""
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="probe", daemon=True)
+
+    def start(self) -> "Probe":
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+    def _run(self) -> None:
+        problem = use_fifo(PROBE_PRIORITY)
+        self.scheduling = problem or f"SCHED_FIFO {PROBE_PRIORITY}"
+        due = time.monotonic() + PERIOD
+        while not self._stop.is_set():
+            before, stolen = run_queue_wait(), host_steal()
+            time.sleep(max(0.0, due - time.monotonic()))
+            now = time.monotonic()
+            self.core.append(run_queue_wait() - before)
+            self.host.append(host_steal() - stolen)
+            self.late.append(now - due)
+            due += PERIOD
+            if due < now:                      # as the cycle does: skip, never catch up
+                due += PERIOD * int((now - due) / PERIOD + 1)
+
+
+def _render_loop(stop: threading.Event, counter: list) -> None:
+    """The camera's free-run render thread as the simulator runs it (normal priority, 30 ms gap)."""
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+    use_normal()
+    cam = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+    rng = np.random.default_rng(2)
+    while not stop.is_set():
+        cam.render(view(rng.uniform(0.18, 0.4), np.radians(rng.uniform(0, 25)), rng.uniform(0, 2 * np.pi)))
+        counter[0] += 1
+        time.sleep(0.03)
+
+
+def _vision_loop(stop: threading.Event, counter: list, priority: int) -> None:
+    """The daemon's vision worker on rendered frames: normal priority, or FIFO `priority`."""
+    from spacearm.controller.vision.pipeline import VisionPipeline
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+    use_normal()
+    cam = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+    rng = np.random.default_rng(3)
+    frames = [cam.render(view(rng.uniform(0.18, 0.4), np.radians(rng.uniform(0, 25)), rng.uniform(0, 2 * np.pi)))
+              for _ in range(8)]
+    pipe = VisionPipeline.from_configs()
+    if priority:
+        use_fifo(priority)
+    while not stop.is_set():
+        pipe.process(frames[counter[0] % len(frames)])
+        counter[0] += 1
+        time.sleep(1 / 30)
+
+
+def _render_process_loop(stop: threading.Event, counter: list) -> None:
+    """The renderer in its child process (render_process.py): this thread only waits on the pipe."""
+    from spacearm.base.config.scene import DEFAULT_SCENE, load_scene
+    from spacearm.base.vision.config import load_camera
+    from spacearm.base.vision.frames import ShmFrameRing
+    from spacearm.firmware_sim.camera.render_process import RenderProcess
+    from spacearm.firmware_sim.camera.service import marker_sites
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    use_normal()
+    cam = load_camera()
+    ring = ShmFrameRing.create(cam.sensor.width, cam.sensor.height)
+    scene = load_scene(DEFAULT_SCENE)
+    sim = CameraSimulator.from_configs()
+    site = marker_sites(scene, sim.scene.marker.marker_T_oru)[0]
+    child = RenderProcess(ring.name, scene, 30.0, 0, 1, True)
+    rng = np.random.default_rng(4)
+    from tests.vision.views import view
+    from spacearm.base.spatial import inv_transform
+    try:
+        while not stop.is_set():
+            camera_T_marker = view(rng.uniform(0.18, 0.4), np.radians(rng.uniform(0, 25)), rng.uniform(0, 2 * np.pi))
+            child.render(0.0, counter[0], site.base_T_marker @ inv_transform(camera_T_marker), frozenset())
+            counter[0] += 1
+            time.sleep(0.03)
+    finally:
+        child.close()
+        ring.close()
+
+
+NEIGHBOURS = {
+    "none": None,
+    "camera renderer thread (normal priority)": _render_loop,
+    "vision worker thread (normal priority)": lambda stop, counter: _vision_loop(stop, counter, 0),
+    "vision worker thread (SCHED_FIFO 40)": lambda stop, counter: _vision_loop(stop, counter, PROBE_PRIORITY - 10),
+    "camera renderer in a child process": _render_process_loop,
+}
+
+
+def gil(seconds: float, steal: CpuSteal) -> list[str]:
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)        # as the daemon and `spacearm sim` set it
+    rows = []
+    with CpuLoad(2):
+        for name, loop in NEIGHBOURS.items():
+            stop, counter = threading.Event(), [0]
+            neighbour = threading.Thread(target=loop, args=(stop, counter), daemon=True) if loop else None
+            if neighbour is not None:
+                neighbour.start()
+                ready = time.monotonic() + 60.0      # its set-up (imports, scene) is not the steady state
+                while counter[0] < 2 and time.monotonic() < ready:
+                    time.sleep(0.1)
+            steal.fraction()
+            probe = Probe().start()
+            time.sleep(seconds)
+            probe.stop()
+            stop.set()
+            if neighbour is not None:
+                neighbour.join(10)
+            n = min(len(probe.late), len(probe.core), len(probe.host))
+            late, core = np.array(probe.late[:n]) * 1e3, np.array(probe.core[:n]) * 1e3
+            host = np.minimum(np.array(probe.host[:n]) * 1e3, np.maximum(late - core, 0.0))
+            gil_wait = np.maximum(late - core - host, 0.0)   # the GIL where a thread shares it
+            worst = int(np.argmax(late))
+            rows.append(f"  {name:44s} | {probe.scheduling:13s} | wakes {n:4d} | late p99 {np.percentile(late, 99):6.1f} "
+                        f"max {late.max():6.1f} ms | of the worst: core {core[worst]:5.1f}, host {host[worst]:5.1f}, "
+                        f"rest {gil_wait[worst]:6.1f} ms | "
+                        f"rest (GIL) p99 {np.percentile(gil_wait, 99):6.1f} ms | late > 5 ms {int(np.sum(late > 5))} | "
+                        f"neighbour {counter[0]} frames | {conditions(steal)}")
+    return ["  neighbour in the probe's interpreter | probe | wakes | lateness | worst wake: core, host, rest | rest | late | "
+            "neighbour | conditions"] + rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "all"))
+    ap.add_argument("--seconds", type=float, default=20.0, help="gil: probe time per neighbour")
+    args = ap.parse_args()
+    t0, steal = time.monotonic(), CpuSteal()
+    rows: list[str] = []
+    if args.section in ("gil", "all"):
+        rows += gil(args.seconds, steal)
+    print("\n".join(rows))
+    print(f"\nbench_realtime on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}), "
+          f"Python {platform.python_version()}, switch interval {1e3 * sys.getswitchinterval():.1f} ms, "
+          f"{time.monotonic() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
