@@ -77,6 +77,10 @@ class FindingCode(str, Enum):
     # operators and consoles
     OPERATOR_STOP = "operator_stop"
     COMMAND_WATCHDOG = "command_watchdog"
+    SHUTDOWN = "shutdown"                  # the daemon was told to end (SIGINT/SIGTERM)
+    # the stop itself (controller/daemon/stops.py): escalated to power off and brakes
+    QUICK_STOP_IGNORED = "quick_stop_ignored"   # a drive still in operation after the quick-stop request
+    STOP_OVERRUN = "stop_overrun"          # a joint sped up while stopping, or is not at rest in time
     # modes that can no longer go on safely
     CONTACT_FORCE_LIMIT = "contact_force_limit"
     CONTACT_MISSING = "contact_missing"
@@ -143,6 +147,9 @@ class Measurement:
     events: tuple[DeviceEvent, ...] = ()
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
     late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
+    # bool per joint: drive powered (operation enabled, quick stop or fault reaction active);
+    # None: as joints_enabled
+    joints_powered: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

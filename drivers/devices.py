@@ -151,6 +151,10 @@ class DeviceDriver:
         return frames
 
 
+# 605Eh: a drive that faults while moving stops on its quick-stop ramp (6085h) before the brake
+FAULT_REACTION_QUICK_STOP_RAMP = 2
+
+
 class JointDriver(DeviceDriver):
     device = "joint_drive"
 
@@ -208,6 +212,7 @@ class JointDriver(DeviceDriver):
             (od.PROFILE_DECELERATION, 0, round(s.profile_acceleration * k)),
             (od.QUICK_STOP_DECELERATION, 0, round(s.quick_stop_deceleration * k)),
             (od.QUICK_STOP_OPTION, 0, s.quick_stop_option),
+            (od.FAULT_REACTION_OPTION, 0, FAULT_REACTION_QUICK_STOP_RAMP),
             (od.INTERPOLATION_TIME_PERIOD, 1, round(self.bus.sync_period * 1000)),
             (od.INTERPOLATION_TIME_PERIOD, 2, -3),
             (od.MODES_OF_OPERATION, 0, od.MODE_CSP),

@@ -2,6 +2,9 @@
 
 States:  disabled -> enabling -> enabled (hold or a motion mode) -> disabled
                        any state -> stopped (protective stop) --reset--> disabled
+A protective stop stops as its reason's policy says (controller/daemon/stops.py): the
+planner's stop from the measured state while the drives stay enabled, then a quick stop at
+rest; or the drives' own quick stop; or power off. Supervised until at rest.
 `update(measurement)` is called once per cycle and returns the command to write.
 Console commands arrive through `submit()` from other threads and are applied at the
 start of the next cycle, so the cycle alone changes controller state.
@@ -19,9 +22,12 @@ import numpy as np
 from spacearm.controller.cycle import (NODE_FINDINGS, Command, Finding, FindingCode, MachineState, Measurement, Mode,
                                        ModeOutput)
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
+from spacearm.controller.daemon.stops import DriveRequest, StopMonitor, StopPolicy, stop_policy
 from spacearm.controller.daemon.supervision import Supervisor
 from spacearm.controller.modes import HoldMode
 from spacearm.controller.planning.errors import PlanningError
+from spacearm.controller.planning.joint_move import JointSetpoint
+from spacearm.controller.planning.stop_trajectory import StopTrajectory
 
 ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
 
@@ -52,9 +58,21 @@ class _Pending:
 
 
 class ControllerCore:
-    def __init__(self, supervisor: Supervisor, joint_names: list[str], period: float):
+    def __init__(self, supervisor: Supervisor, joint_names: list[str], period: float,
+                 a_max: np.ndarray | None = None):
         self.supervisor = supervisor
         self.period = period
+        # Without the joints' acceleration limits the controller cannot plan a stop: the
+        # drives' quick stop makes every controlled stop.
+        self.a_max = None if a_max is None else np.asarray(a_max, float)
+        self.stop_monitor = StopMonitor(joint_names, supervisor.limits.v_max,
+                                        self.a_max if self.a_max is not None else np.full(len(joint_names), np.inf),
+                                        period)
+        self.stop_policy: StopPolicy | None = None
+        self.stopping: StopTrajectory | None = None     # the planner's stop while it runs
+        self._stopping_since = 0.0
+        self.drive_request = DriveRequest.QUICK_STOP     # what a disabling command asks of the drives
+        self.last_setpoint: JointSetpoint | None = None
         # Motions are sampled on their own clock, one period per executed cycle: after an
         # overrun (skipped cycles) a motion continues where it was instead of jumping ahead.
         self.motion_time = 0.0
@@ -101,9 +119,16 @@ class ControllerCore:
         if self.state in (MachineState.ENABLED, MachineState.ENABLING):
             findings = self.supervisor.check(m, self.last_target, moving)
         else:
-            # Disabled or stopped: still watch the nodes, but not motion-related limits.
-            findings = [f for f in self.supervisor.check(m, None, False) if f.code in NODE_FINDINGS]
-        if findings and self.state is not MachineState.STOPPED:
+            # Disabled or stopped: still watch the nodes (and, stopping, the drives' faults),
+            # but not motion-related limits.
+            watched = NODE_FINDINGS | {FindingCode.FAULT} if self.state is MachineState.STOPPED else NODE_FINDINGS
+            findings = [f for f in self.supervisor.check(m, None, False) if f.code in watched]
+        if self.state is MachineState.STOPPED:
+            overrun = self.stop_monitor.check(m)
+            findings += [overrun] if overrun is not None else []
+            for finding in findings:      # a stronger stop replaces the one running
+                self._escalate(m.time, finding)
+        elif findings:
             self.protective_stop(m.time, findings[0])
             for extra in findings[1:]:
                 self._event(m.time, "finding", extra.message, extra)
@@ -122,6 +147,10 @@ class ControllerCore:
         return command
 
     def _command(self, m: Measurement) -> Command:
+        if self.state is MachineState.STOPPED and self.stopping is not None:
+            command = self._stopping_command()
+            if command is not None:
+                return command
         if self.state is MachineState.ENABLED and self.mode is not None:
             mode = self.mode
             out = mode.update(self.motion_time, m)
@@ -129,9 +158,13 @@ class ControllerCore:
             if out.failure is not None:
                 # The mode cannot go on safely (lost marker, capture not confirmed, ...).
                 self.protective_stop(m.time, out.failure)
+                command = self._stopping_command() if self.stopping is not None else None
+                if command is not None:
+                    return command
                 self.last_target = None
                 return Command(m.q.copy(), np.zeros_like(m.q), enable=False)
             setpoint = out.setpoint
+            self.last_setpoint = setpoint
             if mode.moving and out.finished:
                 self._event(m.time, "motion", f"{mode.name} finished")
                 self.motions_finished = self.motions_started
@@ -140,7 +173,26 @@ class ControllerCore:
             return Command(setpoint.q.copy(), setpoint.dq.copy(), enable=True, end_effector=out.end_effector)
         # Not enabled: targets follow the measurement so enabling never causes a jump.
         self.last_target = None
+        self.last_setpoint = None
         return Command(m.q.copy(), np.zeros_like(m.q), enable=self.state is MachineState.ENABLING)
+
+    def _stopping_command(self) -> Command | None:
+        """The planner's stop this cycle: its setpoint with the drives enabled; None once the
+        rest setpoint has been sent for a cycle, and the drives are asked to quick stop (at
+        rest their ramp is over at once: power off and brakes, category 1)."""
+        stop = self.stopping
+        # this cycle's target is one period on from the setpoint the drives had (no repeated target)
+        elapsed = self.motion_time - self._stopping_since + self.period
+        if elapsed > stop.duration + self.period + 1e-9:
+            self.stopping = None
+            self.drive_request = DriveRequest.QUICK_STOP
+            self.stop_monitor.quick_stop_requested(self.last_measurement.time if self.last_measurement else 0.0)
+            self._event(self.last_measurement.time if self.last_measurement else 0.0, "stop",
+                        "at rest: drives quick stop, brakes on")
+            return None
+        setpoint = stop.sample(min(elapsed, stop.duration))
+        self.last_target = setpoint.q.copy()
+        return Command(setpoint.q.copy(), setpoint.dq.copy(), enable=True)
 
     def _set_mode(self, mode: Mode | None) -> None:
         self.mode = mode
@@ -149,11 +201,67 @@ class ControllerCore:
     def mode_progress(self) -> float:
         return self.mode_output.progress if self.mode_output is not None else 0.0
 
+    @property
+    def stop_finished(self) -> bool:
+        """No stop running: not stopped, or stopped with the planner done and no drive in operation."""
+        m = self.last_measurement
+        powered_off = self.stop_policy is not None and self.stop_policy.category == 0
+        if self.state is not MachineState.STOPPED:
+            return True
+        if self.stopping is not None or m is None:
+            return False
+        powered = m.joints_powered if m.joints_powered is not None else m.joints_enabled
+        return powered_off or not np.any(powered)
+
     def protective_stop(self, t: float, finding: Finding) -> None:
+        if self.state is MachineState.STOPPED:       # a stop while stopping: the stronger one wins
+            self._escalate(t, finding)
+            return
+        policy = stop_policy(finding.code)
+        was_enabled = self.state is MachineState.ENABLED
         self.state = MachineState.STOPPED
         self._set_mode(None)
         self.stop_reason = finding
+        self.stop_policy = policy
         self._event(t, "protective_stop", finding.message, finding)
+        m = self.last_measurement
+        self.stopping = None
+        self.drive_request = DriveRequest.DISABLE if policy.category == 0 else DriveRequest.QUICK_STOP
+        if m is None:
+            return
+        self.stop_monitor.start(m)
+        if policy.rank == 0 and was_enabled and self.a_max is not None:
+            q0, v0 = self._stop_start(m)
+            self.stopping = StopTrajectory(q0, v0, self.a_max, self.period)
+            self._stopping_since = self.motion_time
+        else:
+            self.stop_monitor.quick_stop_requested(t)
+
+    def _stop_start(self, m: Measurement) -> tuple[np.ndarray, np.ndarray]:
+        """Where the planner's stop starts: the setpoint the drives follow (no step in position
+        or speed) while the measurement is within the following-error window of it; else (a
+        following-error stop: the joint was held or pushed) the measured position and speed."""
+        sp = self.last_setpoint
+        window = np.broadcast_to(self.supervisor.limits.following_error, m.q.shape)
+        if sp is not None and np.all(np.abs(sp.q - m.q) <= window):
+            return sp.q.copy(), sp.dq.copy()
+        v_max = self.supervisor.limits.v_max
+        return m.q.copy(), np.clip(m.dq, -v_max, v_max)
+
+    def _escalate(self, t: float, finding: Finding) -> None:
+        """While stopped: a finding whose policy is stronger than the running stop's takes over
+        (the planner's stop gives way to the drives' quick stop, anything to power off)."""
+        policy = stop_policy(finding.code)
+        if self.stop_policy is not None and policy.rank <= self.stop_policy.rank:
+            return
+        self.stop_policy = policy
+        self.stopping = None
+        self.drive_request = DriveRequest.DISABLE if policy.category == 0 else DriveRequest.QUICK_STOP
+        self.stop_monitor.quick_stop_requested(t)
+        if policy.category == 0:
+            self.stop_monitor.end()
+        self._event(t, "stop_escalated", f"{finding.message} ({policy.decelerator.value}, category {policy.category})",
+                    finding)
 
     def drain_events(self) -> list[Event]:
         events, self.events = self.events, []
@@ -204,10 +312,13 @@ class ControllerCore:
         return self.state
 
     def cmd_stop(self, t: float, m: Measurement) -> str:
+        """Accepted in every state (anyone may stop the arm): stopping, it changes nothing."""
         self.protective_stop(t, Finding(FindingCode.OPERATOR_STOP, "stop commanded by the operator"))
         return self.state
 
     def cmd_reset(self, t: float, m: Measurement) -> str:
+        if self.state is MachineState.STOPPED and not self.stop_finished:
+            raise CommandRefused("the arm is still stopping; reset once it is at rest", ErrorCode.BUSY)
         if self.state is not MachineState.STOPPED:
             faulted = [n for n, f in zip(self.joint_names, m.joints_faulted) if f]
             if faulted and self.state is MachineState.DISABLED:
@@ -217,6 +328,8 @@ class ControllerCore:
         self.state = MachineState.DISABLED
         self._event(t, "reset", f"reset after: {self.stop_reason}")
         self.stop_reason = None
+        self.stop_policy = None
+        self.stop_monitor.end()
         return self.state
 
     def motion_start(self, t: float, m: Measurement) -> np.ndarray:

@@ -29,12 +29,16 @@ from spacearm.controller.daemon.node_timing import NodeTiming
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_thread import RecorderThread
 from spacearm.controller.recording.can_trace import TraceLimit
-from spacearm.controller.cycle import Command, Finding, MachineState, Measurement
+from spacearm.controller.cycle import Command, Finding, FindingCode, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, check_axis_kinds, load_bus_config
 from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fifo
+
+
+# s of controller time a SIGINT/SIGTERM waits for the arm to stop before powering off anyway
+SHUTDOWN_STOP_LIMIT = 3.0
 
 
 @dataclass
@@ -87,7 +91,8 @@ class Daemon:
             np.array(self.model.q_min), np.array(self.model.q_max), np.array(self.model.v_max),
             following_error=np.array([j.drive.following_error for j in self.arm.joints]),
             settings=self.arm.supervision), names)
-        self.core = ControllerCore(self.supervisor, names, options.period)
+        self.core = ControllerCore(self.supervisor, names, options.period,
+                                   a_max=np.array([j.limits.acceleration for j in self.arm.joints]))
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
         bus_config = load_bus_config(options.bus_config)
@@ -186,6 +191,21 @@ class Daemon:
         while not self._stop.is_set() and (max_cycles is None or cycles < max_cycles):
             self.cycle_once()
             cycles += 1
+        if self._stop.is_set():
+            self.stop_before_exit()
+
+    def stop_before_exit(self, limit: float = SHUTDOWN_STOP_LIMIT) -> None:
+        """SIGINT/SIGTERM: a moving or enabled arm is stopped as any protective stop is
+        (controller/daemon/stops.py, `shutdown`), cycling on until it is at rest with the
+        drives off, at most `limit` s of controller time; shutdown then powers off."""
+        core = self.core
+        if core.state in (MachineState.ENABLED, MachineState.ENABLING) and core.last_measurement is not None:
+            core.protective_stop(core.last_measurement.time, Finding(
+                FindingCode.SHUTDOWN, "daemon shutting down (SIGINT/SIGTERM): stopping the arm first"))
+        cycles = 0
+        while not core.stop_finished and cycles * self.options.period < limit:
+            self.cycle_once()
+            cycles += 1
 
     def request_stop(self) -> None:
         self._stop.set()
@@ -210,7 +230,7 @@ class Daemon:
         if self.vision is not None:
             self.vision.on_cycle(measurement.sync_counter)
         command = self.core.update(measurement)
-        self.hardware.write(command, protective_stop=self.core.state is MachineState.STOPPED)
+        self.hardware.write(command, self.core.drive_request if self.core.state is MachineState.STOPPED else None)
         events = self.core.drain_events()
         if any(e.kind == "reset" for e in events):
             self.hardware.fault_reset()

@@ -13,11 +13,13 @@ from typing import Sequence
 
 import numpy as np
 
+from spacearm.base.canopen.cia402_defs import State
 from spacearm.base.canopen.codes import TPDO_BASE
 from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
 from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
+from spacearm.controller.daemon.stops import DriveRequest
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 from spacearm.drivers.peer_timing import PeerTimingListener
 
@@ -29,6 +31,8 @@ DRIVE_LIMIT_MARGIN = 0.05  # rad
 # A cycle whose I/O ran this many periods late (read after the last one, or TPDO wait past its
 # budget) was starved: its missing process data is reported as `late_cycle`, not counted as loss.
 LATE_CYCLE_SLACK = 0.5
+
+POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
 # 605Ah: quick-stop ramp (6085h), then switch on disabled: the drive's own stop is category 1
 QUICK_STOP_OPTION = 2
@@ -82,7 +86,7 @@ class CanopenHardware:
             base + node.node_id for node in bus_config.nodes for base in TPDO_BASE})
         self.lockstep = lockstep
         self.realtime_budget = realtime_budget
-        self._enabled = False
+        self._goal = "disabled"     # enabled | quick_stop | disable | disabled: the drives' last request
         self.info_events: list[str] = []
         self.last_io_wait = 0.0    # s the last read() waited for its SYNC's TPDOs
         self.period = self.network.config.bus.sync_period
@@ -164,22 +168,27 @@ class CanopenHardware:
             dq=np.array([j.velocity for j in joints]),
             tau=np.array([j.torque for j in joints]),
             joints_enabled=np.array([j.enabled for j in joints]),
+            joints_powered=np.array([j.state in POWERED for j in joints]),
             joints_faulted=np.array([j.fault for j in joints]),
             wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
             end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
                           else EndEffectorState.NONE),
             events=events, missing=missing, late=late > 0.0 and bool(missing))
 
-    def write(self, command: Command, protective_stop: bool) -> None:
-        if command.enable and not self._enabled:
-            for joint in self.network.joints:
-                joint.axis.enable()
-        elif not command.enable and self._enabled:
-            if protective_stop:
+    def write(self, command: Command, stop: DriveRequest | None = None) -> None:
+        """`stop`: what a protective stop asks of drives the command no longer enables (None:
+        not stopped, plain disable). A change of request is passed on even after the drives
+        left operation, so a quick stop escalated to power off reaches them."""
+        goal = "enabled" if command.enable else (stop.value if stop is not None else "disabled")
+        if goal != self._goal:
+            if command.enable:
+                for joint in self.network.joints:
+                    joint.axis.enable()
+            elif stop is DriveRequest.QUICK_STOP:
                 self.network.quick_stop()
-            else:
+            elif self._goal != "disabled":
                 self.network.disable_all()
-        self._enabled = command.enable
+        self._goal = goal
         self.network.write(ArmCommand(joint_positions=list(command.q),
                                       joint_velocities=list(command.dq) if len(command.dq) else None,
                                       end_effector=(EeCommand[command.end_effector.name] if command.end_effector

@@ -58,9 +58,11 @@ class StopFigures:
 
 
 def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarray, a_limit: np.ndarray,
-                 period: float, joints: list[int] | None = None) -> list[StopFigures]:
+                 period: float, joints: list[int] | None = None, one_path: bool = False) -> list[StopFigures]:
     """Figures per joint (all, or `joints`) for a stop at controller time `t_stop`: t (n,) and
-    q (n, dof) are the recording's cycle times and measured positions."""
+    q (n, dof) are the recording's cycle times and measured positions. `one_path`: the joints
+    stopped together on one path, each taking the time the slowest to stop needs (v/a of the
+    joint with the largest), so each joint's bound uses the deceleration that time gives it."""
     t = np.asarray(t, float)
     q = np.asarray(q, float)
     k = int(np.searchsorted(t, t_stop - 1e-9))
@@ -68,6 +70,12 @@ def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarra
         raise ValueError(f"stop at {t_stop:.3f} s is not inside the recording ({t[0]:.3f}..{t[-1]:.3f} s)")
     span = max(1, int(round(0.02 / period)))
     dq = (q[span:] - q[:-span]) / (t[span:] - t[:-span])[:, None]    # dq[i]: t[i]..t[i+span]
+    a_limit = np.asarray(a_limit, float)
+    if one_path:
+        v_all = np.abs(dq[k - span])
+        stop_time = float(np.max(v_all / a_limit))
+        if stop_time > 0.0:
+            a_limit = np.minimum(a_limit, np.maximum(v_all, 1e-9) / stop_time)
     out = []
     for j in (range(q.shape[1]) if joints is None else joints):
         v = dq[:, j]

@@ -61,6 +61,15 @@ class SteppedDaemon:
             return fast[0] >= 10
         self.until(cruising)
 
+    def stop_and_settle(self, command: Callable | None = None, cycles: float = 1.5) -> None:
+        """A stop (the operator's unless given), then `cycles` s of cycles."""
+        self.apply(command or self.core.cmd_stop)
+        self.cycles(int(round(cycles / self.daemon.options.period)))
+
+    def brakes(self) -> list[bool]:
+        """The simulated joints' brakes, as the plant has them."""
+        return [j.brake_engaged for j in self.sim.plant.joints]
+
     def recording(self):
         """(t, q, stop events) of the recording so far (the file is closed and read back)."""
         info = self.daemon.stop_recording()
@@ -72,11 +81,23 @@ class SteppedDaemon:
         return t, q, events, cycles
 
 
+def with_sync_period(bus_config: Path, period: float, folder: Path) -> Path:
+    """The bus file with its SYNC period set to the daemon's (the simulator steps its physics by it)."""
+    text = Path(bus_config).read_text()
+    if period == 0.02:
+        return Path(bus_config)
+    assert "sync_period = 0.02 " in text
+    path = folder / f"bus_{1e3 * period:g}ms.toml"
+    path.write_text(text.replace("sync_period = 0.02 ", f"sync_period = {period} ", 1))
+    return path
+
+
 @contextmanager
 def stepped_daemon(tmp_path: Path, *, arm: Path = ARM, plant: Path = PLANT, bus_config: Path = DEFAULT_BUS_CONFIG,
                    period: float = 0.02) -> Iterator[SteppedDaemon]:
     from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
     from spacearm.firmware_sim.runner import start_simulator
+    bus_config = with_sync_period(bus_config, period, tmp_path)
     bus = f"virtual:stops-{uuid.uuid4().hex[:8]}"
     sim = start_simulator(bus, bus_config, plant=plant)
     daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock="lockstep", api=None,

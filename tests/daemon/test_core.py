@@ -87,7 +87,8 @@ def test_heartbeat_loss_stops_and_motion_needs_explicit_reset(core):
     assert isinstance(refused, CommandRefused) and "reset first" in str(refused)
     refused, _ = start(core, 0.08, lambda q0: q0 + 0.1)
     assert isinstance(refused, CommandRefused)
-    assert run_command(core, 0.10, core.cmd_reset)[0] == "disabled"
+    # reset is taken once the stop is over: the drives left operation (quick stop, brakes)
+    assert run_command(core, 0.10, core.cmd_reset, measurement(0.10, enabled=False))[0] == "disabled"
     enable(core, 0.12)
 
 
