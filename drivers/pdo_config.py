@@ -70,36 +70,42 @@ def find_var(object_dictionary: canopen.ObjectDictionary, index: int, sub: int):
         return None
 
 
+def pdo_numbers(object_dictionary: canopen.ObjectDictionary, comm_base: int) -> list[int]:
+    """The 0-based numbers of the PDOs of one direction the EDS lists (communication objects)."""
+    return [n for n in range(512) if comm_base + n in object_dictionary]
+
+
 def pdo_count(object_dictionary: canopen.ObjectDictionary, comm_base: int) -> int:
-    """How many PDOs of a direction the device has (consecutive communication objects)."""
-    n = 0
-    while comm_base + n in object_dictionary and n < 512:
-        n += 1
-    return n
+    """How many PDOs of a direction the device has."""
+    return len(pdo_numbers(object_dictionary, comm_base))
 
 
-def eds_default_layout(object_dictionary: canopen.ObjectDictionary) -> dict[str, list[list[tuple[int, int]]]]:
-    """The PDO layout a device has after reset communication, from its EDS: the mapping
-    defaults of every PDO whose default COB-ID is valid (others: empty = left disabled)."""
-    out: dict[str, list[list[tuple[int, int]]]] = {}
+Layout = dict[str, list[tuple[int, int | None, list[tuple[int, int]]]]]   # kind -> (number, COB-ID, objects)
+
+
+def eds_default_layout(object_dictionary: canopen.ObjectDictionary) -> Layout:
+    """The PDO layout the EDS gives by default: the mapping defaults of every PDO whose
+    default COB-ID is valid, on that COB-ID (others: left disabled)."""
+    out: Layout = {}
     for kind, comm, mapping in (("rpdo", od.RPDO_COMM, od.RPDO_MAP), ("tpdo", od.TPDO_COMM, od.TPDO_MAP)):
         pdos = []
-        for n in range(pdo_count(object_dictionary, comm)):
+        for n in pdo_numbers(object_dictionary, comm):
             cob = find_var(object_dictionary, comm + n, od.PDO_COB_ID)
             count = find_var(object_dictionary, mapping + n, 0)
-            if cob is None or count is None or (cob.default or 0) & COB_ID_INVALID:
-                pdos.append([])
+            if cob is None or count is None or (cob.default or 0) & COB_ID_INVALID or not count.default:
                 continue
             entries = [find_var(object_dictionary, mapping + n, i) for i in range(1, (count.default or 0) + 1)]
-            pdos.append([((e.default or 0) >> 16, ((e.default or 0) >> 8) & 0xFF) for e in entries if e is not None])
+            refs = [((e.default or 0) >> 16, ((e.default or 0) >> 8) & 0xFF) for e in entries if e is not None]
+            pdos.append((n, (cob.default or 0) & 0x7FF, refs))
         out[kind] = pdos
     return out
 
 
-def layout_refs(cfg: NodeConfig, object_dictionary: canopen.ObjectDictionary) -> dict[str, list[list[tuple[int, int]]]]:
+def layout_refs(cfg: NodeConfig, object_dictionary: canopen.ObjectDictionary) -> Layout:
     """The node's [nodes.pdo] table, else the layout its EDS defines by default."""
     if cfg.pdo is not None:
-        return {kind: [[parse_object_ref(r) for r in pdo] for pdo in getattr(cfg.pdo, kind)]
+        return {kind: [(number - 1, cob_id, [parse_object_ref(r) for r in refs])
+                       for number, cob_id, refs in cfg.pdo.entries(kind)]
                 for kind in ("rpdo", "tpdo")}
     return eds_default_layout(object_dictionary)
 
@@ -109,17 +115,24 @@ def resolve_layout(cfg: NodeConfig, object_dictionary: canopen.ObjectDictionary)
     eds = cfg.eds_path.name
     refs = layout_refs(cfg, object_dictionary)
     out: dict[str, list[PdoSpec]] = {}
+    cobs: dict[int, str] = {}
     for kind, comm, bases in (("rpdo", od.RPDO_COMM, RPDO_BASE), ("tpdo", od.TPDO_COMM, TPDO_BASE)):
         name = kind.upper()
-        available = pdo_count(object_dictionary, comm)
-        configured = [(n, r) for n, r in enumerate(refs[kind]) if r]
+        available = pdo_numbers(object_dictionary, comm)
         specs = []
-        for n, pdo_refs in configured:
+        for n, cob_id, pdo_refs in refs[kind]:
             where = f"{cfg.label}: {name}{n + 1}"
-            if n >= available:
-                raise MappingError(f"{where}: the device has {available} {name}s ({eds})")
-            if n >= len(bases):
-                raise MappingError(f"{where}: only {name}1..{len(bases)} have pre-defined COB-IDs")
+            if n not in available:
+                raise MappingError(f"{where}: the device has no {name}{n + 1} (its EDS {eds} lists "
+                                   f"{len(available)} {name}s: {_numbers(available)})")
+            if cob_id is None:
+                if n >= len(bases):
+                    raise MappingError(f"{where}: only {name}1..{len(bases)} have pre-defined COB-IDs; "
+                                       f"give cob_id in [nodes.pdo]")
+                cob_id = bases[n] + cfg.node_id
+            if cob_id in cobs:
+                raise MappingError(f"{where}: COB-ID 0x{cob_id:03X} already used by {cobs[cob_id]}")
+            cobs[cob_id] = f"{name}{n + 1}"
             if len(pdo_refs) > od.MAX_MAPPED:
                 raise MappingError(f"{where}: {len(pdo_refs)} objects, at most {od.MAX_MAPPED}")
             entries = []
@@ -140,10 +153,14 @@ def resolve_layout(cfg: NodeConfig, object_dictionary: canopen.ObjectDictionary)
             total = sum(e.bits for e in entries)
             if total > MAX_PDO_BITS:
                 raise MappingError(f"{where}: {total} bits mapped, a PDO holds {MAX_PDO_BITS}")
-            specs.append(PdoSpec(name, n, bases[n] + cfg.node_id, entries))
+            specs.append(PdoSpec(name, n, cob_id, entries))
         out[kind] = specs
     check_required(cfg, out["rpdo"], out["tpdo"])
     return out["rpdo"], out["tpdo"]
+
+
+def _numbers(available: list[int]) -> str:
+    return ", ".join(str(n + 1) for n in available) or "none"
 
 
 # What each device type's driver cannot work without, per direction (CiA 402 for a drive)

@@ -21,16 +21,19 @@ HW_VERSION = 0x1009
 SW_VERSION = 0x100A
 GUARD_TIME = 0x100C            # UNSIGNED16 ms (node guarding)
 LIFE_TIME_FACTOR = 0x100D      # UNSIGNED8
+STORE_PARAMETERS = 0x1010     # sub 1: save all ("save" signature), where the device can store
 COB_ID_EMCY = 0x1014
 CONSUMER_HEARTBEAT = 0x1016
 PRODUCER_HEARTBEAT = 0x1017
 IDENTITY = 0x1018
+VERIFY_CONFIGURATION = 0x1020  # sub 1 configuration date, sub 2 configuration time (CiA 302-2)
+STORE_SIGNATURE = 0x65766173   # "save" as UNSIGNED32, written to 1010h sub 1
 
-RPDO_COMM = 0x1400  # + n (0..3)
+RPDO_COMM = 0x1400  # + n (0..511)
 RPDO_MAP = 0x1600
 TPDO_COMM = 0x1800
 TPDO_MAP = 0x1A00
-N_PDOS = 4           # four RPDOs and four TPDOs per device (pre-defined connection set)
+N_PDOS = 4           # PDOs 1..4 of each direction have pre-defined COB-IDs; up to 512 exist
 MAX_MAPPED = 8       # mapping entries per PDO
 
 # PDO communication parameter sub-indices

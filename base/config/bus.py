@@ -135,12 +135,43 @@ class FtSettings(StrictModel):
     torque_limit: int = Field(default=30, ge=1, le=65535, description="N m, overload (2205h.2)")
 
 
+class PdoEntry(StrictModel):
+    """One PDO given as a table: which PDO of the device (any number its EDS offers), on which
+    COB-ID (default: the pre-defined connection set, PDO1..4 only), mapping which objects."""
+    number: int = Field(ge=1, le=512, description="PDO number, 1-based (RPDO1 = 1, as CiA 301 counts)")
+    cob_id: int | None = Field(default=None, ge=1, le=0x7FF, description=(
+        "11-bit COB-ID; required beyond PDO4, which have no pre-defined one"))
+    objects: list[ObjectRef] = Field(min_length=1, max_length=8)
+
+
 class PdoLayout(StrictModel):
-    """The PDOs a node is configured with: a list per direction, one list of mapped objects
-    per PDO (RPDO1.. / TPDO1..); an empty list leaves that PDO disabled. Object sizes come
-    from the node's EDS, which must allow the mapping (checked at load)."""
-    rpdo: list[list[ObjectRef]] = Field(default_factory=list, max_length=512)
-    tpdo: list[list[ObjectRef]] = Field(default_factory=list, max_length=512)
+    """The PDOs a node is configured with, per direction. Each item is either a list of mapped
+    objects (the item's position gives its number: the first is PDO1; an empty list leaves
+    that PDO disabled) or a table {number, cob_id, objects} for any PDO the EDS offers and an
+    explicit COB-ID. Every PDO of the device not named here is disabled at bring-up. Object
+    sizes come from the node's EDS, which must allow the mapping (checked at load)."""
+    rpdo: list[list[ObjectRef] | PdoEntry] = Field(default_factory=list, max_length=512)
+    tpdo: list[list[ObjectRef] | PdoEntry] = Field(default_factory=list, max_length=512)
+
+    @model_validator(mode="after")
+    def _numbers_unique(self) -> "PdoLayout":
+        for kind in ("rpdo", "tpdo"):
+            seen: set[int] = set()
+            for number, _, _ in self.entries(kind):
+                if number in seen:
+                    raise ValueError(f"{kind.upper()}{number} given twice")
+                seen.add(number)
+        return self
+
+    def entries(self, kind: str) -> list[tuple[int, int | None, list[str]]]:
+        """(number 1-based, COB-ID or None, object refs) of each configured (non-empty) PDO."""
+        out = []
+        for position, item in enumerate(getattr(self, kind), start=1):
+            if isinstance(item, PdoEntry):
+                out.append((item.number, item.cob_id, list(item.objects)))
+            elif item:
+                out.append((position, None, list(item)))
+        return out
 
 
 class NodeConfig(StrictModel):
@@ -153,11 +184,14 @@ class NodeConfig(StrictModel):
     ft: FtSettings | None = None
     eds: str | None = Field(default=None, min_length=1, description=(
         "the node's EDS/DCF (relative to configs/eds/ or absolute); default configs/eds/<device>.eds"))
-    pdo: PdoLayout | None = Field(default=None, description="PDO mapping; default: the device type's "
-                                  "standard layout (base/canopen/pdo_maps.py)")
+    pdo: PdoLayout | None = Field(default=None, description="PDO mapping; default: the layout the "
+                                  "node's EDS gives by default")
     sdo: dict[ObjectRef, int] = Field(default_factory=dict, description=(
         "extra SDO writes at bring-up, object -> raw value, in file order (as ros2_canopen's sdo: "
         "list); each object must exist and be writable in the EDS"))
+    strict: bool = Field(default=False, description=(
+        "every object the device refuses at bring-up stops the boot; default: a refused optional "
+        "object (CiA 301/402) is listed in the bring-up report and its fallback used"))
 
     @model_validator(mode="after")
     def _settings_match_device(self) -> "NodeConfig":
@@ -251,6 +285,10 @@ def dump_toml(config: BusConfig) -> str:
             return "true" if v else "false"
         if isinstance(v, str):
             return json.dumps(v)          # a JSON string is a valid TOML basic string
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        if isinstance(v, dict):           # an inline table ([nodes.pdo] entries)
+            return "{" + ", ".join(f"{k} = {value(x)}" for k, x in v.items() if x is not None) + "}"
         return repr(v)
 
     lines = ["[bus]"] + [f"{k} = {value(v)}" for k, v in config.bus.model_dump().items()]

@@ -11,30 +11,35 @@ import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from spacearm.base.config.bus import BusConfig, BusSettings, JointSettings, NodeConfig, PdoLayout
+from spacearm.base.config.bus import BusConfig, BusSettings, JointSettings, NodeConfig, PdoEntry, PdoLayout
 from spacearm.drivers.errors import DriverError
 from spacearm.drivers.network import ArmNetwork
-from hil_tests.interop.durand_drive import VARIANTS, DurandDrive, Variant
+from hil_tests.interop.durand_drive import HIGH_RPDO_COB, HIGH_TPDO_COB, VARIANTS, DurandDrive, Variant
 
 CHECKS = ("boot", "enable", "csp_move", "emcy", "heartbeat_loss")
-NODE_ID = 5
+NODE_ID = 5         # where a variant does not say otherwise
 MOVE = 0.3          # rad (m on a linear axis), the CSP move every drive must track
 
 
 def layout(variant: Variant) -> PdoLayout:
     """What the bus file of this drive says: what the master needs, nothing vendor-specific."""
+    if variant.high_pdos:
+        return PdoLayout(rpdo=[PdoEntry(number=6, cob_id=HIGH_RPDO_COB, objects=["0x6040", "0x607A"])],
+                         tpdo=[PdoEntry(number=7, cob_id=HIGH_TPDO_COB, objects=["0x6041", "0x6064", "0x6061"])])
     tpdo = [["0x6041", "0x6064", "0x6061"]]
     if variant.pdos[1] > 1:
         tpdo.append(["0x606C", "0x603F"])
     return PdoLayout(rpdo=[["0x6040", "0x607A"]], tpdo=tpdo)
 
 
-def bus_config(variant: Variant, eds: Path) -> BusConfig:
+def bus_config(variant: Variant, eds: Path, strict: bool = False) -> BusConfig:
     # a linear drive's bus file says a 10 mm lead: the drive's own read-only 6092h must win
     joint = JointSettings(feed_constant=0.01) if variant.feed is not None else None
-    node = NodeConfig(name="joint_1", node_id=NODE_ID, device="joint_drive", heartbeat_period=0.1,
-                      eds=str(eds), pdo=layout(variant), joint=joint)
-    return BusConfig(bus=BusSettings(), nodes=[node])
+    node = NodeConfig(name="joint_1", node_id=variant.node_id, device="joint_drive", heartbeat_period=0.1,
+                      eds=str(eds), pdo=layout(variant), joint=joint, strict=strict)
+    # node-ID 127 is the master's heartbeat by default: the master moves below it
+    bus = BusSettings(master_node_id=126) if variant.node_id == 127 else BusSettings()
+    return BusConfig(bus=bus, nodes=[node])
 
 
 @dataclass
@@ -56,7 +61,7 @@ def run_variant(name: str, workdir: Path | None = None) -> Result:
     result = Result(name)
     channel = f"durand-{name}-{uuid.uuid4().hex[:6]}"
     workdir = workdir or Path(tempfile.mkdtemp(prefix="durand-"))
-    drive = DurandDrive(channel, NODE_ID, variant)
+    drive = DurandDrive(channel, variant.node_id, variant)
     net = ArmNetwork(f"virtual:{channel}",
                      bus_config(variant, drive.write_eds(workdir / f"durand_{name}.eds")))
     try:

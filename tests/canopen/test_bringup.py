@@ -25,14 +25,25 @@ def _boot_refused(net: ArmNetwork, match: str) -> None:
         net.close()
 
 
-def test_pdos_already_in_the_eds_default_layout_are_not_rewritten(booted):
+def test_every_pdo_the_eds_lists_is_configured_explicitly_and_read_back(booted):
+    """Nothing assumed from the EDS defaults: used PDOs written and read back, unused disabled;
+    the device's own COB-IDs (read over SDO) say so."""
     report = booted.bringup["joint_1"]
     driver = booted.drivers["joint_1"]
-    # 1017h, 1016h, 1006h (1005h is at its default) + hardware data + device settings
-    expected = 3 + len(driver.hardware_objects()) + len(driver.config_writes())
-    assert report.sdo_writes == expected
-    assert report.skipped == []
-    assert "1016h" in report.guarding
+    assert report.skipped == [] and report.refused == [] and "1016h" in report.guarding
+    used = {(s.kind, s.number): s for s in driver.rpdos + driver.tpdos}
+    for kind, comm in (("RPDO", od.RPDO_COMM), ("TPDO", od.TPDO_COMM)):
+        for n in range(4):
+            cob = booted.sdo_read("joint_1", comm + n, od.PDO_COB_ID)
+            spec = used.get((kind, n))
+            if spec is None:
+                assert cob & od.PDO_COB_ID_INVALID, f"{kind}{n + 1} left enabled"
+            else:
+                assert cob == spec.cob_id
+                assert booted.sdo_read("joint_1", comm + n, od.PDO_TRANSMISSION_TYPE) == od.TRANSMISSION_SYNC
+    # the read-back: one COB-ID, one count and every entry per used PDO
+    entries = sum(len(s.entries) for s in used.values())
+    assert report.sdo_reads >= 3 + 2 * len(used) + entries
 
 
 def test_a_write_the_device_refuses_names_node_object_and_code(vbus, bus_config, sim):

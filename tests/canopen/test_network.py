@@ -264,18 +264,37 @@ def test_ft_sensor_values_tare_and_overload(enabled, sim):
     assert any(e.kind == "emcy" and e.code == od.EMCY_FT_OVERLOAD for e in net.poll_events())
 
 
-def test_node_reboot_is_reported_and_recovered(enabled, sim):
+def test_node_reboot_is_an_event_and_the_node_is_reconfigured(enabled, sim):
+    """A boot-up during operation: `bootup` event, the boot-slave process runs again by itself
+    (`reconfigured`), the drive is not re-enabled by the master on its own, and the report says
+    which node rebooted and how it ended."""
     net = enabled
+    net.poll_events()
     sim.power_cycle("joint_4")
-    time.sleep(0.05)
-    kinds = [(e.kind, e.node) for e in net.poll_events()]
-    assert ("bootup", "joint_4") in kinds
-    assert net.cycle().joints[3].state == State.NOT_READY_TO_SWITCH_ON    # no stale values
-    net.recover("joint_4")
-    s = net.run_until(lambda s: s.all_enabled, 10)
+    kinds = eventually(lambda: {e.kind for e in net.poll_events() if e.node == "joint_4"} & {"reconfigured"}
+                       or None, what="reconfigured event")
+    assert kinds == {"reconfigured"}
+    report = net.bringup["joint_4"]
+    assert report.reboots == 1 and "reconfigured and OPERATIONAL again" in report.reboot
+    cob = net.sdo_read("joint_4", od.TPDO_COMM, od.PDO_COB_ID)   # the device holds its layout again
+    assert cob == net.drivers["joint_4"].tpdos[0].cob_id
+    for _ in range(10):
+        s = net.cycle()
     assert s.nodes["joint_4"].nmt_state == od.NMT_STATE_OPERATIONAL
+    assert s.joints[3].state == State.SWITCH_ON_DISABLED       # lost its state; not re-enabled unasked
+    assert all(j.enabled for i, j in enumerate(s.joints) if i != 3)
+    net.enable_all()
     time.sleep(0.3)
     assert not [e for e in net.poll_events() if e.kind == "heartbeat_lost"]
+
+
+def test_reboot_event_comes_before_reconfiguration(enabled, sim):
+    net = enabled
+    net.poll_events()
+    sim.power_cycle("joint_2")
+    eventually(lambda: any(e.kind == "reconfigured" for e in net._events), what="reconfigured")
+    kinds = [e.kind for e in net.poll_events() if e.node == "joint_2"]
+    assert kinds.index("bootup") < kinds.index("reconfigured")
 
 
 def test_shutdown_disables_and_engages_brakes(enabled, sim):

@@ -1,0 +1,216 @@
+"""Cyclic I/O of the network: SYNC, RPDOs out, TPDOs in, their supervision, and the state in
+SI units. ``CyclicIO`` is a part of ``ArmNetwork`` (drivers/network.py) and works on its
+drivers, health, stats and condition variable; it never sleeps except the optional lockstep
+wait for a SYNC's TPDOs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+from spacearm.base.canopen import od
+from spacearm.drivers.devices import (EeCommand, EndEffectorState, FtState, JointDriver, JointState)
+from spacearm.drivers.errors import DriverError, emcy_text
+from spacearm.drivers.health import NodeHealth
+
+
+@dataclass
+class ArmState:
+    sync: int                        # SYNC number this state belongs to
+    complete: bool                   # every expected TPDO of this SYNC arrived
+    joints: list[JointState]
+    end_effector: EndEffectorState | None
+    ft: FtState | None
+    nodes: dict[str, NodeHealth]
+
+    @property
+    def joint_positions(self) -> list[float]:
+        return [j.position for j in self.joints]
+
+    @property
+    def all_enabled(self) -> bool:
+        return all(j.enabled for j in self.joints)
+
+
+@dataclass
+class ArmCommand:
+    joint_positions: Sequence[float | None] | None = None   # rad, CSP targets (None = hold)
+    joint_velocities: Sequence[float] | None = None         # rad/s feed-forward
+    joint_torques: Sequence[float] | None = None            # N m feed-forward at the joint
+    end_effector: EeCommand | None = None
+
+
+
+
+class CyclicIO:
+    # ------------------------------------------------------------------ cycle API
+    def send_sync(self) -> int:
+        """Send one SYNC; returns its number. TPDOs arriving from now on belong to it."""
+        with self._cv:
+            if self._expected is not None and self._monitoring:
+                self._count_missing_tpdos(self._expected_tpdos() - self._received)
+            self._sync += 1
+            self._received = set()
+            self._expected = self._expected_tpdos()
+            self.stats.expected_tpdos += len(self._expected)
+        self._send(od.SYNC_COB_ID_DEFAULT, b"")
+        self.stats.syncs_sent += 1
+        return self._sync
+
+    def _count_missing_tpdos(self, missing: set[int]) -> None:
+        """A mapped TPDO of a live node missing for tpdo_loss_cycles SYNCs in a row is a
+        fault event naming the node and the PDO (once per loss; re-armed when it returns)."""
+        limit = self.config.bus.tpdo_loss_cycles
+        for cob in list(self._tpdo_misses):
+            if cob not in missing:
+                del self._tpdo_misses[cob]
+        for cob in missing:
+            n = self._tpdo_misses[cob] = self._tpdo_misses.get(cob, 0) + 1
+            if n == limit:
+                driver, spec = self._tpdo_routes[cob]
+                self._event("tpdo_missing", driver, f"{driver.label}: {spec.label} missing for {n} SYNCs "
+                                                    f"(mapped, node alive)")
+
+    def _expected_tpdos(self) -> set[int]:
+        cobs = set()
+        for d in self.drivers.values():
+            h = self.health[d.name]
+            if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL:
+                cobs.update(s.cob_id for s in d.tpdos)
+        return cobs
+
+    def wait_all_tpdos(self, timeout: float | None = None) -> bool:
+        """Lockstep: wait until every live OPERATIONAL node sent this SYNC's TPDOs."""
+        timeout = self.config.bus.lockstep_timeout if timeout is None else timeout
+        with self._cv:
+            ok = self._cv.wait_for(lambda: self._expected_tpdos() <= self._received, timeout=timeout)
+        if not ok:
+            self.stats.tpdo_timeouts += 1
+        return ok
+
+    def write(self, command: ArmCommand | None = None) -> None:
+        """Apply a command (SI units), advance the drivers' state machines one step from the
+        latest TPDOs and send the RPDOs. Call before send_sync()."""
+        if not self._connected:
+            raise DriverError("the network is not connected: call boot() first")
+        if command is not None:
+            self._apply(command)
+        frames = []
+        with self._cv:
+            for d in self.drivers.values():
+                if isinstance(d, JointDriver) and self._master_following_error(d):
+                    self._check_following_error(d)
+                d.step()
+                if isinstance(d, JointDriver):
+                    if d.axis.fault_reset_failed:
+                        d.axis.fault_reset_failed = False
+                        self._event("fault_reset_failed", d,
+                                    f"{d.label}: fault reset did not clear the fault "
+                                    f"(error 0x{d.value(od.ERROR_CODE):04X} {emcy_text(d.value(od.ERROR_CODE))})",
+                                    d.value(od.ERROR_CODE))
+                    if d.axis.fault_cleared:
+                        self._event("fault_cleared", d, f"{d.label}: fault cleared")
+                h = self.health[d.name]
+                # Also to a node whose heartbeat was lost: it may still listen (only its
+                # heartbeat producer failed), and the protective stop must reach it.
+                if h.nmt_state == od.NMT_STATE_OPERATIONAL:
+                    frames += d.rpdo_frames()
+        if frames:
+            if not self._connected:
+                raise DriverError("the network is not connected: call boot() first")
+            with self.network.send_lock:
+                self._send_frames(frames)      # one write on the loopback bus
+
+    def _master_following_error(self, d: JointDriver) -> bool:
+        report = self.bringup.get(d.name)
+        return report is not None and report.master_following_error
+
+    def _check_following_error(self, d: JointDriver) -> None:
+        """The fallback for a drive without a following-error window (6065h/6066h absent or
+        refused): the position the drive reports against the target sent one SYNC earlier, over
+        the bus file's window for longer than its timeout, is a ``following_error`` event
+        (once per excursion) with the CiA 402 code 8611h."""
+        if not d.axis.enabled or (od.TARGET_POSITION, 0) not in d.rpdo_values:
+            self._following_over.pop(d.name, None)
+            return
+        error = abs(d.rpdo_values[(od.TARGET_POSITION, 0)] / d.k - d.position)
+        s = d.settings
+        if error <= s.following_error_window:
+            self._following_over.pop(d.name, None)
+            return
+        cycles = self._following_over[d.name] = self._following_over.get(d.name, 0) + 1
+        if cycles == max(1, round(s.following_error_timeout / self.config.bus.sync_period)) + 1:
+            self._event("following_error", d, f"{d.label}: following error {error:.6g} beyond the window "
+                                              f"{s.following_error_window:g} for {s.following_error_timeout:g} s "
+                                              f"(supervised by the master: the drive has no 6065h)",
+                        od.EMCY_FOLLOWING_ERROR)
+
+    def _send(self, can_id: int, data: bytes) -> None:
+        """The cycle's frames (SYNC, RPDOs): plain values to the bus, no Message on the
+        in-process bus; the library's send lock keeps them whole against SDO/NMT senders."""
+        if not self._connected:
+            raise DriverError("the network is not connected: call boot() first")
+        with self.network.send_lock:
+            self._send_frame(can_id, data)
+
+    def _apply(self, c: ArmCommand) -> None:
+        for i, j in enumerate(self.joints):
+            if c.joint_positions is not None and i < len(c.joint_positions) and c.joint_positions[i] is not None:
+                j.target = float(c.joint_positions[i])
+            if c.joint_velocities is not None and i < len(c.joint_velocities):
+                j.velocity_ff = float(c.joint_velocities[i])
+            if c.joint_torques is not None and i < len(c.joint_torques):
+                j.torque_ff = float(c.joint_torques[i])
+        if c.end_effector is not None and self.end_effector is not None:
+            self.end_effector.command(c.end_effector)
+
+    def nodes_missing_tpdos(self) -> list[str]:
+        """Names of live nodes whose TPDOs of the current SYNC have not all arrived."""
+        with self._cv:
+            missing = self._expected_tpdos() - self._received
+            return sorted({self._tpdo_routes[cob][0].name for cob in missing})
+
+    def tpdos_complete(self) -> bool:
+        """Have all expected TPDOs of the last SYNC arrived (non-blocking)?"""
+        with self._cv:
+            return self._expected_tpdos() <= self._received
+
+    def read(self, complete: bool | None = None) -> ArmState:
+        """The latest values in SI units (non-blocking). ``complete`` defaults to
+        tpdos_complete(): whether they all belong to the last SYNC."""
+        with self._cv:
+            if complete is None:
+                complete = self._expected_tpdos() <= self._received
+            return ArmState(
+                sync=self._sync, complete=complete,
+                joints=[j.state() for j in self.joints],
+                end_effector=self.end_effector.state() if self.end_effector else None,
+                ft=self.ft.state() if self.ft else None,
+                nodes={n: NodeHealth(**vars(h)) for n, h in self.health.items()})
+
+    def cycle(self, command: ArmCommand | None = None, wait: bool = True,
+              timeout: float | None = None) -> ArmState:
+        """One control cycle: write(command), send_sync(), [wait_all_tpdos()], read()."""
+        self.write(command)
+        self.send_sync()
+        if wait:
+            self.wait_all_tpdos(timeout)
+        return self.read()
+
+
+
+    def _on_tpdo(self, can_id, data, timestamp):
+        driver, spec = self._tpdo_routes[can_id]
+        length = self._tpdo_lengths.get(id(spec))
+        if length is None:
+            length = self._tpdo_lengths[id(spec)] = spec.length
+        if len(data) < length:
+            self.stats.malformed += 1
+            return
+        with self._cv:
+            driver.decode(spec, bytes(data))
+            self._received.add(can_id)
+            self.stats.tpdos += 1
+            if self._expected is None or self._expected <= self._received:
+                self._cv.notify_all()
+

@@ -1,0 +1,206 @@
+"""Node health on the controller's side: heartbeat and node-guarding consumers, EMCY consumer,
+and the master's timer thread (its own heartbeat, guarding polls, heartbeat-loss checks with
+starvation excused).
+
+``HealthMonitor`` is a part of ``ArmNetwork`` (drivers/network.py); it works on the network's
+``health``, ``drivers``, ``stats``, ``_cv``, ``_event()`` and hands a boot-up during operation
+to the boot master's ``_on_reboot()`` (drivers/boot_master.py).
+"""
+from __future__ import annotations
+
+import logging
+import struct
+import time
+from dataclasses import dataclass
+
+from spacearm.base.canopen import od
+from spacearm.base.runtime.priority import describe, use_fifo
+from spacearm.drivers.devices import DeviceDriver
+from spacearm.drivers.errors import NetworkEvent, emcy_text
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass
+class NodeHealth:
+    name: str
+    node_id: int
+    nmt_state: int | None = None     # last heartbeat state (spacearm.base.canopen.od.NMT_STATE_*)
+    alive: bool = False
+    last_heartbeat: float | None = None
+    emcy_code: int = 0               # last EMCY code (0 after an error reset)
+
+    @property
+    def nmt_state_name(self) -> str:
+        return od.NMT_STATE_NAMES.get(self.nmt_state, "UNKNOWN")
+
+
+
+class HealthMonitor:
+    # ------------------------------------------------------------------ receive handlers
+    def _make_hb_handler(self, name: str):
+        driver = self.drivers[name]
+
+        def on_heartbeat(can_id, data, timestamp):
+            if len(data) != 1:
+                self.stats.malformed += 1
+                return
+            state = data[0] & 0x7F
+            if driver.node_id in self._guarded:
+                self._check_guard_toggle(driver, data[0], state)
+            with self._cv:
+                h = self.health[name]
+                previous, was_alive = h.nmt_state, h.alive
+                h.last_heartbeat = time.monotonic()
+                h.nmt_state = state
+                h.alive = True
+                if state == od.NMT_STATE_BOOTUP:
+                    self._booted.add(driver.node_id)
+                    driver.values.clear()       # whatever it reported before is gone
+                    if self._monitoring:
+                        self._on_reboot(driver)
+                elif self._monitoring and previous == od.NMT_STATE_OPERATIONAL and state != previous:
+                    self._event("nmt_state", driver, f"{driver.label} left OPERATIONAL: now {h.nmt_state_name}",
+                                state)
+                if self._monitoring and not was_alive:
+                    self._event("heartbeat_restored", driver, f"{driver.label} heartbeat back")
+                if state != previous or not was_alive:
+                    self._expected = None
+                self._cv.notify_all()
+        return on_heartbeat
+
+    def _check_guard_toggle(self, driver: DeviceDriver, answer: int, state: int) -> None:
+        """CiA 301 node guarding: each answer's bit 7 alternates, starting from 0 after boot-up.
+        An answer with the same bit as the one before means an answer was lost or repeated
+        (a stale frame, a second node on the ID): counted and reported, not a node loss."""
+        toggle = answer & 0x80
+        if state == od.NMT_STATE_BOOTUP:
+            self._guard_toggle.pop(driver.node_id, None)
+            return
+        last = self._guard_toggle.get(driver.node_id)
+        self._guard_toggle[driver.node_id] = toggle
+        if last is not None and toggle == last:
+            self.stats.guard_toggle_errors += 1
+            if self._monitoring:
+                self._event("guard_toggle", driver, f"{driver.label}: node-guarding answer did not toggle "
+                                                    "(an answer was lost or repeated)")
+
+    def _make_emcy_handler(self, name: str):
+        driver = self.drivers[name]
+
+        def on_emcy(can_id, data, timestamp):
+            if len(data) != 8:
+                self.stats.malformed += 1
+                return
+            code, register, _ = struct.unpack("<HB5s", bytes(data))
+            self.health[name].emcy_code = code
+            if code & 0xFF00 == 0:
+                self._event("emcy_reset", driver, f"{driver.label}: error reset", code)
+            else:
+                self._event("emcy", driver, f"{driver.label}: EMCY 0x{code:04X} {emcy_text(code)} "
+                                            f"(error register 0x{register:02X})", code)
+        return on_emcy
+
+    def _on_nmt_frame(self, can_id, data, timestamp):
+        if len(data) != 2:
+            self.stats.malformed += 1
+
+    def _poll_guarded(self, now: float) -> None:
+        """Node guarding: an RTR on 700h + ID every heartbeat period of each guarded node."""
+        for node_id, due in list(self._guarded.items()):
+            if now >= due:
+                self._guarded[node_id] = max(due + self._driver(node_id).cfg.heartbeat_period, now)
+                try:
+                    self.network.send_message(od.HEARTBEAT_BASE + node_id, b"\x00", remote=True)
+                except Exception as exc:
+                    logger.warning("node guarding request to node %d not sent: %s", node_id, exc)
+
+    def _monitor_loop(self) -> None:
+        """The master's timer: its own heartbeat, node-guarding polls and heartbeat-loss checks.
+
+        Starvation vs device loss: silence is counted only while this process could observe
+        the bus. When the loop wakes more than STARVED_SLACK after it meant to (the host or a
+        busy process held the CPU; frames may be waiting unread in a queue), the excess is
+        not counted as any node's silence: every last-heard time moves forward by it, and a
+        loss that the wall clock alone would have declared becomes a `late_cycle` event
+        (informational) instead of `heartbeat_lost`. A node that really went silent is still
+        declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
+        excused per silence is capped at the margin up to 3 periods, so the bound of 3
+        heartbeat periods holds whatever the load."""
+        if self.timer_priority:
+            self.timer_scheduling = use_fifo(self.timer_priority) or describe()
+        factor = self.config.bus.heartbeat_loss_factor
+        period = self.config.bus.master_heartbeat_period
+        hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id
+        next_hb = time.monotonic()
+        due = next_hb
+        while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
+            now = time.monotonic()
+            excess = now - due - STARVED_SLACK
+            due = now + MONITOR_PERIOD
+            if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
+                next_hb = max(next_hb + period, now)
+                try:
+                    self.network.send_message(hb_cob, bytes([od.NMT_STATE_OPERATIONAL]))
+                except Exception as exc:
+                    logger.warning("controller heartbeat not sent: %s", exc)
+            if period > 0:
+                due = min(due, next_hb)
+            if not self._monitoring:
+                continue
+            self._poll_guarded(now)
+            with self._cv:
+                if excess > 0:
+                    # Starved: excuse the time, and judge only at the next pass, once the
+                    # receive path has had the CPU to deliver what waited meanwhile.
+                    self.stats.starved_time += excess
+                    self._excuse(now, excess, factor)
+                    due = now + RECHECK_AFTER_STARVED
+                    continue
+                for cfg in self.config.nodes:
+                    h = self.health[cfg.name]
+                    if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                        h.alive = False
+                        d = self.drivers[cfg.name]
+                        self._event("heartbeat_lost", d,
+                                    f"{d.label}: heartbeat lost (silent for {now - h.last_heartbeat:.3f} s, "
+                                    f"period {cfg.heartbeat_period:.3f} s)")
+                        self._expected = None
+                        self._cv.notify_all()
+
+    def _excuse(self, now: float, excess: float, factor: float) -> None:
+        """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""
+        judged = []
+        for cfg in self.config.nodes:
+            h = self.health[cfg.name]
+            if not h.alive or h.last_heartbeat is None:
+                continue
+            # at most the margin between the loss factor and 3 periods per silence (less one
+            # monitor pass): a real loss is still declared within 3 heartbeat periods
+            cap = max(0.0, (3.0 - factor) * cfg.heartbeat_period - MONITOR_PERIOD)
+            if h.last_heartbeat != self._excused_since.get(cfg.name):
+                self._excused[cfg.name] = 0.0
+            grant = min(excess, cap - self._excused.get(cfg.name, 0.0))
+            if grant <= 0.0:
+                continue
+            if now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                judged.append(cfg.name)
+            h.last_heartbeat += grant
+            self._excused[cfg.name] = self._excused.get(cfg.name, 0.0) + grant
+            self._excused_since[cfg.name] = h.last_heartbeat
+        self.stats.starved_checks += 1
+        if judged:
+            names = ", ".join(judged)
+            event = NetworkEvent("late_cycle", judged[0], self.drivers[judged[0]].node_id,
+                                 f"late cycle: the controller was starved for {excess:.3f} s; heartbeat "
+                                 f"silence of {names} in that window not counted as node loss")
+            self._events.append(event)
+
+
+
+# The master's timer (heartbeat producer, guarding, loss checks) runs at least every
+# MONITOR_PERIOD; a wake later than STARVED_SLACK past its due time counts as starvation.
+MONITOR_PERIOD = 0.010      # s
+MONITOR_MIN_SLEEP = 0.0005  # s
+STARVED_SLACK = 0.020       # s
+RECHECK_AFTER_STARVED = 0.003  # s: a starved pass judges nothing; the next one comes this soon
