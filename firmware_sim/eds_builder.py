@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 from spacearm.base.paths import CONFIGS
 from spacearm.base.canopen import od
+from spacearm.base.canopen import redundancy_object as rdn
 from spacearm.base.canopen.pdo_maps import PDO_MAPS
 
 EDS_DIR = CONFIGS / "eds"
@@ -74,7 +75,19 @@ def comm_objects(device_type: int, product: int, name: str, consumer_heartbeat: 
     ]
     if not consumer_heartbeat:
         objs = [o for o in objs if o.index != od.CONSUMER_HEARTBEAT]
+    else:    # the slave's bus redundancy rule needs the master's heartbeat (1016h:1)
+        objs.append(redundancy_object())
     return objs
+
+
+def redundancy_object() -> Obj:
+    """ECSS-E-ST-50-15C bus redundancy, as Lely's redundancy object (base/canopen/redundancy_object.py)."""
+    return Obj(rdn.REDUNDANCY, "Bus redundancy", RECORD, subs={
+        0: Var("Highest sub-index supported", UNSIGNED8, "ro", 4),
+        rdn.BDEFAULT: Var("Bdefault", UNSIGNED8, "rw", rdn.DEFAULTS[rdn.BDEFAULT], high=1),
+        rdn.TTOGGLE: Var("Ttoggle", UNSIGNED8, "rw", rdn.DEFAULTS[rdn.TTOGGLE]),
+        rdn.NTOGGLE: Var("Ntoggle", UNSIGNED8, "rw", rdn.DEFAULTS[rdn.NTOGGLE], low=1),
+        rdn.CTOGGLE: Var("Ctoggle", UNSIGNED8, "rw", rdn.DEFAULTS[rdn.CTOGGLE])})
 
 
 def pdo_objects(rpdo_maps: list[list[tuple[int, int, int]]], tpdo_maps: list[list[tuple[int, int, int]]],

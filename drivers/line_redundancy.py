@@ -1,0 +1,309 @@
+"""The master's side of bus redundancy on a redundant pair of lines (ECSS-E-ST-50-15C; the
+objects and the slave's rule, with their sources, are in base/canopen/redundancy_object.py
+and firmware_sim/line_selection.py).
+
+The controller has parallel bus access: it hears both lines (base/transport/redundant.py)
+and sends everything (its heartbeat, SYNC, RPDOs, SDO, NMT) on the active one. The nodes
+follow its heartbeat, so moving the active line moves the network. The rule it moves by
+(Lely leaves this decision to the application; ours, from the nodes' traffic per line):
+
+* the active line is silent: two SYNCs in a row went out on it while nodes were
+  OPERATIONAL and no node frame came back (a dead line shows within two cycles), or no
+  node frame for 1.5 of the slowest node's heartbeat periods (an idle network) -> switch;
+* most nodes are heard on the other line more recently than on the active one (they
+  toggled there: the active line does not reach them) -> switch;
+* after a switch it waits `hold_off` (the nodes' toggle time plus two master heartbeat
+  periods) before it goes back for nodes heard on the old line, so the nodes have time to
+  follow; a line it left for silence is not chosen again for silence of the other (only
+  when nodes are heard there, or in the search below): flipping back while starved nodes
+  are still on their way would chase them from line to line;
+* no node frame on either line for `lost_after` (that time and one more master heartbeat
+  period) -> both lines lost (the daemon's protective stop `bus_lines_lost`); it keeps
+  alternating lines, once a second, to find the network again.
+
+While a switch is under way (the active line silent, or switched less than `lost_after`
+ago and not every node back) `bridging()` is True: the daemon does not count that cycle's
+missing process data as node loss; the window ends at `lost_after`, so a node that does not
+come back is still lost within the usual bounds.
+
+Every switch is a LineEvent with a code: `line_switch`, `line_switch_complete` (every node
+heard on the new line; with the time from the old line's last frame), `bus_lines_lost`.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from spacearm.base.canopen import od
+from spacearm.base.config.bus import BusConfig
+from spacearm.base.config.redundancy import RedundancySettings
+from spacearm.base.transport.redundant import LINE_NAMES
+
+logger = logging.getLogger(__name__)
+
+LINE_SWITCH = "line_switch"
+SWITCH_COMPLETE = "line_switch_complete"
+LINES_LOST = "bus_lines_lost"
+
+SYNCS_UNANSWERED = 2        # SYNCs with no node frame back before the active line counts as silent
+IDLE_SILENCE_PERIODS = 1.5  # node heartbeat periods of silence that make an idle line silent
+SEARCH_PERIOD = 1.0         # s between switches while both lines are lost
+TICK = 0.002                # s: the rule's timer
+
+
+@dataclass(frozen=True)
+class LineEvent:
+    time: float             # monotonic
+    code: str               # LINE_SWITCH | SWITCH_COMPLETE | LINES_LOST
+    line: int               # the active line after the event
+    message: str
+    duration: float | None = None   # SWITCH_COMPLETE: s from the old line's last node frame
+
+
+def settings_of(config: BusConfig) -> RedundancySettings:
+    return getattr(config.bus, "redundancy", None) or RedundancySettings()
+
+
+def bus_config_for(bus_spec: str, config: BusConfig) -> BusConfig:
+    """On a redundant pair the controller's heartbeat and the nodes' consumer time for it are
+    the [bus.redundancy] ones (they set how fast the nodes follow); one line: unchanged."""
+    from spacearm.base.transport.redundant import PAIR_SEPARATOR
+
+    if PAIR_SEPARATOR not in bus_spec:
+        return config
+    r = settings_of(config)
+    bus = config.bus.model_copy(update={"master_heartbeat_period": r.master_heartbeat_period,
+                                        "master_heartbeat_timeout": r.master_heartbeat_timeout})
+    return config.model_copy(update={"bus": bus})
+
+
+def redundancy_writes(config: BusConfig) -> list[tuple[int, int, int]]:
+    """What bring-up writes to a node's redundancy object (where its EDS has it)."""
+    from spacearm.base.canopen import redundancy_object as rdn
+
+    r = settings_of(config)
+    return [(rdn.REDUNDANCY, rdn.BDEFAULT, r.default_line_index), (rdn.REDUNDANCY, rdn.TTOGGLE, r.toggle_time),
+            (rdn.REDUNDANCY, rdn.NTOGGLE, r.max_toggles), (rdn.REDUNDANCY, rdn.CTOGGLE, 0)]
+
+
+class LineRedundancyMaster:
+    """The master's rule on one RedundantBus. `node_of(can_id)` names the node that sends a
+    COB-ID (None: not a node's frame). Times are monotonic s; `clock` is for tests."""
+
+    def __init__(self, bus, node_ids: list[int], node_of: Callable[[int], int | None], *,
+                 node_period: float, master_period: float, settings: RedundancySettings,
+                 on_event: Callable[[LineEvent], None] | None = None, clock=time.monotonic,
+                 timer: bool = True):
+        self.bus = bus
+        self.node_ids = list(node_ids)
+        self.node_of = node_of
+        self.on_event = on_event
+        self.clock = clock
+        self.silence = IDLE_SILENCE_PERIODS * node_period
+        self.hold_off = settings.switch_time() + 2 * master_period
+        self.lost_after = self.hold_off + master_period
+        self.heard: tuple[dict[int, float], dict[int, float]] = ({}, {})
+        self.line_last: list[float | None] = [None, None]
+        self.unanswered = [0, 0]
+        self.operational: set[int] = set()
+        self.switched_at = float("-inf")
+        self.failed_at: float | None = None      # the old line's last node frame, for the switch under way
+        self.pending: set[int] = set()           # nodes not yet heard on the new line
+        self.lost = False
+        self.left_silent = [False, False]        # left for silence, no node heard there since
+        self.switches = 0
+        self.bridged_cycles = 0
+        self.events: list[LineEvent] = []
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        bus.rx_observers.append(self.on_rx)
+        bus.tx_observers.append(self.on_tx)
+        self._thread = None
+        if timer:
+            self._thread = threading.Thread(target=self._run, name="arm-line-redundancy", daemon=True)
+            self._thread.start()
+
+    @property
+    def active(self) -> int:
+        return self.bus.active
+
+    # ------------------------------------------------------------------ what the lines show
+    def on_rx(self, line: int, can_id: int, data: bytes, timestamp: float) -> None:
+        node = self.node_of(can_id)
+        if node is None:
+            return
+        now = self.clock()
+        with self._lock:
+            self.heard[line][node] = now
+            self.line_last[line] = now
+            self.unanswered[line] = 0
+            self.left_silent[line] = False
+            if can_id == od.HEARTBEAT_BASE + node and len(data) == 1:
+                if data[0] & 0x7F == od.NMT_STATE_OPERATIONAL:
+                    self.operational.add(node)
+                else:
+                    self.operational.discard(node)
+            self.lost = False
+            events = []
+            if line == self.bus.active and node in self.pending:
+                self.pending.discard(node)
+                if not self.pending:
+                    events.append(self._complete(now))
+            events += self._decide(now)
+        self._emit(events)
+
+    def on_tx(self, line: int, can_id: int) -> None:
+        if can_id != od.SYNC_COB_ID_DEFAULT or line != self.bus.active:
+            return
+        with self._lock:
+            if not self.operational:
+                return
+            self.unanswered[line] += 1
+            events = self._decide(self.clock())
+        self._emit(events)
+
+    # ------------------------------------------------------------------ the rule
+    def _decide(self, now: float) -> list[LineEvent]:
+        """Under the lock: switch if the rule says so; returns the events to emit."""
+        active, other = self.bus.active, self.bus.active ^ 1
+        last = self.line_last[active]
+        if last is None and self.line_last[other] is None:
+            return []                               # nothing heard yet: not armed
+        moved = [n for n in self.node_ids
+                 if self.heard[other].get(n, float("-inf")) > max(self.heard[active].get(n, float("-inf")),
+                                                                  self.switched_at)]
+        # right after a switch of its own the master waits for the nodes: frames they still send
+        # on the old line until they toggle are not a reason to go back
+        if 2 * len(moved) > len(self.node_ids) and now - self.switched_at >= self.hold_off:
+            return [self._switch(now, f"{len(moved)} of {len(self.node_ids)} nodes are heard on line "
+                                      f"{LINE_NAMES[other]} only")]
+        if self.lost:
+            return [self._switch(now, "searching for the nodes")] if now - self.switched_at >= SEARCH_PERIOD else []
+        if now - self.switched_at < self.hold_off or self.left_silent[other]:
+            return []
+        if self.unanswered[active] >= SYNCS_UNANSWERED:
+            self.left_silent[active] = True
+            return [self._switch(now, f"{self.unanswered[active]} SYNCs on line {LINE_NAMES[active]} "
+                                      "brought no node frame")]
+        if now - (last if last is not None else self.switched_at) > self.silence:
+            self.left_silent[active] = True
+            return [self._switch(now, f"no node frame on line {LINE_NAMES[active]} for "
+                                      f"{now - (last if last is not None else self.switched_at):.3f} s")]
+        return []
+
+    def _switch(self, now: float, why: str) -> LineEvent:
+        old = self.bus.active
+        self.bus.active = old ^ 1
+        self.switches += 1
+        if self.failed_at is None or not self.pending:
+            self.failed_at = self.line_last[old] if self.line_last[old] is not None else now
+        self.switched_at = now
+        self.unanswered[old ^ 1] = 0
+        self.pending = set(self.node_ids)
+        message = f"bus line {LINE_NAMES[old]} -> {LINE_NAMES[old ^ 1]}: {why}"
+        logger.warning(message)
+        return LineEvent(now, LINE_SWITCH, old ^ 1, message)
+
+    def _complete(self, now: float) -> LineEvent:
+        duration = now - self.failed_at if self.failed_at is not None else None
+        self.failed_at = None
+        return LineEvent(now, SWITCH_COMPLETE, self.bus.active,
+                         f"every node on line {LINE_NAMES[self.bus.active]}"
+                         + (f", {1e3 * duration:.0f} ms after the old line's last frame" if duration is not None
+                            else ""), duration)
+
+    def check(self, now: float | None = None) -> None:
+        """One pass of the timer (tests call it with their own clock)."""
+        now = self.clock() if now is None else now
+        with self._lock:
+            events = self._decide(now)
+            heard = [t for t in self.line_last if t is not None]
+            if heard and not self.lost and now - max(heard) > self.lost_after:
+                self.lost = True
+                events.append(LineEvent(now, LINES_LOST, self.bus.active,
+                                        f"both bus lines lost: no node frame on line A or B for "
+                                        f"{now - max(heard):.3f} s"))
+        self._emit(events)
+
+    def bridging(self, now: float | None = None) -> bool:
+        """Is a switch under way (missing process data is the switch, not node loss)?"""
+        now = self.clock() if now is None else now
+        with self._lock:
+            if self.lost:
+                return False
+            heard = [t for t in self.line_last if t is not None]
+            if not heard or now - max(heard) > self.lost_after:
+                return False
+            return self.unanswered[self.bus.active] > 0 or (
+                bool(self.pending) and now - self.switched_at < self.lost_after)
+
+    def status(self) -> dict:
+        now = self.clock()
+        with self._lock:
+            return {"active": LINE_NAMES[self.bus.active], "switches": self.switches,
+                    "lost": self.lost, "bridged_cycles": self.bridged_cycles,
+                    "heard_ago": {LINE_NAMES[i]: (None if t is None else round(now - t, 3))
+                                  for i, t in enumerate(self.line_last)}}
+
+    # ------------------------------------------------------------------ plumbing
+    def _emit(self, events: list[LineEvent]) -> None:
+        for event in events:
+            self.events.append(event)
+            if self.on_event is not None:
+                try:
+                    self.on_event(event)
+                except Exception:
+                    logger.exception("line event callback failed")
+
+    def _run(self) -> None:
+        while not self._stop.wait(TICK):
+            self.check()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
+
+
+def attach(net) -> LineRedundancyMaster | None:
+    """The master's rule for an ArmNetwork on a redundant pair (None on one line); its events
+    become the network's events (`poll_events()`), with the line event's code as kind."""
+    from spacearm.drivers.errors import NetworkEvent
+
+    bus = net.network.bus
+    if not hasattr(bus, "tx_router"):
+        return None
+    ids = {d.node_id for d in net.drivers.values()}
+    routes = getattr(net, "_tpdo_routes", {})
+
+    def node_of(can_id: int) -> int | None:
+        route = routes.get(can_id)
+        if route is not None:
+            return route[0].node_id
+        node_id = can_id & 0x7F
+        if can_id & 0x780 in (od.EMCY_BASE, od.SDO_TX_BASE, od.HEARTBEAT_BASE) and node_id in ids:
+            return node_id
+        return None
+
+    def on_event(event: LineEvent) -> None:
+        network_event = NetworkEvent(event.code, "bus", 0, event.message)
+        net._events.append(network_event)
+        for callback in net.event_callbacks:
+            callback(network_event)
+
+    master = LineRedundancyMaster(
+        bus, sorted(ids), node_of, node_period=max(n.heartbeat_period for n in net.config.nodes),
+        master_period=net.config.bus.master_heartbeat_period, settings=settings_of(net.config), on_event=on_event)
+    net.line_redundancy = master
+    return master
+
+
+def configure_nodes(net) -> None:
+    """Bring-up's redundancy writes, for nodes whose EDS has the object."""
+    for driver in net.drivers.values():
+        for index, sub, value in redundancy_writes(net.config):
+            if index in driver.od:
+                net.sdo_write(driver.name, index, sub, value)

@@ -1,0 +1,216 @@
+"""The simulated nodes on a redundant pair of lines: each listens on one line and follows the
+master's heartbeat to the other when it goes quiet (the slave's rule of ECSS-E-ST-50-15C
+bus redundancy, as Lely's NMT redundancy manager implements it; the objects and the rule's
+sources are in base/canopen/redundancy_object.py).
+
+    sim = Simulator("virtual:arm-a+virtual:arm-b", bus_config).start()   # attaches LineSelection
+
+Per node with the redundancy object (2E00h) and a master heartbeat consumer (1016h:1):
+
+* it listens and sends on one line (selective bus access): starting on Bdefault;
+* the master's heartbeat times out (1016h:1 time, through the node's own consumer check,
+  which excuses the simulator's starvation): after (Ttoggle - 1) more consumer times it
+  toggles to the other line, counts Ctoggle, and sends its heartbeat there at once (as
+  Lely's slave examples restart the producer on a switch, so the master sees it at once);
+* no master there either: it toggles again every Ttoggle consumer times until Ctoggle
+  reaches Ntoggle; then the line it is on becomes Bdefault, it stops toggling and takes its
+  heartbeat-loss reaction (EMCY 8130h, a drive's fault reaction) as without redundancy;
+* hearing the master again ends the search: that line becomes Bdefault.
+
+A node without the object or without 1016h (the compact wrist drive) stays on line A.
+Every toggle is a LineEvent in `events` (`spacearm sim` prints them).
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+
+from spacearm.base.canopen import od
+from spacearm.base.canopen import redundancy_object as rdn
+from spacearm.base.transport.redundant import LINE_NAMES, rx_line
+
+TICK = 0.002   # s: the toggle timer's resolution
+
+
+@dataclass(frozen=True)
+class LineEvent:
+    time: float        # monotonic
+    node: str
+    kind: str          # "switch" | "no_master" | "master_found"
+    line: int
+
+    def __str__(self) -> str:
+        return f"{self.node}: {self.kind} on line {LINE_NAMES[self.line]}"
+
+
+class NodeLineRule:
+    """The slave's rule for one node; times are passed in (monotonic s)."""
+
+    def __init__(self, node):
+        self.node = node
+        self.line = self._get(rdn.BDEFAULT) & 1
+        self.toggle_at: float | None = None
+        self.searching = False
+
+    def _get(self, sub: int) -> int:
+        try:
+            return int(self.node.get(rdn.REDUNDANCY, sub))
+        except Exception:
+            return rdn.DEFAULTS[sub]
+
+    def master(self) -> tuple[int, float] | None:
+        """(node ID, consumer time s) of the redundancy master (1016h:1), None if unset."""
+        try:
+            value = self.node.get(od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB)
+        except Exception:
+            return None
+        producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
+        return (producer, ms / 1000.0) if producer and ms else None
+
+    def master_heard(self) -> bool:
+        """The master's heartbeat on this node's line: the search (if any) ends here."""
+        self.toggle_at = None
+        if not self.searching:
+            return False
+        self.searching = False
+        self.node.put(rdn.REDUNDANCY, rdn.BDEFAULT, self.line)
+        return True
+
+    def master_missed(self, now: float, consumer_time: float) -> None:
+        """The master's heartbeat timed out (one consumer time passed)."""
+        ttoggle = self._get(rdn.TTOGGLE)
+        if ttoggle == 0:          # Lely: Ttoggle 0 disables toggling
+            return
+        self.searching = True
+        self.toggle_at = now + (ttoggle - 1) * consumer_time
+
+    def due(self, now: float) -> bool:
+        return self.toggle_at is not None and now >= self.toggle_at
+
+    def toggle(self, now: float, consumer_time: float) -> str:
+        """Switch to the other line; "switch", or "no_master" once Ntoggle is reached."""
+        self.line ^= 1
+        count = min(self._get(rdn.CTOGGLE) + 1, 255)
+        self.node.put(rdn.REDUNDANCY, rdn.CTOGGLE, count)
+        if count < self._get(rdn.NTOGGLE):
+            self.toggle_at = now + self._get(rdn.TTOGGLE) * consumer_time
+            return "switch"
+        self.node.put(rdn.REDUNDANCY, rdn.BDEFAULT, self.line)
+        self.toggle_at, self.searching = None, False
+        return "no_master"
+
+
+# the node's receive entry points a frame of the other line must not reach
+_GATED = ("on_rpdo", "on_nmt", "on_sdo_request", "on_guard_request", "send_tpdos")
+
+
+class LineSelection:
+    """Selective bus access for every node of a Simulator whose bus is a RedundantBus."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.bus = sim.bus
+        self.rules: dict[int, NodeLineRule] = {}
+        self.events: list[LineEvent] = []
+        self._owners: dict[int, int] = {}        # COB-ID -> sending node ID (found once)
+        for node in sim.nodes.values():
+            if rdn.REDUNDANCY in node.od and od.CONSUMER_HEARTBEAT in node.od:
+                self.rules[node.node_id] = NodeLineRule(node)
+            self._gate(node)
+        self.bus.tx_router = self.tx_line
+        self._thread = threading.Thread(target=self._run, name="sim-line-selection", daemon=True)
+        self._thread.start()
+
+    # ------------------------------------------------------------------ lines
+    def line_of(self, node) -> int:
+        rule = self.rules.get(node.node_id)
+        return rule.line if rule is not None else 0
+
+    def hears(self, node) -> bool:
+        """Does the frame this thread is delivering come on the line the node listens on?"""
+        line = rx_line()
+        return line is None or line == self.line_of(node)
+
+    def tx_line(self, can_id: int) -> int | None:
+        """The line a frame goes out on: its sending node's; None (both) for the simulator's
+        own frames (its timing report, the fault-injection unit's answers)."""
+        owner = self._owners.get(can_id)
+        if owner is None:
+            owner = self._sender(can_id)
+            if owner is None:
+                return None
+            self._owners[can_id] = owner
+        node = self.sim.nodes[owner]
+        return self.line_of(node)
+
+    def _sender(self, can_id: int) -> int | None:
+        function, node_id = can_id & 0x780, can_id & 0x7F
+        if function in (od.EMCY_BASE, od.SDO_TX_BASE, od.HEARTBEAT_BASE) and node_id in self.sim.nodes:
+            return node_id
+        for node in self.sim.nodes.values():
+            if any(pdo.cob_id == can_id for pdo in node._tpdos or ()):
+                return node.node_id
+        return None
+
+    # ------------------------------------------------------------------ the node's side
+    def _gate(self, node) -> None:
+        for name in _GATED:
+            original = getattr(node, name)
+            setattr(node, name, self._gated(node, original))
+        on_heartbeat = node.on_heartbeat
+        check_consumers = node.check_consumers
+
+        def heartbeat(producer: int, now: float) -> None:
+            if not self.hears(node):
+                return
+            rule = self.rules.get(node.node_id)
+            master = rule.master() if rule is not None else None
+            if master is not None and producer == master[0] and rule.master_heard():
+                self.events.append(LineEvent(now, node.name, "master_found", rule.line))
+            on_heartbeat(producer, now)
+
+        def consumers(now: float) -> None:
+            rule = self.rules.get(node.node_id)
+            master = rule.master() if rule is not None else None
+            if master is not None:
+                last = node.consumer_last.get(master[0])
+                if last is not None and now - last > master[1]:
+                    del node.consumer_last[master[0]]    # the rule, not the EMCY, answers this timeout
+                    rule.master_missed(now, master[1])
+            check_consumers(now)
+
+        node.on_heartbeat, node.check_consumers = heartbeat, consumers
+
+    def _gated(self, node, original):
+        def gated(*args):
+            if self.hears(node):
+                return original(*args)
+            return None
+        return gated
+
+    def _run(self) -> None:
+        while not self.sim._stop.wait(TICK):
+            now = time.monotonic()
+            for node_id, rule in self.rules.items():
+                node = self.sim.nodes[node_id]
+                if not rule.due(now) or not node.powered or node.faults.silent:
+                    continue
+                master = rule.master()
+                if master is None:
+                    rule.toggle_at = None
+                    continue
+                with self.sim._sync_lock:
+                    kind = rule.toggle(now, master[1])
+                    self.events.append(LineEvent(now, node.name, "switch", rule.line))
+                    node.next_heartbeat = 0.0     # the producer restarts on the new line
+                    node.send_heartbeat()
+                    if kind == "no_master":
+                        self.events.append(LineEvent(now, node.name, kind, rule.line))
+                        node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
+                        node.on_heartbeat_lost(master[0])
+
+
+def attach(sim) -> LineSelection | None:
+    """LineSelection for a simulator on a redundant pair (None on one line)."""
+    return LineSelection(sim) if hasattr(sim.bus, "tx_router") else None

@@ -1,0 +1,80 @@
+"""Bus redundancy end to end on virtual lines: the simulated nodes' slave rule
+(firmware_sim/line_selection.py) and the master's rule (drivers/line_redundancy.py),
+judged by what the nodes and the lines did, not by the master's own view alone."""
+from __future__ import annotations
+
+from spacearm.base.canopen import redundancy_object as rdn
+from spacearm.drivers.line_redundancy import LINE_SWITCH, LINES_LOST, SWITCH_COMPLETE
+
+FAULT_KINDS = {"heartbeat_lost", "bootup", "emcy", "fault_reset_failed"}
+
+
+def switch_time(pair, cut_at: float, line: int) -> float:
+    """s from the cut until the master and every node are on `line` (from their own events)."""
+    node_times = [e.time for e in pair.selection.events if e.kind == "switch" and e.line == line and e.time >= cut_at]
+    master_times = [e.time for e in pair.master.events if e.code == LINE_SWITCH and e.line == line
+                    and e.time >= cut_at]
+    assert master_times, "the master did not switch"
+    assert set(pair.node_lines().values()) == {line}, pair.node_lines()
+    return max(node_times + master_times) - cut_at
+
+
+def test_nominal_line_cut_then_redundant_line_fails_later(pair):
+    pair.run(0.3)
+    assert pair.master.active == 0 and set(pair.node_lines().values()) == {0}
+
+    cut_at = pair.cut(0)
+    pair.run(0.6)
+    assert pair.within_heartbeat_periods(switch_time(pair, cut_at, 1))
+    assert pair.master.active == 1
+    assert any(e.code == SWITCH_COMPLETE for e in pair.master.events)
+    # every node counted its toggle in its own object, as the master reads it back
+    for node in pair.sim.nodes.values():
+        if node.node_id in pair.selection.rules:
+            assert pair.net.sdo_read(node.name, rdn.REDUNDANCY, rdn.CTOGGLE) >= 1
+    state = pair.net.cycle(timeout=0.1)
+    assert state.complete and all(j.enabled for j in state.joints)
+
+    pair.restore(0)
+    cut_b = pair.cut(1)
+    pair.run(0.6)
+    assert pair.within_heartbeat_periods(switch_time(pair, cut_b, 0))
+    faults = [e for e in pair.events if e.kind in FAULT_KINDS]
+    assert faults == [], faults
+    state = pair.net.cycle(timeout=0.1)
+    assert state.complete and all(j.enabled for j in state.joints)
+
+
+def test_both_lines_lost_is_one_coded_event_and_the_nodes_give_up(pair):
+    pair.run(0.2)
+    cut_at = pair.cut(0)
+    pair.cut(1)
+    pair.run(1.0)
+    lost = [e for e in pair.master.events if e.code == LINES_LOST]
+    assert len(lost) == 1
+    assert pair.within_heartbeat_periods(lost[0].time - cut_at)
+    assert any(e.kind == LINES_LOST for e in pair.events)
+    # each node searched Ntoggle times, then stayed and took its heartbeat-loss reaction
+    settings = pair.net.config.bus.redundancy if hasattr(pair.net.config.bus, "redundancy") else None
+    ntoggle = settings.max_toggles if settings else rdn.DEFAULTS[rdn.NTOGGLE]
+    for node_id in pair.selection.rules:
+        name = pair.sim.nodes[node_id].name
+        assert [e.kind for e in pair.selection.events if e.node == name].count("switch") == ntoggle
+        assert any(e.kind == "no_master" for e in pair.selection.events if e.node == name)
+
+
+def test_babbling_node_on_the_active_line_moves_the_network(pair):
+    pair.run(0.2)
+    cut_at = pair.cut(0, "babble")
+    pair.run(0.6)
+    assert pair.within_heartbeat_periods(switch_time(pair, cut_at, 1))
+    assert pair.net.stats.unknown > 0            # the flood reached the master, counted, ignored
+    assert [e for e in pair.events if e.kind in FAULT_KINDS] == []
+
+
+def test_intermittent_line_moves_the_network_and_nothing_faults(pair):
+    pair.run(0.2)
+    pair.cut(0, "intermittent", loss=0.7, seed=3)
+    pair.run(1.0)
+    assert pair.master.active == 1 and set(pair.node_lines().values()) == {1}
+    assert [e for e in pair.events if e.kind in FAULT_KINDS] == []
