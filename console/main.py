@@ -21,7 +21,7 @@ if TYPE_CHECKING:
 # Subcommand modules; each defines register(app). Optional ones may be absent while
 # their issue is in progress, so a missing module is skipped rather than breaking the CLI.
 COMMAND_MODULES = ("config", "kinematics", "demo", "daemon", "operate", "export", "calibrate", "sim", "hub",
-                   "record_sim", "diagnose", "web", "oru", "approach", "arm", "campaign")
+                   "record_sim", "diagnose", "web", "oru", "approach", "arm", "campaign", "bus")
 
 # Commands whose module is light (imports only the client): registered alone.
 LIGHT_COMMANDS = {name: "operate" for name in ("status", "watch", "enable", "disable", "reset", "stop",
