@@ -57,6 +57,18 @@ class StopFigures:
                 "time": self.time_to_rest, "time_bound": self.time_bound}
 
 
+def recorded_stop(cycles: list[dict], events: list[dict], period: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """(plant time, measured q, plant time of the first protective stop) from a recording's
+    /cycle and /events messages. Time is the SYNC count times the period: the drives advance
+    one period per SYNC, so a cycle the controller ran late (its clock skipped periods) is
+    still one period of motion, and dividing by the controller's clock would halve its speed."""
+    sync = np.array([c["sync"] for c in cycles], float)
+    t_plant = (sync - sync[0]) * period
+    stop = next(e for e in events if e["kind"] == "protective_stop")
+    k = int(np.searchsorted(np.array([c["t"] for c in cycles]), stop["t"] - 1e-9))
+    return t_plant, np.array([c["q"] for c in cycles]), float(t_plant[k])
+
+
 def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarray, a_limit: np.ndarray,
                  period: float, joints: list[int] | None = None, one_path: bool = False) -> list[StopFigures]:
     """Figures per joint (all, or `joints`) for a stop at controller time `t_stop`: t (n,) and

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from spacearm.controller.cycle import Finding, FindingCode
-from spacearm.controller.daemon.stop_metrics import stop_figures
+from spacearm.controller.daemon.stop_metrics import recorded_stop, stop_figures
 from spacearm.controller.daemon.stops import QUICK_STOP_ACK_CYCLES, stops_table
 from tests.daemon.stop_run import stepped_daemon
 
@@ -19,12 +19,11 @@ README = Path(__file__).resolve().parents[2] / "README.md"
 
 
 def _judge(run, joints=None, one_path=False):
-    t, q, events, cycles = run.recording()
-    stops = [e for e in events if e["kind"] == "protective_stop"]
-    assert stops, events
+    _, _, events, cycles = run.recording()
+    period = run.daemon.options.period
+    t, q, t_stop = recorded_stop([c.data for c in cycles], events, period)
     a_max = np.array([j.limits.acceleration for j in run.daemon.arm.joints])
-    figures = stop_figures(t, q, stops[0]["t"], np.array(run.daemon.model.v_max), a_max,
-                           run.daemon.options.period, joints, one_path)
+    figures = stop_figures(t, q, t_stop, np.array(run.daemon.model.v_max), a_max, period, joints, one_path)
     return figures, events, cycles
 
 
