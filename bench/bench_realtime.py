@@ -221,15 +221,59 @@ def gil(seconds: float, steal: CpuSteal) -> list[str]:
             "neighbour | conditions"] + rows
 
 
+def render(frames: int, steal: CpuSteal) -> list[str]:
+    """CPU per simulated camera frame (render + sensor), by distance band, beside two CPU-bound
+    processes; beside it the CPU of one full-frame float32 cv2.remap timed in the same run (the
+    old renderer did three per frame): a reference for how fast this machine is right now."""
+    import cv2
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+    cam = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+    rng = np.random.default_rng(11)
+    image = np.random.default_rng(0).random((cam.camera.height, cam.camera.width), dtype=np.float32)
+    mx, my = cam.renderer.canvas.map_x, cam.renderer.canvas.map_y
+    rows = []
+    with CpuLoad(2):
+        steal.fraction()
+        cam.render(view(0.3, 0.1, 0.2))                 # lazy set-up (maps, lighting, noise field) not counted
+        for band in ((0.15, 0.25), (0.25, 0.5), (0.5, 1.5)):
+            cpu, ref = [], []
+            for _ in range(frames):
+                truth = view(rng.uniform(*band), np.radians(rng.uniform(0, 30)), rng.uniform(0, 2 * np.pi))
+                t0 = time.thread_time()
+                cam.render(truth)
+                cpu.append(time.thread_time() - t0)
+                t0 = time.thread_time()
+                cv2.remap(image, mx, my, cv2.INTER_LINEAR)
+                ref.append(time.thread_time() - t0)
+            c, r = np.array(cpu) * 1e3, np.array(ref) * 1e3
+            rows.append(f"  camera frame 1360x1024, marker {band[0]:.2f}-{band[1]:.2f} m | CPU median {np.median(c):5.1f} ms, "
+                        f"p90 {np.percentile(c, 90):5.1f} ms | <= 15 ms | {'met' if np.median(c) <= 15 else 'MISSED'} | "
+                        f"reference remap {np.median(r):.1f} ms (frame = {np.median(c) / np.median(r):.1f} remaps) | "
+                        f"{conditions(steal)}")
+        still = view(0.3, 0.1, 0.2)
+        cam.render(still)
+        t0 = time.thread_time()
+        for _ in range(frames):
+            cam.render(still)
+        c = (time.thread_time() - t0) / frames * 1e3
+        rows.append(f"  camera frame, arm at rest (same pose: noise only) | CPU {c:5.1f} ms | <= 15 ms | "
+                    f"{'met' if c <= 15 else 'MISSED'} | | {conditions(steal)}")
+    return ["  figure | measured | target | status | reference | conditions"] + rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "all"))
     ap.add_argument("--seconds", type=float, default=20.0, help="gil: probe time per neighbour")
+    ap.add_argument("--frames", type=int, default=20, help="render: frames per distance band")
     args = ap.parse_args()
     t0, steal = time.monotonic(), CpuSteal()
     rows: list[str] = []
     if args.section in ("gil", "all"):
         rows += gil(args.seconds, steal)
+    if args.section in ("render", "all"):
+        rows += render(args.frames, steal)
     print("\n".join(rows))
     print(f"\nbench_realtime on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}), "
           f"Python {platform.python_version()}, switch interval {1e3 * sys.getswitchinterval():.1f} ms, "

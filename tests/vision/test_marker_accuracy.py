@@ -53,4 +53,7 @@ def test_tracking_with_a_prior_gives_the_same_pose(pipeline, camera):
     tracked = pipeline.process(frame, prior)
     assert full.ok and tracked.ok
     pos, rot = pose_error(tracked.camera_T_marker, full.camera_T_marker)
-    assert pos < 1e-6 and rot < 1e-6
+    # the same circles measured through other windows: equal to rounding and the noise on the
+    # window edges (up to 2.3e-6 rad over noise seeds 1-5, with either renderer), far below the
+    # 0.05 deg (8.7e-4 rad) the poses are held to
+    assert pos < 1e-6 and rot < 1e-5
