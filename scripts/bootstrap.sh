@@ -22,6 +22,10 @@ if [ "$(uname -s)" = Linux ] && [ "$(uname -m)" = x86_64 ] && [ "${SPACEARM_NO_V
     command -v ip >/dev/null 2>&1 || need_apt+=(iproute2)
     compgen -G "/lib/modules/*/kernel/drivers/net/can/vcan.ko*" >/dev/null && compgen -G "/boot/vmlinuz-*" >/dev/null \
         || need_apt+=(linux-image-amd64)
+    # CANopenNode (../shared/third_party/canopennode) is built with make for the vcan suite
+    command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
+    command -v make >/dev/null 2>&1 || need_apt+=(make)
+    dpkg -s libc6-dev >/dev/null 2>&1 || need_apt+=(libc6-dev)
 fi
 # The browser console (console/web): three.js from Debian (served from /usr/share/javascript,
 # never fetched at run time) and Chromium for its end-to-end test (Playwright drives it).

@@ -39,6 +39,8 @@ from durand.node import NodeCapabilities
 from durand.object_dictionary import Array, Record
 from durand.scheduler import SyncScheduler, set_scheduler
 
+from spacearm.base.transport import open_bus
+
 VENDOR_ID = 0x0000_0DDD          # made-up vendor of these test drives
 PRODUCT_CODE = 0x0000_402D
 DEVICE_TYPE_402 = 0x0002_0192    # CiA 402, servo drive, with the profile number in the low word
@@ -114,7 +116,9 @@ class DurandDrive:
     def __init__(self, channel: str, node_id: int, variant: Variant):
         _ensure_scheduler()
         self.variant = variant
-        self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        # a bus spec (loopback:NAME, socketcan:vcan0) through our transports, else a virtual channel
+        self.bus = open_bus(channel) if ":" in channel else \
+            can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.network = CANBusNetwork(self.bus)
         rpdos, tpdos = variant.pdos
         self.node = Node(self.network, node_id, capabilities=NodeCapabilities(1, rpdos, tpdos))
