@@ -14,7 +14,7 @@ from spacearm.base.canopen import od
 from spacearm.base.canopen.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
 from spacearm.base.config.bus import BusSettings, NodeConfig, parse_object_ref
 from spacearm.drivers.cia402 import Cia402Axis
-from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
+from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_HALT, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
 from spacearm.drivers.pdo_config import PdoSpec, resolve_layout
@@ -168,6 +168,7 @@ class JointDriver(DeviceDriver):
         self.target: float | None = None        # rad, CSP target requested by the caller
         self.velocity_ff = 0.0                   # rad/s
         self.torque_ff = 0.0                     # N m at the joint
+        self.halt = False                        # controlword bit 8: the drive stops on 605Dh's ramp, stays enabled
         self._hold: float | None = None
         self.mode = od.MODE_CSP
         self._pp_pending = False                 # profile position: set-point sent, not yet acknowledged
@@ -246,6 +247,8 @@ class JointDriver(DeviceDriver):
                 target = self._pp_sent
             elif self._pp_sent is not None:
                 target = self._pp_sent
+        if self.halt:
+            cw |= CW_HALT
         self.rpdo_values[(od.CONTROLWORD, 0)] = cw
         self.rpdo_values[(od.TARGET_POSITION, 0)] = _clamp32(round(target * self.k))
         self.rpdo_values[(od.VELOCITY_OFFSET, 0)] = _clamp32(round(self.velocity_ff * self.k))

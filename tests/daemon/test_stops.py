@@ -212,3 +212,16 @@ def _refused(call):
     except CommandRefused as exc:
         return exc
     return None
+
+
+def test_bringup_sets_each_drives_stop_ramps_from_the_arm_file(tmp_path):
+    """Read back from the drives: 6085h = the arm file's acceleration limit, 605Ah = 2 (ramp,
+    then power off and brake), 605Eh = 2 (a fault stops on the same ramp)."""
+    from spacearm.base.canopen import od
+    with stepped_daemon(tmp_path) as run:
+        net = run.daemon.hardware.network
+        for joint, driver in zip(run.daemon.arm.joints, net.joints):
+            ramp = net.sdo_read(driver.name, od.QUICK_STOP_DECELERATION, 0) / driver.k
+            assert ramp == pytest.approx(joint.limits.acceleration, rel=1e-6)
+            assert net.sdo_read(driver.name, od.QUICK_STOP_OPTION, 0) == 2
+            assert net.sdo_read(driver.name, od.FAULT_REACTION_OPTION, 0) == 2
