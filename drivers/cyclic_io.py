@@ -5,6 +5,7 @@ wait for a SYNC's TPDOs.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -50,9 +51,13 @@ class CyclicIO:
             if self._expected is not None and self._monitoring:
                 self._count_missing_tpdos(self._expected_tpdos() - self._received)
             self._sync += 1
+            if self.controller_period is not None:
+                self._lockstep_health(time.monotonic())
             self._received = set()
             self._expected = self._expected_tpdos()
             self.stats.expected_tpdos += len(self._expected)
+        if self.controller_period is not None:
+            self._send_lockstep_heartbeat()
         self._send(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
@@ -209,6 +214,7 @@ class CyclicIO:
             return
         with self._cv:
             driver.decode(spec, bytes(data))
+            self.health[driver.name].life_sync = self._sync
             self._received.add(can_id)
             self.stats.tpdos += 1
             if self._expected is None or self._expected <= self._received:

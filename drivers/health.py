@@ -29,6 +29,7 @@ class NodeHealth:
     alive: bool = False
     last_heartbeat: float | None = None
     emcy_code: int = 0               # last EMCY code (0 after an error reset)
+    life_sync: int = 0               # SYNC number of its last sign of life (heartbeat or TPDO)
 
     @property
     def nmt_state_name(self) -> str:
@@ -52,6 +53,7 @@ class HealthMonitor:
                 h = self.health[name]
                 previous, was_alive = h.nmt_state, h.alive
                 h.last_heartbeat = time.monotonic()
+                h.life_sync = self._sync
                 h.nmt_state = state
                 h.alive = True
                 if state == od.NMT_STATE_BOOTUP:
@@ -149,6 +151,8 @@ class HealthMonitor:
             if not self._monitoring:
                 continue
             self._poll_guarded(now)
+            if self.controller_period is not None:
+                continue        # lockstep: silence is judged per SYNC, in controller time
             with self._cv:
                 if excess > 0:
                     # Starved: excuse the time, and judge only at the next pass, once the
@@ -167,6 +171,46 @@ class HealthMonitor:
                                     f"period {cfg.heartbeat_period:.3f} s)")
                         self._expected = None
                         self._cv.notify_all()
+
+    def _lockstep_health(self, now: float) -> None:
+        """Lockstep, at every SYNC (under the network's lock): the controller's heartbeat when
+        due in controller time, and heartbeat loss judged in controller time.
+
+        A lockstep run stands still while its process waits for a core, so wall-clock silence
+        proves nothing there: a node is lost only when both the controller time and the wall
+        time since its last sign of life (heartbeat, or a TPDO: it answered a SYNC) exceed the
+        loss factor. Controller time catches a dead node whatever the machine's speed; the
+        wall-clock half keeps a node whose heartbeat runs on wall time (a simulator in its own
+        process) alive while lockstep runs faster than real time. The timer thread still sends
+        the controller's heartbeat on wall time too: a consumer on either clock is served."""
+        period, factor = self.controller_period, self.config.bus.heartbeat_loss_factor
+        hb_period = self.config.bus.master_heartbeat_period
+        if hb_period > 0 and (self._sync - self._hb_sync) * period >= hb_period - 1e-9:
+            self._hb_sync = self._sync
+            self._hb_due_now = True
+        if not self._monitoring:
+            return
+        for cfg in self.config.nodes:
+            h = self.health[cfg.name]
+            if not h.alive or h.last_heartbeat is None:
+                continue
+            limit = factor * cfg.heartbeat_period
+            if (self._sync - h.life_sync) * period > limit and now - h.last_heartbeat > limit:
+                h.alive = False
+                d = self.drivers[cfg.name]
+                self._event("heartbeat_lost", d,
+                            f"{d.label}: heartbeat lost (silent for {(self._sync - h.life_sync) * period:.3f} s "
+                            f"of controller time, period {cfg.heartbeat_period:.3f} s)")
+                self._expected = None
+
+    def _send_lockstep_heartbeat(self) -> None:
+        if self._hb_due_now:
+            self._hb_due_now = False
+            try:
+                self.network.send_message(od.HEARTBEAT_BASE + self.config.bus.master_node_id,
+                                          bytes([od.NMT_STATE_OPERATIONAL]))
+            except Exception as exc:
+                logger.warning("controller heartbeat not sent: %s", exc)
 
     def _excuse(self, now: float, excess: float, factor: float) -> None:
         """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""

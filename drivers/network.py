@@ -165,6 +165,11 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.timer_priority = 0
         self.timer_scheduling = "inherited"
         self._sync = 0
+        # Lockstep: the SYNC period (s) whose count is controller time; node liveness is then
+        # judged per SYNC in controller time (drivers/health.py _lockstep_health). None: wall time.
+        self.controller_period: float | None = None
+        self._hb_sync = 0
+        self._hb_due_now = False
         self._connected = False
         self._stop = threading.Event()
         self._monitor: threading.Thread | None = None

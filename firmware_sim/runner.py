@@ -372,7 +372,7 @@ class Simulator:
             starved = excess > 0
             if starved:
                 self.stats.starved_time += excess
-                for node in self.nodes.values():
+                for node in self.nodes.values() if not self.sync_time_base else ():
                     if node.consumer_last:
                         node.excuse_consumers(excess)
             # a starved pass sends what is due but judges no consumer: the next pass does, soon

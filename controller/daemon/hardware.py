@@ -85,6 +85,8 @@ class CanopenHardware:
         self.peers = PeerTimingListener(self.network.network, device_cob_ids={
             base + node.node_id for node in bus_config.nodes for base in TPDO_BASE})
         self.lockstep = lockstep
+        if lockstep:
+            self.network.controller_period = self.network.config.bus.sync_period
         self.realtime_budget = realtime_budget
         self._goal = "disabled"     # enabled | quick_stop | disable | disabled: the drives' last request
         self.info_events: list[str] = []

@@ -14,8 +14,15 @@ PLANT = "configs/plant/oru_testbed_errors.toml"    # friction, gravity, D-H erro
 WALL_CLOCK_FIELDS = {"period_error", "execution", "io_wait"}
 
 
-def scenario(runs, slow_down: float) -> list[dict]:
-    hook = (lambda: time.sleep(slow_down)) if slow_down else None
+def scenario(runs, slow_down: float, stall_at: int | None = None) -> list[dict]:
+    """slow_down: s slept after every cycle; stall_at: the cycle after which the process stands
+    still for 1 s (a host pause, a swap-in), longer than 3 heartbeat periods of any node."""
+    cycles = iter(range(10**9))
+
+    def hook():
+        n = next(cycles)
+        time.sleep(1.0 if n == stall_at else slow_down)
+    hook = hook if slow_down or stall_at is not None else None
     with scripted_daemon(PLANT, record_dir=runs, cycle_hook=hook) as script:
         start = [j["q"] for j in script.daemon.status()["joints"]]
         script.move_and_wait("move_joints", q=[0.3, -0.2, 1.2, -1.3, 0.4, -1.2])
@@ -35,7 +42,9 @@ def scenario(runs, slow_down: float) -> list[dict]:
 
 def test_a_slowed_lockstep_run_records_the_same_arm_bit_for_bit(tmp_path):
     fast = scenario(tmp_path / "fast", 0.0)
-    slow = scenario(tmp_path / "slow", 0.004)   # +4 ms a cycle: ~3x slower than this cycle's own cost
+    # +4 ms a cycle (~3x slower than this cycle's own cost), and one 1 s stall mid-motion: in
+    # lockstep neither is a lost heartbeat (the stall stops controller and SYNC time alike)
+    slow = scenario(tmp_path / "slow", 0.004, stall_at=150)
     assert len(fast) == len(slow) > 200
     for a, b in zip(fast, slow):
         assert a == b, f"cycle {a['cycle']}: " + ", ".join(
