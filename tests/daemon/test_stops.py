@@ -225,3 +225,32 @@ def test_bringup_sets_each_drives_stop_ramps_from_the_arm_file(tmp_path):
             assert ramp == pytest.approx(joint.limits.acceleration, rel=1e-6)
             assert net.sdo_read(driver.name, od.QUICK_STOP_OPTION, 0) == 2
             assert net.sdo_read(driver.name, od.FAULT_REACTION_OPTION, 0) == 2
+
+
+def test_a_cartesian_move_stops_on_its_line(tmp_path):
+    """A straight tool move from `ready`, stopped mid-way: every joint inside its bounds (on one
+    path) and the measured tool position leaves the move's line by less than 0.5 mm."""
+    from spacearm.base.kinematics.forward import fk
+    from spacearm.base.kinematics.model import KinematicData
+    with stepped_daemon(tmp_path) as run:
+        run.enable()
+        q0 = run.m.q.copy()
+        run.start("move_joints", run.daemon.planner.joint_move(q0, np.array(run.daemon.arm.postures["ready"])))
+        run.until(lambda s: s.mode == "hold", 2000)
+        start = run.m.q.copy()
+        run.start("move_pose", run.daemon.planner.pose_move(start, np.array([0.0, 0.0, 0.15]), np.zeros(3), "tool"))
+        run.cycles(60)
+        run.stop_and_settle()
+        figures, events, cycles = _judge(run, one_path=True)
+    problems = [p for f in figures for p in f.problems()]
+    assert not problems, problems
+    model, data = run.daemon.model, KinematicData(run.daemon.model)
+    p0 = fk(model, data, start)[:3, 3].copy()
+    t_stop = next(e["t"] for e in events if e["kind"] == "protective_stop")
+    tool = np.array([fk(model, data, np.array(c.data["q"]))[:3, 3] for c in cycles if c.data["t"] >= t_stop])
+    direction = tool[-1] - p0
+    direction /= np.linalg.norm(direction)
+    off_line = np.linalg.norm(np.cross(tool - p0, direction), axis=1)
+    print(f"tool off the line while stopping: {1e3 * off_line.max():.3f} mm, stopped "
+          f"{1e3 * np.linalg.norm(tool[-1] - tool[0]):.1f} mm after the stop")
+    assert off_line.max() < 0.5e-3
