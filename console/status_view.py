@@ -4,6 +4,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+# cycles before the statistics' level means anything: the first cycles include the start-up
+# (the cycle run before the API opens waits for the whole boot), and one slow sample is the p99
+STATS_SETTLED = 50
 
 
 def _deg(value: float | None) -> str:
@@ -31,7 +34,8 @@ def status_lines(status: dict[str, Any]) -> list[str]:
             f"p99 {1e3 * stats['period_error_p99']:.3f} ms, max {1e3 * stats['period_error_max']:.3f} ms; "
             f"execution p99 {1e3 * stats['execution_p99']:.3f} ms "
             f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']} "
-            f"[{stats['level']}]" + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
+            f"[{stats['level'] if stats.get('cycles', STATS_SETTLED) >= STATS_SETTLED else 'starting'}]"
+            + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
     nodes = status.get("nodes") or {}
     if nodes.get("level") not in (None, "ok"):
         lines.append(f"WARNING {nodes['message']} (answer p99 {1e3 * nodes['io_wait_p99']:.1f} ms of "

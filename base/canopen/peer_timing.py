@@ -14,13 +14,26 @@ Frame (8 bytes, little endian), COB-ID TPDO1 of the diagnostics node (0x180 + ID
     0-1  late wakes since the last report       UNSIGNED16 (saturates)
     2-3  worst lateness since the last report   UNSIGNED16, 100 us (saturates at 6.5535 s)
     4-5  wakes since the last report            UNSIGNED16 (saturates)
-    6    scheduling policy: 0 normal, 1 SCHED_FIFO, 2 SCHED_RR
+    6    bits 0-1 scheduling policy: 0 normal, 1 SCHED_FIFO, 2 SCHED_RR
+         bits 2-3 what the worst late wake waited for: 0 none (no late wake), 1 a core,
+         2 the GIL, 3 nothing ran (stopped)
     7    real-time priority (0 for normal)
+
+What a late wake waited for, measured in the producer at each wake over the interval since the
+last one (Linux schedstat of every thread of the process, /proc/self/task/*/schedstat):
+- a core: the timer thread itself was runnable but not running (run-queue delay) for at least
+  half of its lateness - other processes (or higher real-time priorities) had the cores;
+- the GIL: the process's other threads ran or waited to run for at least half of it - one of
+  them held the GIL the timer thread needed (a preempted holder counts: it waits for a core
+  while holding it, the priority inversion bench/bench_realtime.py measures);
+- stopped: neither - no thread of the process ran or was waiting to run: SIGSTOP, a debugger,
+  or the host did not run the machine (CPU steal).
 """
 from __future__ import annotations
 
 import os
 import struct
+import time
 from dataclasses import dataclass
 
 from spacearm.base.canopen.codes import TPDO_BASE
@@ -40,6 +53,7 @@ TICK = 0.010              # s: the hub's timer tick (the simulator's scheduler w
 _FRAME = struct.Struct("<HHHBB")
 _LSB = 1e-4               # s per unit of the lateness field
 _POLICIES = {0: "normal", 1: "SCHED_FIFO", 2: "SCHED_RR"}
+CAUSES = ("", "core", "gil", "stopped")      # what the worst late wake waited for ("": no late wake)
 
 
 @dataclass(frozen=True)
@@ -49,6 +63,7 @@ class TimingReport:
     wakes: int
     policy: str
     priority: int
+    cause: str = ""        # CAUSES: what its worst late wake waited for
 
     @property
     def scheduling(self) -> str:
@@ -59,8 +74,9 @@ def decode(data: bytes) -> TimingReport | None:
     """None for a frame that is not a report (wrong length)."""
     if len(data) != _FRAME.size:
         return None
-    late, lateness, wakes, policy, priority = _FRAME.unpack(data)
-    return TimingReport(late, lateness * _LSB, wakes, _POLICIES.get(policy, "unknown"), priority)
+    late, lateness, wakes, flags, priority = _FRAME.unpack(data)
+    return TimingReport(late, lateness * _LSB, wakes, _POLICIES.get(flags & 3, "unknown"), priority,
+                        CAUSES[(flags >> 2) & 3])
 
 
 def _calling_thread_scheduling() -> tuple[int, int]:
@@ -72,26 +88,84 @@ def _calling_thread_scheduling() -> tuple[int, int]:
     return {os.SCHED_FIFO: 1, os.SCHED_RR: 2}.get(policy, 0), priority
 
 
+def _schedstat(path: str) -> tuple[int, int]:
+    """(CPU ns, run-queue ns) of one thread; os.read, not a file object: read on every wake."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        fields = os.read(fd, 128).split()
+    finally:
+        os.close(fd)
+    return int(fields[0]), int(fields[1])
+
+
+def _task_times() -> tuple[int, int, int]:
+    """(CPU ns, run-queue ns) summed over this process's threads, and the calling thread's
+    run-queue ns; zeros where /proc cannot say."""
+    cpu = queue = 0
+    try:
+        own = _schedstat("/proc/thread-self/schedstat")[1]
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                c, q = _schedstat(f"/proc/self/task/{tid}/schedstat")
+            except (OSError, ValueError, IndexError):
+                continue            # a thread that ended meanwhile
+            cpu += c
+            queue += q
+    except (OSError, ValueError, IndexError):
+        return 0, 0, 0
+    return cpu, queue, own
+
+
+def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float) -> str:
+    """What a late wake waited for (module doc): own_queue s runnable without a core, own_cpu s
+    it ran, all_busy s the whole process ran or waited for a core, over the same interval."""
+    if own_queue >= lateness / 2:
+        return "core"
+    if all_busy - own_queue - own_cpu >= lateness / 2:
+        return "gil"
+    return "stopped"
+
+
 class LatenessMeter:
     """The producer's side: `woke(lateness, now)` on every timer wake; `due(now)` says when a
     report is to be sent, `report()` encodes it (call it from the timer's thread: the
     scheduling class is that thread's) and starts the next interval."""
 
-    def __init__(self, period: float = REPORT_PERIOD, inhibit: float = INHIBIT_TIME, late_wake: float = LATE_WAKE):
+    def __init__(self, period: float = REPORT_PERIOD, inhibit: float = INHIBIT_TIME, late_wake: float = LATE_WAKE,
+                 measure_causes: bool = True):
         self.period, self.inhibit, self.late_wake = period, inhibit, late_wake
         self._late = self._wakes = 0
         self._worst = 0.0
+        self._worst_cause = ""
+        # (process CPU + run-queue ns, own run-queue ns, own CPU s) at the last wake
+        self._times: tuple[int, int, float] | None = None
+        self.measure_causes = measure_causes
         self._last_sent: float | None = None
         self._event = False
 
-    def woke(self, lateness: float, now: float) -> None:
+    def woke(self, lateness: float, now: float) -> str:
+        """Call from the timer's thread (its schedstat is the one read); returns what this wake
+        waited for ("" when it was on time)."""
         self._wakes += 1
+        cause = self._cause(lateness) if self.measure_causes else ""
         if lateness > self.late_wake:
             self._late += 1
             self._event = True
-        self._worst = max(self._worst, lateness)
+        if lateness > self._worst:
+            self._worst = lateness
+            self._worst_cause = cause if lateness > self.late_wake else ""
         if self._last_sent is None:
             self._last_sent = now        # first report one period after start
+        return cause
+
+    def _cause(self, lateness: float) -> str:
+        """What this wake waited for, from the times since the last wake ("" on the first)."""
+        cpu, queue, own_queue = _task_times()
+        own_cpu = time.thread_time()
+        last, self._times = self._times, (cpu + queue, own_queue, own_cpu)
+        if last is None or lateness <= self.late_wake:
+            return ""
+        return wake_cause(lateness, (own_queue - last[1]) * 1e-9, own_cpu - last[2], (cpu + queue - last[0]) * 1e-9)
 
     def next_due(self) -> float:
         """Monotonic time of the next report (event: after the inhibit time; else the event timer)."""
@@ -105,9 +179,11 @@ class LatenessMeter:
     def report(self, now: float) -> bytes:
         policy, priority = _calling_thread_scheduling()
         lateness = min(round(self._worst / _LSB), 0xFFFF)
-        data = _FRAME.pack(min(self._late, 0xFFFF), lateness, min(self._wakes, 0xFFFF), policy, priority)
+        flags = policy | CAUSES.index(self._worst_cause) << 2
+        data = _FRAME.pack(min(self._late, 0xFFFF), lateness, min(self._wakes, 0xFFFF), flags, priority)
         self._late = self._wakes = 0
         self._worst = 0.0
+        self._worst_cause = ""
         self._event = False
         self._last_sent = now
         return data

@@ -7,8 +7,18 @@ periods late; this keeps the numbers behind it over a sliding window so `status`
 and the web console can say "the nodes are late" while the arm still runs, and what to do.
 
 Beside it, the simulator's and the hub's own view: each reports how late its own scheduler
-woke (base/canopen/peer_timing.py, received by drivers/peer_timing.py). When they say they
-were late, the message names them: the drives are not at fault, their host process is.
+woke and what its worst late wake waited for - a core, the GIL, or nothing ran at all
+(base/canopen/peer_timing.py, received by drivers/peer_timing.py). When they say they were
+late, the message names them and that cause: the drives are not at fault, their host process
+is, and the advice fits the cause (never --rt-priority to a process already at SCHED_FIFO).
+
+Hysteresis: on a loaded machine a process at SCHED_FIFO still sees a single wake tens of ms
+late now and then (the host: bench/bench_realtime.py gil, "none" row), and an idle arm must not
+show a banner for it. A peer is late only for what could stop the arm or keeps recurring: one
+wake PEER_SERIOUS late, PEER_LATE_REPORTS reports in its window with a wake PEER_LATE late, or
+late wakes in more than LATE_CYCLES of its cycles; once late it stays so while any such report
+is in the window. The daemon's own heartbeat view likewise: one gap of HEARTBEAT_SERIOUS
+periods, or HEARTBEAT_GAPS gaps over HEARTBEAT_GAP in its window.
 """
 from __future__ import annotations
 
@@ -17,13 +27,21 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from spacearm.base.canopen.peer_timing import LATE_WAKE
+
 WINDOW = 250           # cycles (5 s at 20 ms)
 LATE_SHARE = 0.5       # of the wait budget: a SYNC answered later than this counts as late
 LATE_CYCLES = 0.05     # share of late cycles in the window that makes the nodes "late"
-HEARTBEAT_GAP = 1.5    # heartbeat periods between two heartbeats of one node: late
-PEER_LATE = 0.020      # s: a peer that woke this late once (a whole 20 ms cycle) was late
+HEARTBEAT_GAP = 1.5    # heartbeat periods between two heartbeats of one node: late ...
+HEARTBEAT_GAPS = 3     # ... when it happens this often in the window
+HEARTBEAT_SERIOUS = 2.0   # periods: once is enough (the stop comes at 2.5)
+PEER_LATE = 0.020      # s: a wake this late (a whole 20 ms cycle) ...
+PEER_LATE_REPORTS = 3  # ... in this many of a peer's reports in its window makes it late
+PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's reach)
 PEER_SILENT = 3.5      # s without a report from a peer that reported before: it is not running
 ADVICE = "run `spacearm sim` and `spacearm hub` with --rt-priority 50 (or lower the machine's load)"
+CAUSE_TEXT = {"core": "waited for a core", "gil": "waited for the GIL (another of its threads held it)",
+              "stopped": "stopped (none of its threads ran)"}
 
 
 @dataclass(frozen=True)
@@ -33,30 +51,36 @@ class PeerTimingSummary:
     late_cycles: int              # its timer wakes later than peer_timing.LATE_WAKE
     cycles: int                   # its timer wakes
     max_lateness: float           # s, worst wake
+    cause: str                    # what its worst late wake waited for: "core" | "gil" | "stopped" | ""
     scheduling: str               # "normal" | "SCHED_FIFO 50" ...
     window: float                 # s the numbers cover
     last_report_age: float        # s
     message: str
 
 
-def peer_summary(name: str, reports: list, now: float) -> PeerTimingSummary | None:
-    """`reports`: [(received at, TimingReport)], oldest first; None when it never reported."""
+def peer_summary(name: str, reports: list, now: float, was_late: bool = False) -> PeerTimingSummary | None:
+    """`reports`: [(received at, TimingReport)], oldest first; None when it never reported.
+    was_late: it was late at the last summary (hysteresis, module doc)."""
     if not reports:
         return None
     late = sum(r.late for _, r in reports)
     wakes = sum(r.wakes for _, r in reports)
-    worst = max(r.max_lateness for _, r in reports)
+    worst_at, worst = max(((r.max_lateness, r) for _, r in reports), key=lambda w: w[0])
     scheduling = reports[-1][1].scheduling
     age = now - reports[-1][0]
     window = now - reports[0][0]
-    numbers = f"{late} late of {wakes} cycles, max {1e3 * worst:.1f} ms (last {window:.0f} s, {scheduling})"
+    bad = sum(r.max_lateness >= PEER_LATE for _, r in reports)
+    cause = worst.cause if worst_at > LATE_WAKE else ""
+    numbers = (f"{late} late of {wakes} cycles, max {1e3 * worst_at:.1f} ms"
+               + (f", {CAUSE_TEXT[cause]}" if cause else "") + f" (last {window:.0f} s, {scheduling})")
     if age > PEER_SILENT:
         level, message = "silent", f"{name} silent: no timing report for {age:.1f} s"
-    elif worst >= PEER_LATE or (wakes and late > LATE_CYCLES * wakes):
+    elif (worst_at >= PEER_SERIOUS or bad >= PEER_LATE_REPORTS or (wakes and late > LATE_CYCLES * wakes)
+          or (was_late and bad)):
         level, message = "late", f"{name} late: {numbers}"
     else:
         level, message = "ok", f"{name} on time: {numbers}"
-    return PeerTimingSummary(level, late, wakes, worst, scheduling, window, age, message)
+    return PeerTimingSummary(level, late, wakes, worst_at, cause, scheduling, window, age, message)
 
 
 COMMANDS = {"simulator": "spacearm sim", "hub": "spacearm hub"}
@@ -66,8 +90,15 @@ def _peer_advice(name: str, peer: PeerTimingSummary) -> str:
     command = COMMANDS.get(name, name)
     if peer.level == "silent":
         return f"is `{command}` still running?"
+    if peer.cause == "gil":
+        return (f"a thread of `{command}` below its real-time priority held the GIL (it must run at the "
+                "nodes' priority or in its own process)")
+    if peer.cause == "stopped":
+        return f"`{command}` did not run at all: a debugger, SIGSTOP, or the host (CPU steal)"
     if peer.scheduling == "normal":
         return f"run `{command}` with --rt-priority 50 (or lower the machine's load)"
+    if peer.cause == "core":
+        return f"`{command}` already runs {peer.scheduling}: a process at a higher real-time priority took its core"
     return (f"`{command}` already runs {peer.scheduling}: something stopped it or ran above it "
             "(a debugger, SIGSTOP, a higher real-time priority)")
 
@@ -96,6 +127,7 @@ class NodeTiming:
         self._missing: deque[bool] = deque(maxlen=window)
         self._gaps: deque[tuple[float, str]] = deque(maxlen=window)
         self._last_heartbeat: dict[str, float | None] = {}
+        self._peer_late: dict[str, bool] = {}
 
     def add(self, io_wait: float, complete: bool, heartbeats: dict[str, tuple[float | None, float]]) -> None:
         """One cycle: its wait for TPDOs, whether they all came, and each node's (last heartbeat
@@ -121,18 +153,28 @@ class NodeTiming:
         late = int(np.sum(waits > LATE_SHARE * self.budget)) if self.budget > 0 else 0
         missing = int(sum(self._missing))
         gap, node = max(self._gaps, default=(0.0, ""))
+        gaps = sum(g > HEARTBEAT_GAP for g, _ in self._gaps)
         if missing:
             level, what = "starved", f"{missing} of the last {n} cycles missed process data"
-        elif n and (late > LATE_CYCLES * n or gap > HEARTBEAT_GAP):
+        elif n and (late > LATE_CYCLES * n or gap >= HEARTBEAT_SERIOUS or gaps >= HEARTBEAT_GAPS):
             level = "late"
             what = (f"{late} of the last {n} cycles answered after {100 * LATE_SHARE:.0f} % of the "
                     f"{1e3 * self.budget:.1f} ms wait" if late > LATE_CYCLES * n
                     else f"heartbeats of {node} {gap:.1f} periods apart")
         else:
             level, what = "ok", "nodes answer in time"
-        peers = {name: p for name, r in (peer_reports or {}).items() if (p := peer_summary(name, r, now))}
+        peers = {name: p for name, r in (peer_reports or {}).items()
+                 if (p := peer_summary(name, r, now, self._peer_late.get(name, False)))}
+        self._peer_late = {name: p.level == "late" for name, p in peers.items()}
         behind = [p.message for p in peers.values() if p.level != "ok"]
-        advice = ADVICE if not behind else "; ".join(_peer_advice(n, p) for n, p in peers.items() if p.level != "ok")
+        if behind:
+            advice = "; ".join(_peer_advice(n, p) for n, p in peers.items() if p.level != "ok")
+        elif peers and all(p.scheduling != "normal" for p in peers.values()):
+            # they run real time and say they were on time: the delay is not theirs to fix
+            advice = (f"the {' and the '.join(peers)} report{'s' if len(peers) == 1 else ''} on time at "
+                      f"{'/'.join(sorted({p.scheduling for p in peers.values()}))}: look at the bus or this daemon's load")
+        else:
+            advice = ADVICE
         if behind:      # the host process is named first: the drives behind it are not at fault
             what = "; ".join(behind) + ("" if level == "ok" else f" (the daemon sees: {what})")
             level = "late" if level == "ok" else level

@@ -86,3 +86,81 @@ def test_a_device_on_a_report_cob_id_is_not_taken_for_a_report():
     network = canopen.Network()
     PeerTimingListener(network, device_cob_ids={peer_timing.HUB_COB_ID})
     assert peer_timing.SIMULATOR_COB_ID in network.subscribers and peer_timing.HUB_COB_ID not in network.subscribers
+
+
+def test_the_worst_late_wakes_cause_round_trips_and_an_on_time_interval_has_none():
+    meter = LatenessMeter(period=1.0, inhibit=0.1, late_wake=0.005, measure_causes=False)
+    meter._worst_cause = "gil"          # as _cause() found it for the worst late wake
+    meter._worst, meter._late, meter._wakes = 0.05, 1, 3
+    assert decode(meter.report(1.0)).cause == "gil"
+    meter.woke(0.001, 1.5)
+    assert decode(meter.report(2.0)).cause == ""
+
+
+def test_wake_cause_splits_lateness_by_what_the_process_did_meanwhile():
+    from spacearm.base.canopen.peer_timing import wake_cause
+    assert wake_cause(0.040, own_queue=0.030, own_cpu=0.0001, all_busy=0.031) == "core"
+    assert wake_cause(0.040, own_queue=0.001, own_cpu=0.0001, all_busy=0.035) == "gil"
+    assert wake_cause(0.040, own_queue=0.001, own_cpu=0.0001, all_busy=0.002) == "stopped"
+
+
+def test_a_thread_holding_the_gil_is_measured_as_the_gil():
+    """A timer thread whose wakes wait for another thread of its process that keeps the GIL
+    (a long switch interval stands in for a holder that is preempted): its late wakes say gil."""
+    import sys
+    import threading
+    interval = sys.getswitchinterval()
+    stop = threading.Event()
+    meter = LatenessMeter(late_wake=0.005)
+    causes = []
+
+    def spin():
+        while not stop.is_set():
+            sum(range(2000))
+
+    def timer():
+        due = time.monotonic()
+        for _ in range(60):
+            time.sleep(max(0.0, due - time.monotonic()))
+            now = time.monotonic()
+            cause = meter.woke(now - due, now)
+            if now - due > 0.02:
+                causes.append(cause)
+            due = now + 0.01
+    spinner = threading.Thread(target=spin, daemon=True)
+    sys.setswitchinterval(0.05)
+    try:
+        spinner.start()
+        worker = threading.Thread(target=timer)
+        worker.start()
+        worker.join(30)
+    finally:
+        stop.set()
+        sys.setswitchinterval(interval)
+        spinner.join(5)
+    assert causes and causes.count("gil") >= len(causes) / 2, causes
+
+
+def test_a_stopped_process_is_measured_as_stopped():
+    """SIGSTOP for 0.3 s: no thread of the process ran nor waited for a core."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    script = ("import time\nfrom spacearm.base.canopen.peer_timing import LatenessMeter\n"
+              "m = LatenessMeter(late_wake=0.005)\nprint('ready', flush=True)\ndue = time.monotonic()\n"
+              "for _ in range(150):\n    time.sleep(max(0.0, due - time.monotonic()))\n"
+              "    now = time.monotonic(); m.woke(now - due, now); due = now + 0.01\n"
+              "print(m._worst, m._worst_cause, flush=True)\n")
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "ready"
+        time.sleep(0.3)
+        os.kill(proc.pid, signal.SIGSTOP)
+        time.sleep(0.3)
+        os.kill(proc.pid, signal.SIGCONT)
+        worst, cause = proc.stdout.readline().split()
+    finally:
+        proc.kill()
+        proc.wait()
+    assert float(worst) >= 0.25 and cause == "stopped", (worst, cause)

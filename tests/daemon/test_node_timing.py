@@ -2,6 +2,8 @@
 missing data give the levels and the advice the operator sees in status."""
 from __future__ import annotations
 
+import pytest
+
 from spacearm.controller.daemon.node_timing import NodeTiming
 
 BUDGET = 0.008
@@ -79,3 +81,66 @@ def test_a_peer_that_stops_reporting_is_silent_and_one_that_never_reported_is_no
     summary = timing.summary({"simulator": _reports(100.0, 0, 0.001, age=5.0), "hub": []}, 100.0)
     assert summary.peers["simulator"]["level"] == "silent" and "hub" not in summary.peers
     assert "simulator silent" in summary.message
+
+
+def _fifo_reports(now: float, worsts: list[float], cause: str = "core"):
+    """One report a second, the last at `now` - 0.5; each with its worst wake."""
+    from spacearm.base.canopen.peer_timing import TimingReport
+    n = len(worsts)
+    return [(now - 0.5 - (n - 1 - i), TimingReport(int(w > 0.005), w, 100, "SCHED_FIFO", 50, cause if w > 0.005 else ""))
+            for i, w in enumerate(worsts)]
+
+
+def test_one_late_wake_of_a_real_time_simulator_shows_no_banner_three_do_and_it_clears_slowly():
+    timing = NodeTiming(BUDGET)
+    feed(timing, 250, 0.001)
+    one = timing.summary({"simulator": _fifo_reports(100.0, [0.001] * 9 + [0.06])}, 100.0)
+    assert one.level == "ok" and one.peers["simulator"]["level"] == "ok"          # the host's odd hiccup
+    three = timing.summary({"simulator": _fifo_reports(101.0, [0.03, 0.001, 0.04, 0.001, 0.05])}, 101.0)
+    assert three.level == "late" and "waited for a core" in three.message
+    # once late it stays so while a late report is in the window, and clears when none is
+    assert timing.summary({"simulator": _fifo_reports(102.0, [0.001] * 4 + [0.03])}, 102.0).level == "late"
+    assert timing.summary({"simulator": _fifo_reports(160.0, [0.001] * 5)}, 160.0).level == "ok"
+
+
+def test_a_wake_that_could_stop_the_arm_is_late_at_once():
+    timing = NodeTiming(BUDGET)
+    feed(timing, 250, 0.001)
+    summary = timing.summary({"simulator": _fifo_reports(100.0, [0.001] * 4 + [0.14], "gil")}, 100.0)
+    assert summary.level == "late" and "waited for the GIL" in summary.message
+
+
+@pytest.mark.parametrize("cause, says, advises", [
+    ("core", "waited for a core", "higher real-time priority took its core"),
+    ("gil", "waited for the GIL", "held the GIL"),
+    ("stopped", "stopped (none of its threads ran)", "a debugger, SIGSTOP, or the host"),
+])
+def test_the_advice_names_the_measured_cause_and_never_rt_priority_to_a_fifo_process(cause, says, advises):
+    timing = NodeTiming(BUDGET)
+    feed(timing, 250, 0.001)
+    summary = timing.summary({"simulator": _fifo_reports(100.0, [0.001, 0.03, 0.04, 0.05, 0.2], cause)}, 100.0)
+    assert summary.level == "late" and says in summary.message and advises in summary.message
+    assert "--rt-priority" not in summary.message
+
+
+def test_late_answers_beside_real_time_peers_on_time_do_not_advise_rt_priority():
+    timing = NodeTiming(BUDGET)
+    feed(timing, 200, 0.001)
+    feed(timing, 50, 0.006)
+    summary = timing.summary({"simulator": _fifo_reports(100.0, [0.001] * 5), "hub": _fifo_reports(100.0, [0.001] * 5)},
+                             100.0)
+    assert summary.level == "late" and "--rt-priority" not in summary.message
+    assert "report on time at SCHED_FIFO 50" in summary.message
+
+
+def test_one_heartbeat_gap_is_no_banner_repeated_or_long_ones_are():
+    def beats(timing: NodeTiming, times: list[float]) -> None:
+        for t in times:
+            timing.add(0.001, True, {"joint_1": (t, HB)})
+
+    timing = NodeTiming(BUDGET)
+    regular = [0.1 * k for k in range(1, 100)]
+    beats(timing, regular + [9.9 + 0.17] + [10.07 + 0.1 * k for k in range(1, 100)])   # one 1.7-period gap
+    assert timing.summary().level == "ok"
+    beats(timing, [20.0, 20.21])                               # 2.1 periods: near the 2.5-period stop
+    assert timing.summary().level == "late"
