@@ -91,6 +91,7 @@ class CyclicIO:
             ok = self._cv.wait_for(lambda: self._expected_tpdos() <= self._received, timeout=timeout)
         if not ok:
             self.stats.tpdo_timeouts += 1
+            self._lockstep_wait_expired = timeout     # observed silence (health.py _lockstep_health)
         return ok
 
     def write(self, command: ArmCommand | None = None) -> None:

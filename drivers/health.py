@@ -30,6 +30,7 @@ class NodeHealth:
     last_heartbeat: float | None = None
     emcy_code: int = 0               # last EMCY code (0 after an error reset)
     life_sync: int = 0               # SYNC number of its last sign of life (heartbeat or TPDO)
+    quiet: float = 0.0               # lockstep: s the controller observed it silent (health.py)
 
     @property
     def nmt_state_name(self) -> str:
@@ -174,33 +175,37 @@ class HealthMonitor:
 
     def _lockstep_health(self, now: float) -> None:
         """Lockstep, at every SYNC (under the network's lock): the controller's heartbeat when
-        due in controller time, and heartbeat loss judged in controller time.
+        due in controller time, and heartbeat loss judged on observed time.
 
         A lockstep run stands still while its process waits for a core, so wall-clock silence
-        proves nothing there: a node is lost only when both the controller time and the wall
-        time since its last sign of life (heartbeat, or a TPDO: it answered a SYNC) exceed the
-        loss factor. Controller time catches a dead node whatever the machine's speed; the
-        wall-clock half keeps a node whose heartbeat runs on wall time (a simulator in its own
-        process) alive while lockstep runs faster than real time. The timer thread still sends
-        the controller's heartbeat on wall time too: a consumer on either clock is served."""
+        proves nothing there. What counts as a node's silence is the time the controller
+        observed the bus without a sign of life from it (a heartbeat, or a TPDO: it answered
+        a SYNC): one SYNC period per cycle, plus a TPDO wait that ran out (the controller
+        waited that long for it). A node is lost when that observed silence and the wall
+        time since its last sign of life both exceed the loss factor; the wall-clock half keeps
+        a node whose heartbeat runs on wall time (a simulator in its own process) alive while
+        lockstep runs faster than real time. The timer thread still sends the controller's
+        heartbeat on wall time too: a consumer on either clock is served."""
         period, factor = self.controller_period, self.config.bus.heartbeat_loss_factor
         hb_period = self.config.bus.master_heartbeat_period
         if hb_period > 0 and (self._sync - self._hb_sync) * period >= hb_period - 1e-9:
             self._hb_sync = self._sync
             self._hb_due_now = True
+        observed, self._lockstep_wait_expired = period + self._lockstep_wait_expired, 0.0
         if not self._monitoring:
             return
         for cfg in self.config.nodes:
             h = self.health[cfg.name]
             if not h.alive or h.last_heartbeat is None:
                 continue
+            h.quiet = 0.0 if h.life_sync >= self._sync - 1 else h.quiet + observed
             limit = factor * cfg.heartbeat_period
-            if (self._sync - h.life_sync) * period > limit and now - h.last_heartbeat > limit:
+            if h.quiet > limit and now - h.last_heartbeat > limit:
                 h.alive = False
                 d = self.drivers[cfg.name]
                 self._event("heartbeat_lost", d,
-                            f"{d.label}: heartbeat lost (silent for {(self._sync - h.life_sync) * period:.3f} s "
-                            f"of controller time, period {cfg.heartbeat_period:.3f} s)")
+                            f"{d.label}: heartbeat lost (silent for {h.quiet:.3f} s of observed time, "
+                            f"period {cfg.heartbeat_period:.3f} s)")
                 self._expected = None
 
     def _send_lockstep_heartbeat(self) -> None:

@@ -170,6 +170,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.controller_period: float | None = None
         self._hb_sync = 0
         self._hb_due_now = False
+        self._lockstep_wait_expired = 0.0     # s of the last TPDO wait that ran out
         self._connected = False
         self._stop = threading.Event()
         self._monitor: threading.Thread | None = None
