@@ -40,6 +40,27 @@ class StateUpdate:
     message: dict[str, Any]         # what the page gets
     status: dict[str, Any]          # the daemon's whole status of this cycle
     text: str = ""                  # the message as JSON, serialised once for every page
+    shown: tuple = ()               # what a person sees of it (shown_key): equal keys look the same
+
+    def whole(self) -> "StateUpdate":
+        """The same cycle with the whole status (for a page that missed the lean updates)."""
+        return StateUpdate(self.cycle, self.cycle_wall_time, self.message, self.status,
+                           json.dumps({**self.message, "status": self.status}, separators=(",", ":")), self.shown)
+
+
+def shown_key(status: dict[str, Any]) -> tuple:
+    """What the page shows of a status that moves, at about the resolution it shows it (q and
+    targets 1e-5 rad, speeds 1e-4 rad/s, torques and forces 0.01): two statuses with the same
+    key look the same to the operator, whatever the cycle counters did in between."""
+    def r(value: Any, digits: int) -> Any:
+        return round(value, digits) if isinstance(value, (int, float)) else value
+    joints = tuple((r(j.get("q"), 5), r(j.get("q_cmd"), 5), r(j.get("dq"), 4), r(j.get("tau"), 2),
+                    j.get("enabled"), j.get("fault")) for j in status.get("joints") or ())
+    events = status.get("events") or []
+    return (status.get("state"), status.get("mode"), r(status.get("progress"), 3), status.get("stop_reason"),
+            joints, tuple(r(v, 2) for v in status.get("wrench") or ()), len(events),
+            json.dumps(events[-1:], sort_keys=True), json.dumps(status.get("task"), sort_keys=True),
+            json.dumps(status.get("control"), sort_keys=True), status.get("end_effector"))
 
 
 Subscriber = Callable[[StateUpdate], None]
@@ -175,7 +196,7 @@ class StateFeed:
         if full.get("joints"):
             message["frames"] = arm_frames(self.model, self.data, [j["q"] for j in full["joints"]])
         return StateUpdate(int(full.get("cycle", -1)), wall, message, full,
-                           json.dumps(message, separators=(",", ":")))
+                           json.dumps(message, separators=(",", ":")), shown_key(full))
 
     def _publish(self, update: StateUpdate) -> None:
         self.latest = update

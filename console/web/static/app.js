@@ -12,7 +12,23 @@ const spacearm = window.spacearm = {
   presim: null, scene: null, ws: null, replies: new Map(), nextId: 1,
 };
 
-function now_wall() { return (performance.timeOrigin + performance.now()) / 1000; }
+function now_mono() { return performance.now() / 1000; }   // s, the page's monotonic clock
+
+// The page's clock against the server's CLOCK_MONOTONIC (the clock of the daemon's `woke_at`),
+// NTP-style over the WebSocket: the exchange with the shortest round trip wins. The page's
+// wall clock (performance.timeOrigin + now) is no reference: Chromium fixes timeOrigin when the
+// page loads and it was seen 2.7 s off the system clock (a latency of -2686.9 ms).
+async function syncClock() {
+  let best = null;
+  for (let i = 0; i < 5; i++) {
+    const t0 = performance.now();
+    const r = await send("clock");
+    const t1 = performance.now();
+    if (typeof r.monotonic !== "number") return;
+    if (!best || t1 - t0 < best.rtt) best = { rtt: t1 - t0, offset: r.monotonic - (t0 + t1) / 2000 };
+  }
+  spacearm.clock = best;
+}
 
 function send(op, cmd, args) {
   const id = spacearm.nextId++;
@@ -25,7 +41,7 @@ function send(op, cmd, args) {
 function connect() {
   const ws = new WebSocket(`ws://${location.host}/ws`);
   spacearm.ws = ws;
-  ws.onopen = () => setLink(true, "connected");
+  ws.onopen = () => { setLink(true, "connected"); syncClock(); };
   ws.onclose = () => { setLink(false, "disconnected"); setTimeout(connect, 1000); };
   ws.onmessage = ev => {
     const msg = JSON.parse(ev.data);
@@ -50,11 +66,11 @@ function setLink(ok, text) {            // touch the DOM only on a change: each 
 const ftHistory = [];
 
 function onState(msg) {
-  const arrived = now_wall();
+  const arrived = now_mono();
   const s = { ...spacearm.lastStatus, ...msg.status };   // parts left out keep their last value
   spacearm.updates++;
-  if (msg.cycle_wall_time) {
-    spacearm.latencies.push(arrived - msg.cycle_wall_time);
+  if (spacearm.clock && typeof msg.status.woke_at === "number") {
+    spacearm.latencies.push(arrived + spacearm.clock.offset - msg.status.woke_at);
     if (spacearm.latencies.length > 20000) spacearm.latencies.shift();
   }
   spacearm.arrivals.push(arrived);
@@ -316,8 +332,9 @@ function setupCamera(camera) {
   if (!camera) return;                     // the "no camera" panel stays
   const img = new Image();
   img.alt = "eye-in-hand camera";
-  $("camera").innerHTML = "";
-  $("camera").appendChild(img);
+  // Until the first frame has decoded (in lockstep the camera renders only during the
+  // approaches) the panel says so; an <img> without a picture shows a broken-image icon.
+  $("camera").innerHTML = '<div class="nocam">waiting for the first camera frame</div>';
   // Each new frame shown: [page s, camera frame number, the ORU task line at the time, its
   // decoded width in px] (what the operator saw during which subtask; the web HIL test reads
   // it). Counted once decoded: a frame replaced before it loaded was never on the screen.
@@ -325,15 +342,20 @@ function setupCamera(camera) {
   const shown = (seq, width) => {
     const f = spacearm.cameraFrames, last = f[f.length - 1];
     if (last && last[1] === seq) return;
+    if (img.parentNode !== $("camera")) { $("camera").innerHTML = ""; $("camera").appendChild(img); }
     f.push([performance.now() / 1000, seq, $("task").textContent, width]);
     if (f.length > 5000) f.shift();
   };
-  let previous = null;
+  let previous = null, latest = -1;
   const next = async () => {
     try {
-      const r = await fetch("/api/camera.png?t=" + Date.now(), { cache: "no-store" });
+      // `after`: the server answers 204 while the camera has no newer frame (a still camera
+      // costs the page no decode)
+      const r = await fetch(`/api/camera.png?after=${latest}&t=${Date.now()}`, { cache: "no-store" });
       if (!r.ok) throw new Error(`HTTP ${r.status}`);
+      if (r.status === 204) { setTimeout(next, 200); return; }
       const seq = parseInt(r.headers.get("X-Frame-Seq") || "0", 10);
+      latest = seq;
       const url = URL.createObjectURL(await r.blob());
       img.onload = () => shown(seq, img.naturalWidth);
       img.src = url;

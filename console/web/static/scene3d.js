@@ -100,6 +100,7 @@ class CellScene {
     const ghostMat = new THREE.MeshStandardMaterial({ color: 0x4f8fff, transparent: true, opacity: 0.35, depthWrite: false });
     this.ghost = new ArmMeshes(this.scene, nFrames, ghostMat, ghostMat, 0.045);
     this.ghost.visible = false;
+    this.arm.visible = false;                     // until the first measured state places it
     this.ghostPath = null;
     this.frameCount = 0;
     // Redraw on every size change of the view, not only the window's (a panel reflow resizes
@@ -184,7 +185,13 @@ class CellScene {
   resize() {
     const w = this.container.clientWidth, h = this.container.clientHeight;
     if (w === 0 || h === 0) return;           // hidden or collapsed: keep the last size, redraw when it returns
-    this.renderer.setSize(w, h);
+    if (w === this.width && h === this.height) return;
+    this.width = w;
+    this.height = h;
+    this.resizes = (this.resizes || 0) + 1;
+    // The drawing buffer follows the container; the canvas's CSS size stays 100 % (style.css),
+    // so the size set here never changes the layout it was measured from.
+    this.renderer.setSize(w, h, false);
     this.camera.aspect = w / Math.max(h, 1);
     this.camera.updateProjectionMatrix();
     if (this.lastRender !== undefined) this.requestRender();
@@ -194,6 +201,7 @@ class CellScene {
     const prev = this.armFrames;
     if (prev && prev.length === frames.length && prev.every((f, i) => f.every((v, k) => v === frames[i][k]))) return;
     this.arm.update(frames);
+    this.arm.visible = true;
     this.armFrames = frames;
     this.requestRender();
   }
@@ -205,7 +213,12 @@ class CellScene {
     this.requestRender();
   }
 
-  hideGhost() { this.ghostPath = null; this.ghost.visible = false; this.requestRender(); }
+  hideGhost() {                              // called on every status of a stopped arm: a no-op when hidden
+    if (!this.ghostPath && !this.ghost.group.visible) return;
+    this.ghostPath = null;
+    this.ghost.visible = false;
+    this.requestRender();
+  }
 
   render() {
     const gp = this.ghostPath;
