@@ -52,6 +52,10 @@ def test_status_names_the_frozen_process_from_its_own_report(stack, frozen):
     status = s.status()
     nodes = status["nodes"]
     assert nodes["peers"][frozen]["level"] == "late" and nodes["peers"][frozen]["late_cycles"] >= 1
+    # its own measurement says what the late wake waited for: nothing of it ran (SIGSTOP), and
+    # the advice does not tell a process at SCHED_FIFO 50 to ask for real-time priority
+    assert nodes["peers"][frozen]["cause"] == "stopped", nodes["peers"][frozen]
+    assert "stopped (none of its threads ran)" in nodes["message"] and "--rt-priority" not in nodes["message"]
     other = "hub" if frozen == "simulator" else "simulator"
     assert nodes["peers"][other]["max_lateness"] < 0.8 * FREEZE, nodes["peers"]
     # the warning names the frozen process first, with its own numbers; the drives are not blamed
