@@ -44,8 +44,9 @@ def _groups(text: str, what: str, cls, prefixes: bool = False):
 
 
 def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, plane: str, anchor: str,
-           tool_point: str, register: bool, frames: bool, fix: str):
-    """Kinematics, blocks, error model and candidate parameters from the command line."""
+           tool_point: str, register: bool, frames: bool, fix: str, validate: List[Path] = ()):
+    """Kinematics, blocks, error model, candidate parameters and validation blocks (another
+    session's files, same instruments) from the command line."""
     from spacearm.controller.calibration.composite import CompositeProblem
     from spacearm.controller.calibration.errormodel import ErrorModel
     from spacearm.controller.calibration.fit_setup import (Instruments, SetupError, initial_registration, load_blocks,
@@ -57,6 +58,7 @@ def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, pl
                            parse_vector(anchor, (3, 4), "--anchor"),
                            parse_vector(tool_point, (3,), "--tool-point") or (0.0, 0.0, 0.0))
         blocks = load_blocks(data, kin, inst)
+        vblocks = load_blocks(list(validate), kin, inst) if validate else []
         em = ErrorModel.from_kinematics(kin)
         if register:
             em = ErrorModel.from_kinematics(kin, world=initial_registration(em, blocks))
@@ -67,7 +69,7 @@ def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, pl
     frame_names = em.frame_names("world") + em.frame_names("tool")
     cands = [n for n in names if (frames or register or n not in frame_names)
              and not any(n == f or n.startswith(f) for f in fixed)]
-    return kin, em, blocks, cands
+    return kin, em, blocks, cands, vblocks
 
 
 def register_fit(cal: typer.Typer) -> None:
@@ -95,6 +97,10 @@ def register_fit(cal: typer.Typer) -> None:
             noise: str = typer.Option("residual", help="Uncertainties: residual (scaled by the fit) | stated."),
             max_noise_ratio: float = typer.Option(3.0, help="Reject when residual RMS exceeds this x the stated noise."),
             seed: int = typer.Option(0),
+            validate: List[Path] = typer.Option([], "--validate", help="Another session's measurement file(s), "
+                                                "same instruments: every --data posture fits, these score it."),
+            regularise: str = typer.Option("auto", help="auto: a prior of 0.5 deg / 5 mm on the D-H terms where the "
+                                           "problem is weakly conditioned (the effect on held-out error is printed) | off."),
             apply: Optional[Path] = typer.Option(None, "--apply", help="Write the calibrated arm file here."),
             as_json: bool = typer.Option(False, "--json")) -> None:
         """Identify, validate on held-out postures and judge a calibration from measurement files."""
@@ -103,13 +109,14 @@ def register_fit(cal: typer.Typer) -> None:
         try:
             opts = FitOptions(method=method, holdout=holdout, kfold=kfold, seed=seed,
                               priors=_groups(prior, "--prior", Priors, prefixes=True),
-                              bounds=_groups(bound, "--bound", Bounds), noise=noise, max_noise_ratio=max_noise_ratio)
+                              bounds=_groups(bound, "--bound", Bounds), noise=noise, max_noise_ratio=max_noise_ratio,
+                              regularise=regularise)
         except ValueError as exc:
             raise CommandFailed(str(exc)) from None
-        kin, em, blocks, cands = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
-                                        register, frames, fix)
+        kin, em, blocks, cands, vblocks = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
+                                                 register, frames, fix, validate)
         try:
-            rep = fit_blocks(em, blocks, opts, candidates=cands)
+            rep = fit_blocks(em, blocks, opts, candidates=cands, validation=vblocks or None)
         except (ValueError, np.linalg.LinAlgError) as exc:
             raise CommandFailed(str(exc)) from None
         res, ident = rep.result, rep.identifiability
@@ -120,6 +127,9 @@ def register_fit(cal: typer.Typer) -> None:
                 "noise_ratio": rep.noise_ratio, "rank": ident.rank, "condition": ident.condition,
                 "dropped": {d.name: d.reason for d in ident.dropped},
                 "held_out_rms_before": rep.held_rms("before"), "held_out_rms_after": rep.held_rms("after"),
+                "validation_file": rep.validation_file, "regularised": rep.regularised,
+                "instrument": {n: float(res.x[i]) for i, n in enumerate(res.names) if i >= em.n_params},
+                "held_out_rms_unregularised": rep.held_unregularised,
                 "held_out": [h.__dict__ for h in rep.held_out]}))
         else:
             _print_report(rep, opts)
@@ -153,8 +163,8 @@ def register_fit(cal: typer.Typer) -> None:
         from spacearm.controller.calibration.composite import CompositeProblem
         from spacearm.controller.calibration.fit_checks import data_identifiability
         from spacearm.controller.calibration.pose_selection import next_postures, probe_block
-        kin, em, blocks, cands = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
-                                        register, frames, fix)
+        kin, em, blocks, cands, _ = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
+                                           register, frames, fix)
         rng = np.random.default_rng(seed)
         Qc = kin.random_configurations(candidates, rng, margin=0.05)
         # Candidates: what could be identified with rich data (the candidate postures), not only
@@ -196,9 +206,25 @@ def _print_report(rep, opts) -> None:
     print(f"estimates (+- 1 sigma, {scale}):")
     for name, value in res.estimate.items():
         print(f"  {name:<12} {_fmt(name, value):>18}  +- {_fmt(name, rep.std[name])}")
+    if rep.regularised:
+        unreg = "" if rep.held_unregularised is None else \
+            f"; held-out RMS without it {rep.held_unregularised * 1e3:.4f} mm"
+        print(f"regularised by default (weakly conditioned, singular value ratio {rep.weakest.sigma_ratio:.1e}): "
+              f"prior 0.5 deg / 5 mm on the D-H terms{unreg}")
     if rep.held_out:
-        print(f"held-out postures: {len(rep.held_out)}, position error RMS {rep.held_rms('before') * 1e3:.4f} mm "
+        what = "validation postures (another session)" if rep.validation_file else "held-out postures"
+        print(f"{what}: {len(rep.held_out)}, position error RMS {rep.held_rms('before') * 1e3:.4f} mm "
               f"(start values) -> {rep.held_rms('after') * 1e3:.4f} mm (fit)")
+        n_out, rms_out = rep.held_rms_where(True)
+        if n_out:
+            n_in, rms_in = rep.held_rms_where(False)
+            inside = f"{rms_in * 1e3:.4f} mm on the {n_in} inside" if n_in else "none inside"
+            print(f"  extrapolation: {n_out} postures outside the training range of a joint, RMS {rms_out * 1e3:.4f} mm "
+                  f"({inside})")
         for h in rep.worst_held_out(opts.worst):
-            print(f"  worst: {h.block} row {h.index}: {h.before * 1e3:.4f} -> {h.after * 1e3:.4f} mm")
+            flag = f"  [outside the training range: {', '.join(h.outside)}]" if h.outside else ""
+            print(f"  worst: {h.block} row {h.index}: {h.before * 1e3:.4f} -> {h.after * 1e3:.4f} mm{flag}")
+        for h in (h for h in rep.held_out if h.outside and h.after > h.before):
+            print(f"  extrapolated and worse: {h.block} row {h.index}: {h.before * 1e3:.4f} -> {h.after * 1e3:.4f} mm "
+                  f"({', '.join(h.outside)})")
     print(rep.verdict.message())

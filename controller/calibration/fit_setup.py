@@ -14,7 +14,8 @@ from numpy.typing import NDArray
 
 from spacearm.controller.calibration.composite import Block
 from spacearm.controller.calibration.datafile import DataFileError, read_measurements
-from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.errormodel import ErrorModel, prismatic_joints
+from spacearm.controller.calibration.instrument_start import kabsch, register_points
 from spacearm.controller.calibration.measurement_models import PlaneModel, PointModel, PoseModel, RangeModel
 from spacearm.base.kinematics import KinematicModel
 
@@ -59,6 +60,7 @@ def load_blocks(files: list[Path], kin: KinematicModel, inst: Instruments) -> li
             raise SetupError(f"{path}: non-finite values (nan/inf) in the data")
         if len(mf.Q) < 2:
             raise SetupError(f"{path}: need at least two postures")
+        check_units(path, kin, mf.kind, mf.Q, mf.measured)
         suffix = "" if k == 0 else str(k + 1)
         if mf.kind == "pose":
             model, sigma = PoseModel(), [inst.sigma_pos] * 3 + [inst.sigma_rot] * 3
@@ -78,21 +80,49 @@ def load_blocks(files: list[Path], kin: KinematicModel, inst: Instruments) -> li
     return blocks
 
 
-def _kabsch(P: Array, Q: Array) -> Array:
-    """Rigid transform T with Q ~= T P (rows are points)."""
-    cp, cq = P.mean(0), Q.mean(0)
-    U, _, Vt = np.linalg.svd((P - cp).T @ (Q - cq))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
-    R = Vt.T @ D @ U.T
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = cq - R @ cp
-    return T
+LIMIT_SLACK = 0.05        # rad (m for a prismatic joint) beyond the arm file's limits still accepted
+SCALE_SLACK = 10.0        # readings may spread over this many arm reaches before they are not metres
+
+
+def check_units(path: Path, kin: KinematicModel, kind: str, Q: Array, measured: Array) -> None:
+    """One line naming the likely unit when joints leave the arm's limits (degrees? mm?) or the
+    readings spread far beyond the arm's reach (mm?)."""
+    lo, hi = np.asarray(kin.q_min, float) - LIMIT_SLACK, np.asarray(kin.q_max, float) + LIMIT_SLACK
+    prismatic = prismatic_joints(kin)
+    bad = np.flatnonzero(np.any((Q < lo) | (Q > hi), axis=0))
+    if bad.size:
+        j = int(bad[0])
+        worst = float(Q[np.argmax(np.abs(Q[:, j])), j])
+        scale, unit, want = (1e-3, "mm", "m") if prismatic[j] else (np.pi / 180.0, "degrees", "rad")
+        fits = np.all((Q[:, bad] * scale >= lo[bad]) & (Q[:, bad] * scale <= hi[bad]))
+        hint = f": the values look like {unit} ({want} expected)" if fits else ""
+        raise SetupError(f"{path}: joint q{j + 1} = {worst:.6g} is outside the arm's limits "
+                         f"[{kin.q_min[j]:.4g}, {kin.q_max[j]:.4g}] {want}{hint}")
+    reach = float(kin.reach)
+    if kind == "range":
+        size, what = float(np.median(np.abs(measured))), "median range"
+    elif kind in ("position", "pose"):
+        pts = measured if kind == "position" else measured[:, :3, 3]
+        size, what = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1))), "spread of the points"
+    else:
+        return
+    if size > SCALE_SLACK * reach:
+        hint = ": the values look like mm (m expected)" if size * 1e-3 <= SCALE_SLACK * reach else ""
+        raise SetupError(f"{path}: {what} {size:.6g} is more than {SCALE_SLACK:g}x the arm's reach "
+                         f"({reach:.3g} m){hint}")
 
 
 def initial_registration(em: ErrorModel, blocks: list[Block]) -> Array:
     """Measurement frame <- arm base from the point and pose data at the nominal model (Kabsch),
-    so that a motion-capture or tracker frame need not be registered by hand."""
+    so that a motion-capture or tracker frame need not be registered by hand. With one marker's
+    data, the marker's point on the tool is estimated with it, so neither depends on --tool-point."""
+    points = [b for b in blocks if isinstance(b.model, PointModel)]
+    if points and len(points) == len(blocks) and len({id(b.model) for b in points}) == 1 \
+            and sum(len(b.Q) for b in points) >= 3:
+        T = np.concatenate([em.poses(em.nominal, b.Q) for b in points])
+        M = np.concatenate([b.measured for b in points])
+        W, _ = register_points(T[:, :3, 3], T[:, :3, :3], M, np.asarray(points[0].model.tool_point, float))
+        return W
     P, M = [], []
     for b in blocks:
         T = em.poses(em.nominal, b.Q)
@@ -104,4 +134,4 @@ def initial_registration(em: ErrorModel, blocks: list[Block]) -> Array:
             M.append(b.measured)
     if not P or sum(len(p) for p in P) < 3:
         raise SetupError("registration needs point or pose data (at least 3 postures)")
-    return _kabsch(np.concatenate(P), np.concatenate(M))
+    return kabsch(np.concatenate(P), np.concatenate(M))

@@ -1,22 +1,32 @@
-"""Identifiable parameter set from the identification Jacobian (SVD for the rank, ordered QR for which).
+"""Identifiable (base) parameter set by rank-revealing QR with column pivoting on the data's postures.
 
-Procedure (deterministic):
- 1. Evaluate the Jacobian on a well-spread random configuration set (fixed seed).
- 2. Scale every column to unit norm, so metres and radians compete fairly.
- 3. SVD of the scaled Jacobian -> numerical rank r (singular values below tol * s_max are zero).
- 4. Ordered Gram-Schmidt (QR with a priority order instead of norm pivoting): walk the
-    candidates in priority order and keep a column if its part orthogonal to the kept ones is
-    larger than `tol`; otherwise it is dropped and explained by regressing it on the kept columns.
-    The priority order makes ties (exactly dependent columns) resolve the textbook way:
-    theta, d, a, alpha first; Hayati beta after them; the d of a link whose two axes are parallel
-    (the d that beta replaces) last; frames and the plane's gauge after the arm.
- 5. Check that the kept set has rank r.
+Procedure (deterministic, never raises on a rank-deficient or nearly deficient Jacobian):
+ 1. The identification Jacobian on the data's own postures (rows whitened by the stated noise
+    when it comes from a measurement problem), or on a well-spread random posture set.
+ 2. Columns scaled: to unit norm, or, when `scale` gives each parameter's plausible size, to the
+    change of the (whitened) readings that an error of that size makes, so metres and radians
+    compete by what they do to the data.
+ 3. Preference tiers, walked in order; within a tier, pivoted QR (scipy.linalg.qr,
+    pivoting=True) of the columns' part orthogonal to everything kept so far. A column is kept
+    while its pivot |R_kk| exceeds one tolerance: `floor` (noise units: an error of plausible
+    size must move the readings by that many noise sigmas beyond what the kept parameters can
+    absorb) and never below `tol` relative to the largest column (numerical rank).
+    Tiers (kept first): the instrument's own placement (anchor, wire length offset, marker or
+    tool point), then the registration (world frame), the tool mount frame, the D-H terms
+    theta, d, a, alpha, Hayati beta, the plane's coefficients, the d that beta replaces on
+    parallel axes, and the plane's gauge last. So a set-up error is never absorbed into the
+    arm's geometry; within a tier, exact ties follow the parameters' order.
+ 4. Each dropped column is explained by regressing it on the kept ones.
+Because the tolerance and the tiers do not depend on the start values (only on the postures
+and the noise), neither does the kept set, up to ties decided at the numerical tolerance.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numpy.typing import NDArray
 
 from spacearm.controller.calibration.residuals import Problem
@@ -51,24 +61,24 @@ def parallel_links(problem: Problem, tol: float = 1e-3) -> list[int]:
     return [i for i in range(kin.nq) if abs(np.sin(kin.alpha[i])) < tol]
 
 
-def priority_order(problem: Problem, candidates: list[str], gauge: str | None = None) -> list[str]:
-    """Candidates sorted by keep-preference (see module docstring)."""
+def preference_tier(problem: Problem, gauge: str | None = None) -> Callable[[str], float]:
+    """Keep-preference tier of a parameter name (lower is kept first; module docstring)."""
     kin = problem.model.kin
     hayati_d = set()
     for i in parallel_links(problem):
         # standard D-H: alpha_i ~ 0 means z_{i-1} || z_i, so d_i slides along the same line as
-        # d_{i+1}; Hayati replaces d_i by beta_i. Modified rows carry alpha_{i-1}: d_{i-1}... here
-        # alpha on joint i+1 row couples d_i and d_{i+1}; the earlier d is the one replaced.
+        # d_{i+1}; Hayati replaces d_i by beta_i. Modified rows carry alpha_{i-1}: the alpha on
+        # joint i+1's row couples d_i and d_{i+1}; the earlier d is the one replaced.
         if kin.convention == "standard":
             hayati_d.add(f"d_{i + 1}")
         elif i >= 1:
             hayati_d.add(f"d_{i}")
-    plane_last = {f"{problem.plane.prefix}_f"} if problem.plane is not None else set()
-    gauge_set = {gauge} if gauge else set()
+    plane_prefix = problem.plane.prefix + "_" if problem.plane is not None else None
+    last = ({gauge} if gauge else set()) | ({plane_prefix + "f"} if plane_prefix else set())
 
     def tier(name: str) -> float:
         kind = name.rsplit("_", 1)[0]
-        if name in gauge_set or name in plane_last:
+        if name in last:
             return 6
         if name in hayati_d:
             return 5
@@ -76,20 +86,19 @@ def priority_order(problem: Problem, candidates: list[str], gauge: str | None = 
             return 0
         if kind == "beta":
             return 1
-        if problem.plane is not None and name.startswith(problem.plane.prefix + "_"):
-            return 4
-        if name.endswith(("_tx", "_ty", "_tz", "_ax", "_ay", "_az")):
-            # An instrument's placement first (a marker on the tool, a draw-wire anchor): it is
-            # what is really uncertain, and the first/last joints' D-H rows (which the data cannot
-            # tell from it) would otherwise absorb a roughly known anchor or marker as degrees
-            # and decimetres of arm "error".
-            return -1
-        if name.startswith(problem.model.tool_prefix + "_"):
-            return 2.5
+        if plane_prefix and name.startswith(plane_prefix):
+            return 4    # the laser paper keeps the plane after the arm (its 25 + 1)
         if name.startswith(problem.model.world_prefix + "_"):
-            return 3
-        return 4  # an instrument's own parameters (anchor, tool point)
+            return -2   # registration of the measurement frame
+        if name.startswith(problem.model.tool_prefix + "_"):
+            return -1   # the tool's (camera's, marker plate's) mount on the flange
+        return -3       # the instrument's own placement: anchor, wire offset, marker point
+    return tier
 
+
+def priority_order(problem: Problem, candidates: list[str], gauge: str | None = None) -> list[str]:
+    """Candidates sorted by keep-preference (see module docstring)."""
+    tier = preference_tier(problem, gauge)
     pos = {n: i for i, n in enumerate(problem.names)}
     return sorted(candidates, key=lambda n: (tier(n), pos[n]))
 
@@ -115,50 +124,76 @@ def identifiability_jacobian(problem: Problem, candidates: list[str], n_configs:
 
 def find_identifiable(problem: Problem, candidates: list[str] | None = None, n_configs: int = 200,
                       seed: int = 0, tol: float = 1e-6, gauge: str | None = None,
-                      Q: Array | None = None, A: Array | None = None) -> IdentifiabilityReport:
+                      Q: Array | None = None, A: Array | None = None, scale: Array | None = None,
+                      floor: float = 0.0) -> IdentifiabilityReport:
     """The identifiable subset of `candidates` (default: all parameters) with reasons for drops.
 
     `A` (rows, len(candidates)) is a given identification Jacobian, e.g. on the data's own
-    postures (see fit_checks.data_identifiability); otherwise it is evaluated on Q or random postures.
+    postures (see fit_checks.data_identifiability); otherwise it is evaluated on Q or random
+    postures. `scale` (len(candidates),) and `floor`: see the module docstring.
     """
-    candidates = list(problem.names) if candidates is None else list(candidates)
+    candidates = list(candidates) if candidates is not None else list(problem.names)
     if A is None:
         A = identifiability_jacobian(problem, candidates, n_configs, seed, Q)
+    A = np.asarray(A, float)
     norms = np.linalg.norm(A, axis=0)
+    finite = np.isfinite(norms)
+    top = norms[finite].max() if finite.any() else 0.0
     dropped: list[Dropped] = []
     usable = []
     for j, name in enumerate(candidates):
-        if norms[j] < 1e-12 * max(norms.max(), 1e-300):
+        if not finite[j]:
+            dropped.append(Dropped(name, "its effect on the measurement is not finite here"))
+        elif norms[j] <= 1e-12 * max(top, 1e-300):
             dropped.append(Dropped(name, "no effect on the measurement"))
         else:
             usable.append(j)
-    As = A[:, usable] / norms[usable]
-    s = np.linalg.svd(As, compute_uv=False)
-    rank = int(np.sum(s > tol * s[0] * max(As.shape) ** 0.5)) if s.size else 0
-    order = priority_order(problem, [candidates[j] for j in usable], gauge)
-    col = {candidates[j]: As[:, k] for k, j in enumerate(usable)}
-    basis: list[Array] = []
-    kept: list[str] = []
-    for name in order:
-        v = col[name].copy()
-        for b in basis:          # twice for numerical orthogonality (classical trick)
-            v -= (b @ v) * b
-        for b in basis:
-            v -= (b @ v) * b
-        nv = np.linalg.norm(v)
-        if nv > np.sqrt(tol) and len(kept) < rank:
-            basis.append(v / nv)
-            kept.append(name)
-        else:
+    names = [candidates[j] for j in usable]
+    if scale is None:
+        As = A[:, usable] / norms[usable]
+    else:
+        As = A[:, usable] * np.asarray(scale, float)[usable]
+    col = {n: As[:, k] for k, n in enumerate(names)}
+    s = np.linalg.svd(As, compute_uv=False) if names else np.zeros(0)
+    threshold = max(floor, tol * (s[0] if s.size else 0.0) * max(As.shape) ** 0.5)
+    tier = preference_tier(problem, gauge)
+    kept = _pivoted_selection(col, priority_order(problem, names, gauge), threshold, tier)
+    for name in names:
+        if name not in kept:
             dropped.append(Dropped(name, _explain(name, col, kept, problem)))
     kept_sorted = [n for n in candidates if n in kept]
     K = np.column_stack([col[n] for n in kept_sorted]) if kept else np.zeros((A.shape[0], 0))
     sk = np.linalg.svd(K, compute_uv=False) if kept else np.array([1.0])
-    if np.linalg.matrix_rank(K, tol=tol * sk[0] * max(K.shape) ** 0.5) != len(kept):
-        raise RuntimeError("kept columns are not independent; lower tol")
     pos = {n: i for i, n in enumerate(candidates)}
     dropped.sort(key=lambda d: pos[d.name])
-    return IdentifiabilityReport(kept_sorted, dropped, rank, s, float(sk[0] / sk[-1]))
+    return IdentifiabilityReport(kept_sorted, dropped, len(kept), s, float(sk[0] / max(sk[-1], 1e-300)))
+
+
+def _pivoted_selection(col: dict[str, Array], order: list[str], threshold: float,
+                       tier: Callable[[str], float]) -> list[str]:
+    """Walk the tiers; in each, pivoted QR of the columns' part orthogonal to the kept ones.
+
+    Columns are nudged by their place in `order` (at most 1e-6 relative) before pivoting, so
+    exactly interchangeable columns resolve in the stated order while a column with a clearly
+    larger independent part still wins inside its tier."""
+    if not order:
+        return []
+    basis = np.zeros((len(col[order[0]]), 0))
+    kept: list[str] = []
+    for level in sorted({tier(n) for n in order}):
+        group = [n for n in order if tier(n) == level]
+        M = np.column_stack([col[n] for n in group])
+        for _ in range(2):                       # twice: numerically orthogonal to the basis
+            M = M - basis @ (basis.T @ M)
+        nudge = 1.0 - 1e-6 * np.arange(len(group)) / max(len(group), 1)
+        Qm, R, piv = scipy.linalg.qr(M * nudge, mode="economic", pivoting=True)
+        diag = np.abs(np.diag(R)) if R.size else np.zeros(0)
+        k = 0
+        while k < len(diag) and diag[k] > threshold:
+            k += 1
+        kept += [group[p] for p in piv[:k]]
+        basis = np.column_stack([basis, Qm[:, :k]])
+    return kept
 
 
 def _explain(name: str, col: dict[str, Array], kept: list[str], problem: Problem) -> str:

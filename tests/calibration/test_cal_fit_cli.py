@@ -63,7 +63,7 @@ def test_apply_writes_joint_and_base_corrections_that_the_model_reads(tmp_path):
                               "--anchor", anchor, "--tool-point", "0,0,0.05", "--frames", "--sigma-pos", "1e-4",
                               "--apply", str(out), "--json"])
     assert res.exit_code == 0, res.output
-    est = json.loads(res.output.splitlines()[0])["estimate"]
+    inst = json.loads(res.output.splitlines()[0])["instrument"]
     text = out.read_text()
     # Points and ranges in the base frame show the base; the tool frame is not separable from the
     # measured points' offsets, which stay instrument parameters (provenance comments).
@@ -71,8 +71,9 @@ def test_apply_writes_joint_and_base_corrections_that_the_model_reads(tmp_path):
     from spacearm.controller.calibration.errormodel import ErrorModel
     em_cal = ErrorModel.from_kinematics(load_model(out))
     Q = st.em.kin.random_configurations(50, np.random.default_rng(9))
-    # The tracked point (tool origin in truth) as the calibrated file plus the marker offset predicts it.
-    t = np.array([est.get("marker_tx", 0.0), est.get("marker_ty", 0.0), 0.05 + est.get("marker_tz", 0.0)])
+    # The tracked point (tool origin in truth) as the calibrated file plus the fitted marker point
+    # (its start estimated from the data, not the --tool-point guess) predicts it.
+    t = np.array([inst["marker_tx"], inst["marker_ty"], inst["marker_tz"]])
     T_cal = em_cal.poses(em_cal.nominal, Q)
     p_cal = T_cal[:, :3, 3] + T_cal[:, :3, :3] @ t
     p_true = st.em.poses(x, Q)[:, :3, 3]

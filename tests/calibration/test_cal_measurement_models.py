@@ -67,8 +67,9 @@ def test_noise_free_data_is_recovered_exactly(kind):
     rep = fit_blocks(st.em, [Block(st.model, Q, S.readings(st, x, Q, None), st.sigma)], FitOptions(holdout=0.25))
     assert rep.result.status == "converged"
     # Exact up to what the kept parameters cannot express of the dropped ones beyond first order
-    # (a range anchor's offset moved into joint 1's D-H row leaves ~1 um on this arm).
-    assert rep.held_rms("after") < 5e-6 < 1e-3 < rep.held_rms("before")
+    # (a range anchor's offset moved into joint 1's D-H row leaves ~1 um on this arm). The
+    # instrument's start is the data's own estimate, at the nominal arm: ~1 mm before the fit.
+    assert rep.held_rms("after") < 5e-6 < 3e-4 < rep.held_rms("before")
     assert rep.verdict.ok, rep.verdict.message()
 
 
