@@ -31,6 +31,7 @@ from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABOR
 from spacearm.base.config.bus import BusSettings, parse_object_ref
 from spacearm.drivers.devices import DeviceDriver
 from spacearm.drivers.errors import BootError, DriverError, SdoError
+from spacearm.drivers.line_redundancy import redundancy_writes
 from spacearm.drivers.pdo_config import PdoSpec, find_var, pdo_numbers
 
 logger = logging.getLogger(__name__)
@@ -173,6 +174,10 @@ class NodeBringup:
         self.hardware()
         for index, sub, value in self.d.config_writes():
             self._write_if_present(index, sub, value)
+        if getattr(self.net, "line_redundancy", None) is not None:     # on a redundant pair of lines
+            for index, sub, value in redundancy_writes(self.net.config):
+                if index in self.d.od:
+                    self._write_if_present(index, sub, value)
         self.dcf_values()
         self.sdo_table()
         self.pdos()

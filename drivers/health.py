@@ -162,6 +162,8 @@ class HealthMonitor:
                     self._excuse(now, excess, factor)
                     due = now + RECHECK_AFTER_STARVED
                     continue
+                if self._line_switching(now):
+                    continue        # silence of a bus line switch, bounded (drivers/line_redundancy.py)
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
@@ -192,7 +194,7 @@ class HealthMonitor:
             self._hb_sync = self._sync
             self._hb_due_now = True
         observed, self._lockstep_wait_expired = period + self._lockstep_wait_expired, 0.0
-        if not self._monitoring:
+        if not self._monitoring or self._line_switching(now):
             return
         for cfg in self.config.nodes:
             h = self.health[cfg.name]
@@ -207,6 +209,12 @@ class HealthMonitor:
                             f"{d.label}: heartbeat lost (silent for {h.quiet:.3f} s of observed time, "
                             f"period {cfg.heartbeat_period:.3f} s)")
                 self._expected = None
+
+    def _line_switching(self, now: float) -> bool:
+        """A switch of bus lines is under way: the nodes' silence is the switch, not their loss
+        (a window that ends within the loss bound; drivers/line_redundancy.py bridging())."""
+        redundancy = getattr(self, "line_redundancy", None)
+        return redundancy is not None and redundancy.bridging()
 
     def _send_lockstep_heartbeat(self) -> None:
         if self._hb_due_now:

@@ -263,6 +263,9 @@ class LineRedundancyMaster:
             self.check()
 
     def stop(self) -> None:
+        for observers, observer in ((self.bus.rx_observers, self.on_rx), (self.bus.tx_observers, self.on_tx)):
+            if observer in observers:
+                observers.remove(observer)
         self._stop.set()
         if self._thread is not None:
             self._thread.join(1.0)
@@ -277,10 +280,8 @@ def attach(net) -> LineRedundancyMaster | None:
     if not hasattr(bus, "tx_router"):
         return None
     ids = {d.node_id for d in net.drivers.values()}
-    routes = getattr(net, "_tpdo_routes", {})
-
     def node_of(can_id: int) -> int | None:
-        route = routes.get(can_id)
+        route = net._tpdo_routes.get(can_id)
         if route is not None:
             return route[0].node_id
         node_id = can_id & 0x7F
@@ -300,10 +301,3 @@ def attach(net) -> LineRedundancyMaster | None:
     net.line_redundancy = master
     return master
 
-
-def configure_nodes(net) -> None:
-    """Bring-up's redundancy writes, for nodes whose EDS has the object."""
-    for driver in net.drivers.values():
-        for index, sub, value in redundancy_writes(net.config):
-            if index in driver.od:
-                net.sdo_write(driver.name, index, sub, value)

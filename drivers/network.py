@@ -43,6 +43,7 @@ from spacearm.base.canopen.codes import ABORT_NO_OBJECT, ABORT_NO_SUBINDEX
 from spacearm.base.canopen.eds import load_od
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, load_bus_config
 from spacearm.base.transport import frame_sender, frames_sender, open_bus
+from spacearm.drivers import line_redundancy
 from spacearm.drivers.boot_master import BootMaster
 from spacearm.drivers.bringup import BringupReport
 from spacearm.drivers.cyclic_io import ArmCommand, ArmState, CyclicIO
@@ -119,6 +120,8 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
     def __init__(self, bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG):
         self.bus_spec = bus_spec
         self.config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config)
+        self.config = line_redundancy.bus_config_for(bus_spec, self.config)   # a pair's heartbeat timing
+        self.line_redundancy: line_redundancy.LineRedundancyMaster | None = None
         self.network = canopen.Network()
         self.network.NOTIFIER_CYCLE = 0.05    # receive-thread wake-up; bounds close() time
         self.network.listeners = [_Listener(self)]
@@ -207,6 +210,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.network.subscribe(od.NMT_COB_ID, self._on_nmt_frame)
         self._connected = True
         self._stop.clear()
+        self.line_redundancy = line_redundancy.attach(self)     # None on one line
         self._monitor = threading.Thread(target=self._monitor_loop, name="arm-heartbeat-monitor", daemon=True)
         self._monitor.start()
         return self
@@ -218,6 +222,8 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self._stop.set()
         if self._monitor is not None:
             self._monitor.join(1.0)
+        if self.line_redundancy is not None:
+            self.line_redundancy.stop()
         self.network.disconnect()
         self._connected = False
 

@@ -9,7 +9,10 @@ Per node with the redundancy object (2E00h) and a master heartbeat consumer (101
 
 * it listens and sends on one line (selective bus access): starting on Bdefault;
 * the master's heartbeat times out (1016h:1 time, through the node's own consumer check,
-  which excuses the simulator's starvation): after (Ttoggle - 1) more consumer times it
+  which excuses the simulator's starvation) while the node is OPERATIONAL (our deviation from
+  Lely, whose timer runs from the reset: a master busy configuring nodes by SDO may be late
+  with its heartbeat, and a node leaving the line mid-configuration fails the boot; before
+  OPERATIONAL the node neither toggles nor faults): after (Ttoggle - 1) more consumer times it
   toggles to the other line, counts Ctoggle, and sends its heartbeat there at once (as
   Lely's slave examples restart the producer on a switch, so the master sees it at once);
 * no master there either: it toggles again every Ttoggle consumer times until Ctoggle
@@ -35,7 +38,7 @@ TICK = 0.002   # s: the toggle timer's resolution
 
 @dataclass(frozen=True)
 class LineEvent:
-    time: float        # monotonic
+    time: float        # monotonic (whatever clock the rule runs on)
     node: str
     kind: str          # "switch" | "no_master" | "master_found"
     line: int
@@ -151,6 +154,9 @@ class LineSelection:
         for node in self.sim.nodes.values():
             if any(pdo.cob_id == can_id for pdo in node._tpdos or ()):
                 return node.node_id
+        # a TPDO before the node built its PDO table (just after a reset): the pre-defined set
+        if function in od.TPDO_BASE and node_id in self.sim.nodes:
+            return node_id
         return None
 
     # ------------------------------------------------------------------ the node's side
@@ -167,7 +173,7 @@ class LineSelection:
             rule = self.rules.get(node.node_id)
             master = rule.master() if rule is not None else None
             if master is not None and producer == master[0] and rule.master_heard():
-                self.events.append(LineEvent(now, node.name, "master_found", rule.line))
+                self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
         def consumers(now: float) -> None:
@@ -177,7 +183,8 @@ class LineSelection:
                 last = node.consumer_last.get(master[0])
                 if last is not None and now - last > master[1]:
                     del node.consumer_last[master[0]]    # the rule, not the EMCY, answers this timeout
-                    rule.master_missed(now, master[1])
+                    if node.nmt_state == od.NMT_STATE_OPERATIONAL:
+                        rule.master_missed(now, master[1])
             check_consumers(now)
 
         node.on_heartbeat, node.check_consumers = heartbeat, consumers
@@ -189,9 +196,14 @@ class LineSelection:
             return None
         return gated
 
+    def clock(self) -> float:
+        """The simulator's clock for consumed heartbeats: the plant's (SYNC) time beside a
+        lockstep controller (Simulator time_base 'sync'), else the monotonic clock."""
+        return self.sim.plant.time if getattr(self.sim, "sync_time_base", False) else time.monotonic()
+
     def _run(self) -> None:
         while not self.sim._stop.wait(TICK):
-            now = time.monotonic()
+            now = self.clock()
             for node_id, rule in self.rules.items():
                 node = self.sim.nodes[node_id]
                 if not rule.due(now) or not node.powered or node.faults.silent:
@@ -202,11 +214,11 @@ class LineSelection:
                     continue
                 with self.sim._sync_lock:
                     kind = rule.toggle(now, master[1])
-                    self.events.append(LineEvent(now, node.name, "switch", rule.line))
+                    self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
                     node.next_heartbeat = 0.0     # the producer restarts on the new line
                     node.send_heartbeat()
                     if kind == "no_master":
-                        self.events.append(LineEvent(now, node.name, kind, rule.line))
+                        self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
                         node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
                         node.on_heartbeat_lost(master[0])
 

@@ -22,6 +22,7 @@ import can
 from spacearm.base.canopen import od, peer_timing
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, check_axis_kinds, load_bus_config
 from spacearm.base.transport import frame_sender, frames_sender, open_bus
+from spacearm.firmware_sim import line_selection
 from spacearm.firmware_sim.end_effector import EndEffectorNode
 from spacearm.firmware_sim.ft_sensor import FtSensorNode
 from spacearm.firmware_sim.joint_drive import JointDriveNode
@@ -137,6 +138,7 @@ class Simulator:
         self._notifier = can.Notifier(self.bus, [listener], timeout=0.1)
         if hasattr(self.bus, "add_inline_listener"):
             self.bus.add_inline_listener(listener)   # in-process bus: no thread hop per frame
+        self.line_selection = line_selection.attach(self)   # each node on its own line of a pair
         for node in self.nodes.values():
             node.power_on()                       # each sends its boot-up message
         self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="sim-heartbeat", daemon=True)

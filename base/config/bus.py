@@ -20,6 +20,7 @@ from pydantic import Field, model_validator
 from spacearm.base.canopen.axis_scale import AxisScale, feed_counts
 from spacearm.base.config.errors import ConfigError
 from spacearm.base.config.loader import StrictModel, load_toml_model
+from spacearm.base.config.redundancy import RedundancySettings
 from spacearm.base.paths import CONFIGS
 
 EDS_DIR = CONFIGS / "eds"
@@ -56,6 +57,8 @@ class BusSettings(StrictModel):
     tpdo_loss_cycles: int = Field(default=5, ge=2, le=1000,
                                   description="a mapped TPDO missing for this many SYNCs in a row is a "
                                               "fault (tpdo_missing), like a lost heartbeat")
+    redundancy: RedundancySettings = Field(default_factory=RedundancySettings,
+                                           description="bus redundancy on a redundant pair of lines (A+B)")
 
 
 class JointSettings(StrictModel):
