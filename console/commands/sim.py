@@ -32,7 +32,8 @@ CAMERA_LINE = "spacearm sim: camera frames in shared memory {name}"   # printed 
 
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
             duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
-            camera: Optional[str] = None, board: Optional[Path] = None, rt_priority: int = 0) -> int:
+            camera: Optional[str] = None, board: Optional[Path] = None, rt_priority: int = 0,
+            time_base: str = "wall") -> int:
     from spacearm.base.config.errors import ConfigError
     from spacearm.base.transport import BusSpecError
     from spacearm.firmware_sim.runner import Simulator
@@ -54,7 +55,7 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
         if problem:
             typer.echo(f"spacearm sim: {problem}", err=True)
     try:
-        sim = Simulator(bus, bus_config, plant, control_node)
+        sim = Simulator(bus, bus_config, plant, control_node, time_base=time_base)
         sim.start()
     except (ConfigError, BusSpecError, ValueError) as exc:
         typer.echo(f"spacearm sim: {exc}", err=True)
@@ -127,7 +128,12 @@ def register(app: typer.Typer) -> None:
             0, "--rt-priority", min=0, max=99,
             help="SCHED_FIFO priority of the nodes (0: normal scheduling); the HIL benches use 50 so "
                  "the simulated hardware answers SYNC in time on a busy machine"),
+        time_base: str = typer.Option(
+            "wall", "--time-base",
+            help="wall: the drives judge the controller's heartbeat on the clock (real time); sync: on "
+                 "SYNC time, beside a `--clock lockstep` daemon, so a stalled or slow lockstep run is "
+                 "never a lost controller"),
     ) -> None:
         """Run the simulated CANopen nodes (6 joint drives, end effector, F/T sensor)."""
         raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node, camera, board,
-                                 rt_priority))
+                                 rt_priority, time_base))
