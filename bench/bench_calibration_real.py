@@ -1,0 +1,245 @@
+"""Calibration on real and realistic set-ups, side by side with FIGAROH (PyPI `figaroh`, Apache-2.0).
+
+    .venv/bin/python bench/bench_calibration_real.py [--setups 200] [--skip-figaroh]
+
+  TIAGo mocap   identify on 2021-11-30 (37 postures), validate on 2021-11-26 (62): FIGAROH's
+                geometric calibration (full_params and joint_offset, BaseCalibration on Pinocchio,
+                its own base-parameter QR) and ours (`calibrate fit --register --validate`), in
+                this run, on the same files; every figure is the RMS over postures of the norm
+                of marker 1's position error (mm), FIGAROH's published definition.
+  FR3           held-out RMS position error, median of 10 random 80/34 splits (dedicated study
+                and the general pipeline of `calibrate fit`).
+  draw-wire     realistic_setups.draw_wire_case on the held-out seeds 1000-1004: validation RMS
+                against the truth-parameter floor (target within 10 %).
+  random        `--setups` random realistic set-ups (range, point, plane, pose; 6-8 joints,
+                prismatic included) on the held-out seeds 1000..: internal errors (target 0).
+Every row carries the load average and the CPU steal while it was measured.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import sys
+import time
+import traceback
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from hil_tests.harness import CpuSteal  # noqa: E402
+
+HELD_OUT_SEEDS = 1000            # seeds below are for tests and development; figures use these
+TIAGO_TARGET_MM = 2.9
+FR3_TARGET_MM = 1.2
+FLOOR_TARGET = 1.10
+
+
+def conditions(steal: CpuSteal) -> str:
+    return f"load {os.getloadavg()[0]:.1f}, steal {100 * steal.fraction():.1f} %"
+
+
+# ----------------------------------------------------------------------------------- FIGAROH
+FIGAROH_CONFIG = """robot:
+  name: tiago
+tasks:
+  calibration:
+    enabled: true
+    parameters:
+      calibration_level: {level}
+      include_non_geometric: false
+      outlier_threshold: 0.05
+    kinematics:
+      base_frame: universe
+      tool_frame: wrist_ft_tool_link
+    measurements:
+      markers:
+        - name: wrist_marker
+          reference_joint: arm_7_joint
+          measurable_dof: [true, true, true, false, false, false]
+          sensor_type: mocap
+      poses:
+        base_pose: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+        tool_pose: [0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    data:
+      source_file: "{train}"
+      validation_data_file: ""
+      number_of_samples: 37
+"""
+
+
+def figaroh_tiago(level: str) -> dict:
+    """FIGAROH's geometric calibration of the TIAGo data (as its examples run it: base and tip
+    frames unknown, marker 1, LM with its outlier loop), scored by its own forward kinematics."""
+    import contextlib
+    import io
+    import logging
+    import tempfile
+    import warnings
+    from types import SimpleNamespace
+
+    import pandas as pd
+    import pinocchio as pin
+    from figaroh.calibration import BaseCalibration
+    from figaroh.calibration.calibration_tools import calc_updated_fkm
+
+    from spacearm.controller.calibration.tiago_mocap import JOINTS, TRAINING, URDF, VALIDATION
+
+    class TiagoMarker(BaseCalibration):
+        def cost_function(self, var):
+            return self.PEE_measured - calc_updated_fkm(self.model, self.data, var, self.q_measured, self.calib_config)
+
+    warnings.filterwarnings("ignore")
+    logging.disable(logging.WARNING)
+    model = pin.buildModelFromUrdf(str(URDF))        # kinematics only: the meshes are not shipped
+    robot = SimpleNamespace(model=model, data=model.createData(), q0=pin.neutral(model))
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        cfg = Path(tmp) / "tiago.yaml"
+        cfg.write_text(FIGAROH_CONFIG.format(level=level, train=TRAINING))
+        cal = TiagoMarker(robot, str(cfg))
+        cal.calib_config["known_baseframe"] = False
+        cal.calib_config["known_tipframe"] = False
+        with contextlib.redirect_stdout(io.StringIO()):
+            cal.initialize()
+            cal.solve(plotting=False, enable_logging=False, html_report=False)
+    elapsed = time.perf_counter() - t0
+
+    def errors(path: Path) -> np.ndarray:
+        df = pd.read_csv(path)
+        q = np.tile(pin.neutral(cal.model), (len(df), 1))
+        for j in JOINTS:
+            q[:, cal.model.joints[cal.model.getJointId(j)].idx_q] = df[j].to_numpy()
+        pred = calc_updated_fkm(cal.model, cal.data, cal.LM_result.x, q, dict(cal.calib_config, NbSample=len(df)))
+        return np.linalg.norm(pred.reshape(3, -1).T - df[["x1", "y1", "z1"]].to_numpy(), axis=1)
+    tr, va = errors(TRAINING), errors(VALIDATION)
+    return {"label": f"FIGAROH {level}", "params": len(cal.LM_result.x), "train": float(np.sqrt(np.mean(tr ** 2))),
+            "valid": float(np.sqrt(np.mean(va ** 2))), "max": float(va.max()), "accepted": cal.STATUS == "CALIBRATED",
+            "seconds": elapsed}
+
+
+def ours_tiago(registration_only: bool) -> dict:
+    from spacearm.controller.calibration.tiago_mocap import fit_tiago
+    t0 = time.perf_counter()
+    f = fit_tiago(registration_only)
+    rep = f.report
+    n_out, rms_out = rep.held_rms_where(True)
+    note = rep.verdict.message() + (f"; {n_out} validation postures extrapolate (RMS {rms_out * 1e3:.2f} mm)"
+                                    if n_out else "")
+    if rep.regularised:
+        note += f"; default prior, without it {rep.held_unregularised * 1e3:.2f} mm"
+    return {"label": f"spacearm {f.label}", "params": f.parameters, "train": f.train_rms, "valid": f.validation_rms,
+            "max": f.validation_max, "accepted": rep.verdict.ok, "seconds": time.perf_counter() - t0, "note": note}
+
+
+def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
+    print("TIAGo mocap (real): identify on 2021-11-30 (37), validate on 2021-11-26 (62); RMS of marker 1's "
+          "position error norm, mm")
+    print(f"  {'method':<30}{'params':>7}{'train':>8}{'valid':>8}{'max':>8}{'time s':>8}  conditions / verdict")
+    rows = []
+    runs = [lambda: ours_tiago(True), lambda: ours_tiago(False)]
+    if with_figaroh:
+        runs = [lambda: figaroh_tiago("full_params"), lambda: figaroh_tiago("joint_offset")] + runs
+    for run in runs:
+        try:
+            r = run()
+        except Exception as exc:                     # a reference that fails is reported, not hidden
+            print(f"  reference failed: {type(exc).__name__}: {exc}")
+            continue
+        rows.append(r)
+        print(f"  {r['label']:<30}{r['params']:>7d}{r['train'] * 1e3:>8.3f}{r['valid'] * 1e3:>8.3f}{r['max'] * 1e3:>8.2f}"
+              f"{r['seconds']:>8.1f}  {conditions(steal)}; {r.get('note', 'converged' if r['accepted'] else 'FAILED')}")
+    ours = next((r for r in rows if r["label"] == "spacearm full"), None)
+    fig = next((r for r in rows if r["label"] == "FIGAROH full_params"), None)
+    if ours is not None:
+        ok = ours["accepted"] and ours["valid"] <= TIAGO_TARGET_MM * 1e-3 and (fig is None or ours["valid"] <= fig["valid"])
+        versus = f", FIGAROH full_params {fig['valid'] * 1e3:.3f} mm in this run" if fig else ""
+        print(f"  target: accepted fit, validation <= {TIAGO_TARGET_MM} mm and not worse than FIGAROH: "
+              f"{ours['valid'] * 1e3:.3f} mm{versus} [{'ok' if ok else 'MISS'}]")
+        if not ok:
+            print("  why: 37 training postures for ~27 identifiable terms; 11 of the 62 validation postures lie outside "
+                  "the training range of arm_1/arm_6 and two of them (rows 0 and 4) alone carry ~40 % of the squared "
+                  "error; which weak terms are kept moves the validation RMS by ~1 mm either way")
+
+
+def bench_fr3(steal: CpuSteal) -> None:
+    from spacearm.controller.calibration.fr3 import fr3_study, fr3_trusted_study
+    t0 = time.perf_counter()
+    _, med = fr3_study()
+    _, gen = fr3_trusted_study()
+    pos = med["full_pos"] * 1e3
+    print(f"FR3 eye-in-hand (real), held-out position RMS, median of 10 splits: dedicated study {pos:.3f} mm, "
+          f"general pipeline {gen['full_pos'] * 1e3:.3f} mm (target <= {FR3_TARGET_MM}) "
+          f"[{'ok' if min(pos, gen['full_pos'] * 1e3) <= FR3_TARGET_MM else 'MISS'}] "
+          f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
+
+
+def bench_draw_wire(steal: CpuSteal, cases: int = 5) -> None:
+    from spacearm.controller.calibration.realistic_setups import draw_wire_case
+    from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
+    print("Draw-wire, ORU 6-DOF, 1000 postures of a recorded motion, wrist joint 4 over ~10 deg, anchor ~0.5 m, "
+          "wire 0.5-1.2 m, 0.5 mm noise, anchor start 0.26 m off; validation: 500 other postures")
+    for seed in range(HELD_OUT_SEEDS, HELD_OUT_SEEDS + cases):
+        case = draw_wire_case(seed)
+        t0 = time.perf_counter()
+        try:
+            rep = fit_blocks(case.em, case.blocks, FitOptions(), candidates=case.candidates(), validation=case.validation)
+        except Exception as exc:
+            print(f"  seed {seed}: INTERNAL ERROR {type(exc).__name__}: {exc}")
+            continue
+        ratio = rep.held_rms("after") / case.truth_floor()
+        print(f"  seed {seed}: validation {rep.held_rms('after') * 1e3:.4f} mm, floor {case.truth_floor() * 1e3:.4f} mm, "
+              f"ratio {ratio:.3f} (target <= {FLOOR_TARGET}) [{'ok' if ratio <= FLOOR_TARGET and rep.verdict.ok else 'MISS'}]"
+              f", {len(rep.result.free)} parameters, {rep.verdict.message()[:80]}, "
+              f"{time.perf_counter() - t0:.1f} s, {conditions(steal)}")
+
+
+def bench_random(steal: CpuSteal, count: int) -> None:
+    from spacearm.controller.calibration.realistic_setups import has_prismatic, random_setup
+    from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
+    t0 = time.perf_counter()
+    errors, accepted, ratios, kinds, joints, prismatic = [], 0, [], {}, set(), 0
+    for seed in range(HELD_OUT_SEEDS, HELD_OUT_SEEDS + count):
+        try:
+            case = random_setup(seed)
+            rep = fit_blocks(case.em, case.blocks, FitOptions(), candidates=case.candidates(), validation=case.validation)
+            accepted += rep.verdict.ok
+            ratios.append(rep.held_rms("after") / case.truth_floor())
+            kinds[case.blocks[0].label] = kinds.get(case.blocks[0].label, 0) + 1
+            joints.add(case.em.kin.nq)
+            prismatic += has_prismatic(case)
+        except Exception as exc:
+            errors.append((seed, f"{type(exc).__name__}: {exc}", traceback.format_exc(limit=3)))
+    print(f"Random realistic set-ups, seeds {HELD_OUT_SEEDS}-{HELD_OUT_SEEDS + count - 1}: {count} fitted "
+          f"({', '.join(f'{k} {v}' for k, v in sorted(kinds.items()))}; {min(joints)}-{max(joints)} joints, "
+          f"{prismatic} with a prismatic joint): internal errors {len(errors)} (target 0) "
+          f"[{'ok' if not errors else 'MISS'}], accepted {accepted}, validation / truth floor median "
+          f"{np.median(ratios):.3f}, 90th percentile {np.percentile(ratios, 90):.3f}; "
+          f"{time.perf_counter() - t0:.0f} s, {conditions(steal)}")
+    for seed, msg, tb in errors[:5]:
+        print(f"  seed {seed}: {msg}\n{tb}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--setups", type=int, default=200, help="random realistic set-ups to fit")
+    ap.add_argument("--skip-figaroh", action="store_true", help="only our side of the TIAGo comparison")
+    ap.add_argument("--only", choices=("tiago", "fr3", "wire", "random"), help="one part")
+    args = ap.parse_args()
+    steal = CpuSteal()
+    print(f"machine: {platform.node()}, {os.cpu_count()} cores, {conditions(steal)} at start, "
+          f"OPENBLAS_NUM_THREADS={os.environ['OPENBLAS_NUM_THREADS']}")
+    parts = {"tiago": lambda: bench_tiago(steal, not args.skip_figaroh), "fr3": lambda: bench_fr3(steal),
+             "wire": lambda: bench_draw_wire(steal), "random": lambda: bench_random(steal, args.setups)}
+    for name, part in parts.items():
+        if args.only in (None, name):
+            part()
+
+
+if __name__ == "__main__":
+    main()
