@@ -26,6 +26,8 @@ from spacearm.offline.diagnosis.candidates import STRIBECK_VELOCITIES, VELOCITY_
 from spacearm.offline.diagnosis.fitting import SIGNIFICANCE, ChannelFit, fit_features
 from spacearm.offline.diagnosis.honesty import MIN_CONFIRMED_REDUCTION, moved, single_speed, uncertain
 from spacearm.offline.diagnosis.joint_units import units_of
+from spacearm.offline.diagnosis.physical import (from_log_cholesky, levenberg_marquardt, log_cholesky_jacobian,
+                                                parameter_violations, to_log_cholesky)
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.rigid_body import ArmModel, base_columns, inverse_dynamics, regressor
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
@@ -38,6 +40,9 @@ COLUMN = {"offset": "torque_offset", "coulomb": "coulomb_friction", "viscous": "
           "stribeck": "stribeck_friction"}
 ROUNDS = 2                   # friction / rigid-body alternations
 PAYLOAD_SHARE = 0.8          # a payload explaining this share of the base-parameter refit's variance is named
+PHYSICAL_SHARE = 0.5         # real bodies must explain this share of what unconstrained base parameters do
+ON_BOUND = 0.02              # a last link left with less than this share of its mass: the fit sits on its bound
+PHYSICAL_FIT_ITERATIONS = 60
 
 
 @dataclass
@@ -68,6 +73,7 @@ class ArmDiagnosis:
     not_reported: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     sensor_findings: list[SensorFinding] = field(default_factory=list)
+    model_wrong: list[str] = field(default_factory=list)     # fits that needed a physically impossible value
 
     @property
     def to_excite(self) -> list[int]:
@@ -78,9 +84,9 @@ class ArmDiagnosis:
 
     @property
     def verdict(self) -> str:
-        if not self.findings and not self.sensor_findings:
+        if not self.findings and not self.sensor_findings and not self.model_wrong:
             return "no significant torque mismatch against the rigid-body model"
-        return "; ".join([s.text for s in self.sensor_findings] + [f.text for f in self.findings])
+        return "; ".join([s.text for s in self.sensor_findings] + [f.text for f in self.findings] + self.model_wrong)
 
 
 def accelerations(table: RecordingTable) -> tuple[np.ndarray, np.ndarray]:
@@ -177,39 +183,134 @@ def _payload_columns(arm: ArmModel) -> list[int]:
     return [10 * last + k for k in range(10)]     # mass, first moments and inertia of the last link
 
 
+def _physical_refit(arm: ArmModel, Y: np.ndarray, y: np.ndarray, train: np.ndarray, active: list[int],
+                    links: list[int]) -> tuple[np.ndarray, np.ndarray]:
+    """(change of every link's ten parameters, predicted torque change on the active joints):
+    least squares over the `links`' log-Cholesky numbers (see physical), so every answer is a
+    set of real bodies. Directions the recording does not identify stay at the URDF's values
+    (a weak pull toward them)."""
+    nominal = [_link(arm, i) for i in links]
+    theta0 = np.concatenate([to_log_cholesky(p) for p in nominal])
+    cols = [10 * i + k for i in links for k in range(10)]
+    rows = Y[train][:, active][:, :, cols].reshape(-1, len(cols))
+    # the model is linear in the parameter change: ||rows d - y||^2 = ||A d - b||^2 + const with
+    # A'A = rows'rows (from its eigen-decomposition), so the nonlinear fit runs on a square system
+    values, vectors = np.linalg.eigh(rows.T @ rows)
+    values = np.clip(values, 1e-12 * max(float(values.max()), 1e-300), None)
+    A = np.sqrt(values)[:, None] * vectors.T
+    b = (vectors.T @ (rows.T @ y[train].reshape(-1))) / np.sqrt(values)
+    weight = 1e-2 * max(float(np.sqrt(np.mean(y[train] ** 2))), 1e-9)
+
+    def change(theta: np.ndarray) -> np.ndarray:
+        return np.concatenate([from_log_cholesky(theta[10 * k: 10 * k + 10]) - nominal[k] for k in range(len(links))])
+
+    def jacobian(theta: np.ndarray) -> np.ndarray:
+        blocks = [A[:, 10 * k: 10 * k + 10] @ log_cholesky_jacobian(theta[10 * k: 10 * k + 10])
+                  for k in range(len(links))]
+        return np.vstack([np.hstack(blocks), weight * np.eye(len(theta0))])
+
+    theta = levenberg_marquardt(lambda th: np.r_[A @ change(th) - b, weight * (th - theta0)], jacobian, theta0,
+                                PHYSICAL_FIT_ITERATIONS)
+    delta = np.zeros(Y.shape[-1])
+    delta[cols] = change(theta)
+    return delta, np.einsum("rjc,c->rj", Y[:, active], delta)
+
+
+def _link(arm: ArmModel, i: int) -> np.ndarray:
+    """Link i's (0-based joint) ten dynamic parameters in the URDF (any locked fingers folded in)."""
+    return np.asarray(arm.model.inertias[i + 1].toDynamicParameters(), float)
+
+
 def _rigid_body_fit(arm: ArmModel, Y: np.ndarray, cols: list[int], left: np.ndarray, train: np.ndarray,
                     active: list[int]):
-    """(correction, description or None): the payload on the last link when it explains most of
-    what a base-parameter refit does, else the base-parameter refit, else nothing."""
+    """(correction, description or None, why the model is wrong or None): the payload on the
+    last link when it explains most of what a refit of every link does, else that refit, else
+    nothing. Both are fitted as real bodies (see _physical_refit); a payload that needs the
+    last link at its bound (no mass left), or torques that only an unconstrained refit of the
+    base parameters explains, mean the rigid-body model is wrong here, not a finding."""
     rb = np.zeros_like(left)
     if not cols or not active:
-        return rb, None
+        return rb, None, None
     y = left[:, active]
     base = _rms(y[~train])
 
-    def fit(columns: list[int]):
-        Yc = Y[:, active][:, :, columns]
-        coef, *_ = np.linalg.lstsq(Yc[train].reshape(-1, len(columns)), y[train].reshape(-1), rcond=None)
-        pred = np.einsum("rjc,c->rj", Yc, coef)
-        return coef, pred, 1 - _rms((y - pred)[~train]) / max(base, 1e-12)
+    def gain_of(pred: np.ndarray) -> float:
+        return 1 - _rms((y - pred)[~train]) / max(base, 1e-12)
 
-    _, full_pred, gain = fit(cols)
-    if gain < MIN_CONFIRMED_REDUCTION:
-        return rb, None
-    dp, pay_pred, pay_gain = fit(_payload_columns(arm))
-    # compared as shares of the explained variance
-    if 1 - (1 - pay_gain) ** 2 >= PAYLOAD_SHARE * (1 - (1 - gain) ** 2) and abs(dp[0]) > 1e-3:
+    Yc = Y[:, active][:, :, cols]
+    coef, *_ = np.linalg.lstsq(Yc[train].reshape(-1, len(cols)), y[train].reshape(-1), rcond=None)
+    free_gain = gain_of(np.einsum("rjc,c->rj", Yc, coef))
+    if free_gain < MIN_CONFIRMED_REDUCTION:
+        return rb, None, None
+    delta, full_pred = _physical_refit(arm, Y, y, train, active, list(range(arm.n)))
+    gain = gain_of(full_pred)
+    last = arm.n - 1
+    dp, pay_pred = _physical_refit(arm, Y, y, train, active, [last])
+    dp = dp[10 * last: 10 * last + 10]
+    pay_gain = gain_of(pay_pred)
+    nominal = _link(arm, last)
+    share = lambda g: 1 - (1 - max(g, 0.0)) ** 2       # compared as shares of the explained variance
+    if share(pay_gain) >= PAYLOAD_SHARE * share(gain) and pay_gain >= MIN_CONFIRMED_REDUCTION and abs(dp[0]) > 1e-3:
+        c = dp[1:4] / dp[0]
+        where = f"{dp[0]:+.3g} kg at ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) m in {arm.joint_names[-1]}'s frame"
+        if nominal[0] + dp[0] < ON_BOUND * nominal[0]:
+            return rb, None, (
+                f"the rigid-body model is wrong here: the torques ask for a last link lighter than no mass (a payload "
+                f"/ last-link mass error {where}, {nominal[0]:.3g} kg nominal: the fit sits at zero mass) - no "
+                "physical body; look for a torque scale (gear ratio, torque constant) or sign error, or an effect "
+                "the catalogue lacks")
         rb[:, active] = pay_pred
-        c = dp[1:] / dp[0]
-        return rb, (f"payload / last-link mass error {dp[0]:+.3g} kg at ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) m in "
-                    f"{arm.joint_names[-1]}'s frame (held-out torque RMS {100 * pay_gain:.0f} % lower on the moving "
-                    f"joints; a refit of all {len(cols)} base parameters: {100 * gain:.0f} %)",
+        return rb, (f"payload / last-link mass error {where} (fitted as a real body; a refit of every link would "
+                    f"explain {100 * gain:.0f} % of the held-out torque RMS, the payload {100 * pay_gain:.0f} %)",
                     {"payload_mass": float(dp[0]), "payload_com_x": float(c[0]), "payload_com_y": float(c[1]),
-                     "payload_com_z": float(c[2])}, pay_gain, ("payload",))
+                     "payload_com_z": float(c[2]), "last_link_total_mass": float(nominal[0] + dp[0])},
+                    pay_gain, ("payload",)), None
+    if gain < MIN_CONFIRMED_REDUCTION or share(gain) < PHYSICAL_SHARE * share(free_gain):
+        return rb, None, (
+            f"the rigid-body model is wrong here: a refit of its {len(cols)} base parameters with no physical "
+            f"constraint would explain {100 * free_gain:.0f} % of the held-out torque RMS, real bodies only "
+            f"{100 * gain:.0f} % - look for a torque scale or sign error, or an effect the catalogue lacks")
+    arm_mass = sum(_link(arm, i)[0] for i in range(arm.n))
+    implausible = [f"{arm.joint_names[i]} {delta[10 * i]:+.3g} kg" for i in range(arm.n)
+                   if abs(delta[10 * i]) > arm_mass]
+    if implausible:
+        # a body, but not this arm: a link heavier by more than the whole arm is a scale or sign error
+        return rb, None, (
+            f"the rigid-body model is wrong here: real bodies explain {100 * gain:.0f} % of the held-out torque RMS "
+            f"only with link mass changes larger than the whole arm ({arm_mass:.3g} kg): {', '.join(implausible)} - "
+            "look for a torque scale (gear ratio, torque constant) or sign error, or an effect the catalogue lacks")
+    masses = [f"{arm.joint_names[i]} {delta[10 * i]:+.2g} kg" for i in range(arm.n) if abs(delta[10 * i]) > 1e-2]
     rb[:, active] = full_pred
-    return rb, (f"rigid-body parameters differ from the URDF: {len(cols)} base parameters refitted (held-out torque "
-                f"RMS {100 * gain:.0f} % lower on the moving joints; a payload alone: {100 * pay_gain:.0f} %)",
-                {"base_parameters": float(len(cols))}, gain, ("rigid_body",))
+    return rb, (f"rigid-body parameters differ from the URDF: every link refitted as a real body (held-out torque "
+                f"RMS {100 * gain:.0f} % lower on the moving joints, unconstrained base parameters "
+                f"{100 * free_gain:.0f} %; a payload alone: {100 * pay_gain:.0f} %)"
+                + (f"; mass changes {', '.join(masses)}" if masses else ""),
+                {"base_parameters": float(len(cols))} | {f"mass_change_{name}": float(delta[10 * i])
+                                                          for i, name in enumerate(arm.joint_names)},
+                gain, ("rigid_body",)), None
+
+
+def _made_worse(r: np.ndarray, model: np.ndarray, rb: np.ndarray, train: np.ndarray, noise: list[float],
+                active: list[int]) -> list[str]:
+    """The joints a rigid-body correction makes worse on the held-out rows by more than their
+    noise, in words: a pooled gain on the heavy joints may hide a wrist made 10x worse."""
+    worse = []
+    for j in active:
+        before, after = _rms((r - model)[~train, j]), _rms((r - model - rb)[~train, j])
+        if after > before + noise[j]:
+            worse.append(f"tau_{j + 1} {before:.3g} -> {after:.3g} (noise {noise[j]:.2g})")
+    return worse
+
+
+def _friction_fits(v: np.ndarray, left: np.ndarray, train: np.ndarray, active: list[int]
+                   ) -> tuple[dict[int, ChannelFit], np.ndarray]:
+    frictions, model = {}, np.zeros_like(left)
+    for j in active:
+        fit, _ = friction_fit(v[:, j], left[:, j], train, j)
+        if fit is not None:
+            frictions[j] = fit
+            model[:, j] = fit.prediction
+    return frictions, model
 
 
 def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | None = None,
@@ -238,17 +339,19 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     # an offset to a per-joint fit, a friction left in looks like inertia to the coupled one)
     # rigid body first: a payload error is large and smooth, and a per-joint offset would
     # otherwise take the part of it that the posture barely changes
-    rb, rb_text = _rigid_body_fit(arm, Y, cols, r, train, active)
+    rb, rb_text, rb_wrong = _rigid_body_fit(arm, Y, cols, r, train, active)
     frictions: dict[int, ChannelFit] = {}
     model = np.zeros_like(r)
     for _ in range(ROUNDS):
-        frictions, model = {}, np.zeros_like(r)
-        for j in active:
-            fit, _ = friction_fit(v[:, j], r[:, j] - rb[:, j], train, j)
-            if fit is not None:
-                frictions[j] = fit
-                model[:, j] = fit.prediction
-        rb, rb_text = _rigid_body_fit(arm, Y, cols, r - model, train, active)
+        frictions, model = _friction_fits(v, r - rb, train, active)
+        rb, rb_text, rb_wrong = _rigid_body_fit(arm, Y, cols, r - model, train, active)
+    worse = _made_worse(r, model, rb, train, noise, active) if rb_text is not None else []
+    if worse:
+        # fitted jointly with each joint's friction above and still worse somewhere: dropped
+        not_reported.append(f"{rb_text[0]} (makes {', '.join(worse)} worse on the held-out rows: not accepted)")
+        rb, rb_text = np.zeros_like(r), None
+        frictions, model = _friction_fits(v, r, train, active)
+    model_wrong = [rb_wrong] if rb_wrong is not None else []
     timings["fit_s"] = time.perf_counter() - started - sum(timings.values())
 
     joints = []
@@ -276,13 +379,14 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     # no nominal sensor to compare with: the recording's own steps and velocity shift
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active, kinds)
     timings["total_s"] = time.perf_counter() - started
-    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors)
+    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong)
 
 
 def arm_summary(d: ArmDiagnosis) -> dict:
     """The JSON summary of an arm-torque diagnosis."""
     return {
         "verdict": d.verdict, "heldout_from_s": d.heldout_start, "not_reported": d.not_reported,
+        "model_wrong": d.model_wrong,
         "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
                              "text": f.text} for f in d.sensor_findings],
         "findings": [{"rank": i + 1, "effects": list(f.effects), "joint": None if f.joint is None else f.joint + 1,
