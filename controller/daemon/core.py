@@ -19,8 +19,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from spacearm.controller.cycle import (NODE_FINDINGS, Command, Finding, FindingCode, MachineState, Measurement, Mode,
-                                       ModeOutput)
+from spacearm.controller.cycle import (EVENT_ONLY, NODE_FINDINGS, Command, Finding, FindingCode, MachineState,
+                                       Measurement, Mode, ModeOutput)
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
 from spacearm.controller.daemon.stops import DriveRequest, StopMonitor, StopPolicy, stop_policy
 from spacearm.controller.daemon.supervision import Supervisor
@@ -111,10 +111,10 @@ class ControllerCore:
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m
         self._apply_pending(m)
-        for event in m.events:   # the controller's own starvation: recorded with its code, not a stop
-            if event.kind is FindingCode.LATE_CYCLE:
-                self._event(m.time, "late_cycle", event.detail,
-                            Finding(FindingCode.LATE_CYCLE, event.detail, node=event.node or None))
+        for event in m.events:   # the controller's starvation, bus line switches: recorded with their code, not a stop
+            if event.kind in EVENT_ONLY:
+                self._event(m.time, event.kind.value, event.detail,
+                            Finding(event.kind, event.detail, node=event.node or None))
         moving = self.state is MachineState.ENABLED and self.mode is not None and self.mode.moving
         if self.state in (MachineState.ENABLED, MachineState.ENABLING):
             findings = self.supervisor.check(m, self.last_target, moving)
@@ -143,15 +143,23 @@ class ControllerCore:
                                      f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}",
                                      joint=slow[0] if slow else None))
         command = self._command(m)
-        self.motion_time += self.period
+        if not m.bridged:        # a bus line switch: the drives get nothing, so the path waits for them
+            self.motion_time += self.period
         return command
 
     def _command(self, m: Measurement) -> Command:
-        if self.state is MachineState.STOPPED and self.stopping is not None:
+        if self.stopping is not None and self.state in (MachineState.STOPPED, MachineState.ENABLED):
             command = self._stopping_command()
             if command is not None:
                 return command
+            if self.state is MachineState.ENABLED:       # a `disable` that waited for rest
+                self.state = MachineState.DISABLED
+                self._event(m.time, "state", "disabled at rest, brakes on")
         if self.state is MachineState.ENABLED and self.mode is not None:
+            if m.bridged and self.last_setpoint is not None:
+                # the drives hold the last target they got; resuming from it avoids a catch-up
+                # faster than the joints' limits once the switch completes
+                return Command(self.last_setpoint.q.copy(), np.zeros_like(m.q), enable=True)
             mode = self.mode
             out = mode.update(self.motion_time, m)
             self.mode_output = out
@@ -181,17 +189,20 @@ class ControllerCore:
         rest setpoint has been sent for a cycle, and the drives are asked to quick stop (at
         rest their ramp is over at once: power off and brakes, category 1)."""
         stop = self.stopping
+        stopped = self.state is MachineState.STOPPED
         # this cycle's target is one period on from the setpoint the drives had (no repeated target)
         elapsed = self.motion_time - self._stopping_since + self.period
         if elapsed > stop.duration + self.period + 1e-9:
             self.stopping = None
-            self.drive_request = DriveRequest.QUICK_STOP
-            self.stop_monitor.quick_stop_requested(self.last_measurement.time if self.last_measurement else 0.0)
-            self._event(self.last_measurement.time if self.last_measurement else 0.0, "stop",
-                        "at rest: drives quick stop, brakes on")
+            if stopped:
+                self.drive_request = DriveRequest.QUICK_STOP
+                self.stop_monitor.quick_stop_requested(self.last_measurement.time if self.last_measurement else 0.0)
+                self._event(self.last_measurement.time if self.last_measurement else 0.0, "stop",
+                            "at rest: drives quick stop, brakes on")
             return None
         setpoint = stop.sample(min(elapsed, stop.duration))
         self.last_target = setpoint.q.copy()
+        self.last_setpoint = setpoint
         return Command(setpoint.q.copy(), setpoint.dq.copy(), enable=True)
 
     def _set_mode(self, mode: Mode | None) -> None:
@@ -305,10 +316,21 @@ class ControllerCore:
         return self.state
 
     def cmd_disable(self, t: float, m: Measurement) -> str:
-        if self.state is not MachineState.STOPPED:
-            self.state = MachineState.DISABLED
+        """Power off; a moving arm is first brought to rest by the planner (as a stop, without
+        its reason: the state stays `enabled` until then, and no motion is taken meanwhile)."""
+        if self.state is MachineState.STOPPED or self.stopping is not None:
+            return self.state
+        moving = self.mode is not None and self.mode.moving and self.last_setpoint is not None
+        if self.state is MachineState.ENABLED and moving and self.a_max is not None:
+            q0, v0 = self._stop_start(m)
+            self.stopping = StopTrajectory(q0, v0, self.a_max, self.period)
+            self._stopping_since = self.motion_time
             self._set_mode(None)
-            self._event(t, "state", "disabled, brakes on")
+            self._event(t, "state", "disabling: stopping the motion first")
+            return self.state
+        self.state = MachineState.DISABLED
+        self._set_mode(None)
+        self._event(t, "state", "disabled, brakes on")
         return self.state
 
     def cmd_stop(self, t: float, m: Measurement) -> str:
@@ -338,6 +360,8 @@ class ControllerCore:
             raise CommandRefused(f"protective stop active ({self.stop_reason}); reset first", ErrorCode.PROTECTIVE_STOP)
         if self.state is not MachineState.ENABLED:
             raise CommandRefused(f"arm is {self.state}; enable it first", ErrorCode.NOT_ENABLED)
+        if self.stopping is not None:
+            raise CommandRefused("the arm is stopping to be disabled", ErrorCode.BUSY)
         if self.mode is not None and self.mode.moving and not (self.mode_output is not None and self.mode_output.finished):
             raise CommandRefused(f"{self.mode.name} still in progress; stop it or wait", ErrorCode.BUSY)
         return (self.last_target if self.last_target is not None else m.q).copy()

@@ -62,6 +62,8 @@ FAULTED = StopPolicy(1, Decelerator.FAULT_REACTION, "6085h = " + _ACCEL + " (605
                      "the drive in fault, brake on; the others " + _OFF)
 MASTER_LOST = StopPolicy(1, Decelerator.FAULT_REACTION, "6085h = " + _ACCEL + " (605Eh = 2), each drive on its own",
                          "every drive in fault, brakes on; `reset` once a daemon is back")
+DISABLE = StopPolicy(1, Decelerator.PLANNER, _ACCEL + " (one path, reached in one cycle)",
+                     "disable voltage at rest: switch on disabled, brakes on; state `disabled`, no reset needed")
 POWER_OFF = StopPolicy(0, Decelerator.NONE, "none: brakes", "switch on disabled, brakes on")
 
 # reason -> policy; the reasons are the stop codes (controller/cycle.py) and two the drives
@@ -70,6 +72,7 @@ STOPS: dict[str, StopPolicy] = {
     FindingCode.OPERATOR_STOP: PLANNED,           # console, web console, API `stop`
     FindingCode.COMMAND_WATCHDOG: PLANNED,        # jogging console silent or gone, lease holder gone
     FindingCode.SHUTDOWN: PLANNED,                # the daemon's SIGINT/SIGTERM
+    "disable": DISABLE,                           # the `disable` command while a motion runs (not a stop)
     FindingCode.FOLLOWING_ERROR: PLANNED,
     FindingCode.POSITION_LIMIT: PLANNED,
     FindingCode.VELOCITY_LIMIT: PLANNED,

@@ -254,3 +254,21 @@ def test_a_cartesian_move_stops_on_its_line(tmp_path):
     print(f"tool off the line while stopping: {1e3 * off_line.max():.3f} mm, stopped "
           f"{1e3 * np.linalg.norm(tool[-1] - tool[0]):.1f} mm after the stop")
     assert off_line.max() < 0.5e-3
+
+
+def test_disable_mid_motion_stops_first_then_powers_off(tmp_path):
+    with stepped_daemon(tmp_path) as run:
+        run.enable()
+        run.jog_at_full_speed(3)
+        assert run.apply(run.core.cmd_disable) == "enabled"          # still stopping
+        refused = _refused(lambda: run.apply(run.core.motion_start))
+        run.cycles(int(1.5 / 0.02))
+        assert run.core.state == "disabled" and run.core.stop_reason is None
+        _assert_off_and_braked(run)
+        t, q, events, cycles = run.recording()
+    assert refused is not None and refused.code == "busy"
+    k = next(i for i, c in enumerate(cycles) if "disabling" in " ".join(
+        e["message"] for e in events if e["t"] == c.data["t"]))
+    a_max = np.array([j.limits.acceleration for j in run.daemon.arm.joints])
+    figures = stop_figures(t, q, t[k], np.array(run.daemon.model.v_max), a_max, 0.02)
+    _assert_inside_bounds(figures, 3)
