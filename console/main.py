@@ -23,9 +23,21 @@ if TYPE_CHECKING:
 COMMAND_MODULES = ("config", "kinematics", "demo", "daemon", "operate", "export", "calibrate", "sim", "hub",
                    "record_sim", "diagnose", "web", "oru", "approach", "arm", "campaign", "bus")
 
-# Commands whose module is light (imports only the client): registered alone.
+# Commands whose module is light (imports only the client). Every known word is now
+# registered alone (console/command_index.py); kept for callers that read it.
 LIGHT_COMMANDS = {name: "operate" for name in ("status", "watch", "enable", "disable", "reset", "stop",
                                                  "jog", "move", "control", "record")}
+
+
+def index_app() -> "typer.Typer":
+    """`spacearm` / `spacearm --help`: the same options and command list as the full app, from
+    console/command_index.py, without importing a command module (the diagnosis alone pulls
+    in scipy.stats)."""
+    from spacearm.console.command_index import COMMANDS
+    app = build_app(())
+    for word, (_, text) in COMMANDS.items():
+        app.command(word, help=text)(lambda: None)
+    return app
 
 
 def build_app(modules: Iterable[str] = COMMAND_MODULES) -> "typer.Typer":
@@ -38,6 +50,11 @@ def build_app(modules: Iterable[str] = COMMAND_MODULES) -> "typer.Typer":
         add_completion=False,
         pretty_exceptions_enable=False,
     )
+
+    @app.callback()
+    def group() -> None:   # a group even with one command registered: `spacearm hub ...` names it
+        pass
+
     for module_name in modules:
         try:
             module = importlib.import_module(f"spacearm.console.commands.{module_name}")
@@ -90,6 +107,10 @@ def main(argv: list[str] | None = None) -> None:
     if plain is not None:
         quick.run(*plain)
         raise SystemExit(0)
+    call = quick.parse_call(args)
+    if call is not None:
+        call()
+        raise SystemExit(0)
 
     from typer._click.exceptions import UsageError
     from typer.exceptions import Abort, Exit
@@ -98,7 +119,9 @@ def main(argv: list[str] | None = None) -> None:
 
     as_json = "--json" in args
     command = _command_of(args)
-    app = build_app((LIGHT_COMMANDS[command],) if command in LIGHT_COMMANDS else COMMAND_MODULES)
+    from spacearm.console.command_index import module_of
+    module = module_of(command)
+    app = index_app() if command is None else build_app((module,) if module else COMMAND_MODULES)
     try:
         code = app(args=args, prog_name="spacearm", standalone_mode=False)
     except UsageError as exc:

@@ -8,14 +8,13 @@ frame with --frame tool): x y z, then roll pitch yaw about fixed axes, R = Rz(ya
 """
 from __future__ import annotations
 
-import json
 import sys
 import time
 from typing import Any
 
 import typer
 
-from spacearm.console import lease_store
+from spacearm.console import daemon_calls
 from spacearm.console.control import controlled_call as _controlled_call, take as _take  # noqa: F401 (web, oru)
 from spacearm.console.client import DEFAULT_API, ApiClient
 from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
@@ -29,8 +28,7 @@ JSON_OPTION = typer.Option(False, "--json", help="Print the answer as JSON.")
 WAIT_OPTION = typer.Option(True, "--wait/--no-wait", help="Wait until the motion has finished.")
 
 
-def _emit(result: Any, as_json: bool, text: str) -> None:
-    print(json.dumps(result) if as_json else text)
+_emit = daemon_calls.emit    # (oru.py)
 
 
 def _wait_for_motion(client: ApiClient, motion: int, as_json: bool) -> dict:
@@ -161,19 +159,13 @@ def register(app: typer.Typer) -> None:
     @friendly_errors
     def control_take(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Take control (or keep it, when this user's consoles hold it); refused while another holds it."""
-        with ApiClient(api, token) as client:
-            _take(client)
-            holder = (client.call("status").get("control") or {}).get("holder")
-        _emit({"control": "taken", "holder": holder}, as_json, f"control held by {holder}")
+        daemon_calls.control_take(api, token, as_json)
 
     @control_app.command("release")
     @friendly_errors
     def control_release(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Release control so another console can take it."""
-        with ApiClient(api, token) as client:
-            client.call("control.release", lease=lease_store.load(client.address))
-        lease_store.forget(api)
-        _emit({"control": "released"}, as_json, "control released")
+        daemon_calls.control_release(api, token, as_json)
 
     app.add_typer(control_app, name="control")
 
@@ -184,17 +176,13 @@ def register(app: typer.Typer) -> None:
     def record_start(path: str = typer.Argument(None, help="Output .mcap (default: runs/<time>.mcap)."),
                      api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Start recording every cycle."""
-        with ApiClient(api, token) as client:
-            result = _controlled_call(client, "record.start", path=path)
-        _emit(result, as_json, f"recording to {result['path']}")
+        daemon_calls.record_start(path, api, token, as_json)
 
     @record_app.command("stop")
     @friendly_errors
     def record_stop(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """Stop recording and close the file."""
-        with ApiClient(api, token) as client:
-            result = _controlled_call(client, "record.stop")
-        _emit(result, as_json, f"recording closed: {result['path']} ({result['cycles']} cycles)")
+        daemon_calls.record_stop(api, token, as_json)
 
     app.add_typer(record_app, name="record")
 
@@ -204,14 +192,4 @@ def register(app: typer.Typer) -> None:
               rate: float = typer.Option(5.0, help="Refreshes per second."),
               count: int = typer.Option(0, help="Stop after this many refreshes (0: until Ctrl-C).")) -> None:
         """Live view of joints, forces and cycle statistics, refreshing in the terminal."""
-        from rich.live import Live
-        from spacearm.console.status_view import status_table
-        shown = 0
-        with ApiClient(api, token) as client, Live(auto_refresh=False) as live:
-            try:
-                while count == 0 or shown < count:
-                    live.update(status_table(client.call("status")), refresh=True)
-                    shown += 1
-                    time.sleep(1.0 / max(rate, 0.1))
-            except KeyboardInterrupt:
-                pass
+        daemon_calls.watch(api, token, rate, count)

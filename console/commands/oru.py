@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import Any
 
 import typer
 
+from spacearm.console import daemon_calls
 from spacearm.console.client import ApiClient
 from spacearm.console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, WAIT_OPTION, _controlled_call, _emit
 from spacearm.console.errors import CommandFailed, friendly_errors
@@ -27,28 +27,7 @@ def _stages(text: str | None) -> list[int] | None:
         raise CommandFailed(f"--stages: expected stage numbers like 1,2 got {text!r}") from None
 
 
-def describe(status: dict[str, Any]) -> str:
-    if status.get("state") == "idle":
-        return "no ORU changeout has run"
-    head = f"ORU changeout {status['state']}: {100 * status['progress']:.1f} %"
-    if status.get("subtask") is not None:
-        head += (f", stage {status['stage']} ({status['stage_name']}) subtask {status['subtask']}: "
-                 f"{status['title']} [{status['algorithm']}]")
-    lines = [head]
-    if status.get("holding"):
-        lines.append(f"holding {status['holding']}")
-    if status.get("failure"):
-        lines.append(f"failure: {status['failure']}")
-    if status.get("pause"):
-        lines.append(f"paused [{status['pause']['code']}]: {status['pause']['message']}")
-    for r in status.get("records", []):
-        v = r.get("vision")
-        if v and r.get("outcome") != "running":
-            latency = "-" if v["latency_median"] is None else f"{1e3 * v['latency_median']:.0f} ms"
-            lines.append(f"stage {r['stage'] + 1} subtask {r['number']} closed-loop approach {r['outcome']}: "
-                         f"{v['detected']}/{v['frames']} frames with the marker, latency {latency}")
-    lines += [f"note: {n}" for n in dict.fromkeys(status.get("notes", []))]
-    return "\n".join(lines)
+describe = daemon_calls.oru_describe
 
 
 def follow(client: ApiClient, as_json: bool) -> dict:
@@ -91,23 +70,19 @@ def register(app: typer.Typer) -> None:
         if status["state"] != "done":
             raise CommandFailed(f"ORU changeout {status['state']}: {status.get('failure') or 'aborted'}")
 
-    for name, lease, helptext in (("pause", True, "Hold still; the flow resumes where it was."),
-                                  ("resume", True, "Continue a paused changeout."),
-                                  ("abort", False, "End the changeout holding the current pose (no lease needed).")):
-        def make(cmd: str, needs_lease: bool):
+    for name, helptext in (("pause", "Hold still; the flow resumes where it was."),
+                           ("resume", "Continue a paused changeout."),
+                           ("abort", "End the changeout holding the current pose (no lease needed).")):
+        def make(verb: str):
             @friendly_errors
             def simple(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
-                with ApiClient(api, token) as client:
-                    result = _controlled_call(client, cmd) if needs_lease else client.call(cmd)
-                _emit({"state": result}, as_json, f"ORU changeout {result}")
+                daemon_calls.oru_simple(verb, api, token, as_json)
             simple.__doc__ = helptext
             return simple
-        oru.command(name)(make(f"oru.{name}", lease))
+        oru.command(name)(make(name))
 
     @oru.command()
     @friendly_errors
     def status(api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION) -> None:
         """State of the current (or last) changeout: stage, subtask, progress, failure."""
-        with ApiClient(api, token) as client:
-            result = client.call("oru.status")
-        _emit(result, as_json, describe(result))
+        daemon_calls.oru_status(api, token, as_json)
