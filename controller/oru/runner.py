@@ -17,7 +17,7 @@ afresh. Abort ends the flow holding the current target.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,6 +25,7 @@ from spacearm.controller.modes import ModeBase
 from spacearm.controller.cycle import Finding, Measurement, ModeOutput, hold
 from spacearm.controller.oru.flow import FlowContext, stage_steps
 from spacearm.controller.oru.steps import ContactStep, Step
+from spacearm.controller.planning.joint_move import JointSetpoint
 
 
 @dataclass
@@ -176,7 +177,14 @@ class OruTaskRunner(ModeBase):
         if self.clock < self._hold_until:
             self.clock += period
             return ModeOutput(hold(self.q_last))
-        out = step.update(self.clock, m, self.rate) if isinstance(step, ContactStep) else step.update(self.clock, m)
+        if isinstance(step, ContactStep):
+            out = step.update(self.clock, m, self.rate)
+        else:
+            # the path runs at `rate` of its own speed while pausing or resuming: so does the
+            # velocity sent with it (60B1h), or the drives push the joints ahead of their targets
+            out = step.update(self.clock, m)
+            sp = out.setpoint
+            out = replace(out, setpoint=JointSetpoint(sp.q, sp.dq * self.rate, sp.ddq * self.rate ** 2))
         self._step_progress = out.progress
         if self._last_dt > 0.05 * self.ctx.impedance.period:   # path speed per clock second, for the next ramp
             # at most the velocity limits (a path is planned within them; a step change of
