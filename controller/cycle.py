@@ -64,6 +64,9 @@ class FindingCode(str, Enum):
     BOOTUP = "bootup"                      # a node restarted
     PDO_MISSING = "pdo_missing"
     LATE_CYCLE = "late_cycle"              # not a stop: the controller itself was starved (event only)
+    LINE_SWITCH = "line_switch"            # not a stop: the bus moved to its other line (event only)
+    LINE_SWITCH_COMPLETE = "line_switch_complete"   # every node heard on the new line (event only)
+    BUS_LINES_LOST = "bus_lines_lost"      # both lines of a redundant pair silent
     # motion supervision
     POSITION_LIMIT = "position_limit"
     VELOCITY_LIMIT = "velocity_limit"
@@ -98,9 +101,12 @@ class FindingCode(str, Enum):
         return self.value
 
 
+# codes recorded as events with their code, never a stop
+EVENT_ONLY = frozenset({FindingCode.LATE_CYCLE, FindingCode.LINE_SWITCH, FindingCode.LINE_SWITCH_COMPLETE})
+
 # codes a node's own report or silence produces: watched even while the arm is disabled
 NODE_FINDINGS = frozenset({FindingCode.HEARTBEAT_LOST, FindingCode.EMCY, FindingCode.BOOTUP,
-                           FindingCode.PDO_MISSING, FindingCode.FT_FROZEN})
+                           FindingCode.BUS_LINES_LOST, FindingCode.PDO_MISSING, FindingCode.FT_FROZEN})
 
 
 @dataclass(frozen=True)
@@ -147,6 +153,7 @@ class Measurement:
     events: tuple[DeviceEvent, ...] = ()
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
     late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
+    bridged: bool = False           # missing data of a bus line switch under way (bounded): not node loss
     # bool per joint: drive powered (operation enabled, quick stop or fault reaction active);
     # None: as joints_enabled
     joints_powered: np.ndarray | None = None

@@ -14,11 +14,11 @@ follow its heartbeat, so moving the active line moves the network. The rule it m
   toggled there: the active line does not reach them) -> switch;
 * after a switch it waits `hold_off` (the nodes' toggle time plus two master heartbeat
   periods) before it goes back for nodes heard on the old line, so the nodes have time to
-  follow; a line it left for silence is not chosen again for silence of the other (only
-  when nodes are heard there, or in the search below): flipping back while starved nodes
-  are still on their way would chase them from line to line;
-* no node frame on either line for `lost_after` (that time and one more master heartbeat
-  period) -> both lines lost (the daemon's protective stop `bus_lines_lost`); it keeps
+  follow; a line it left for silence is not chosen again for silence of the other within
+  `lost_after` (only when nodes are heard there, or in the search below): flipping back
+  while starved nodes are still on their way would chase them from line to line;
+* no node frame on either line for `lost_after` (that time and three more master heartbeat
+  periods) -> both lines lost (the daemon's protective stop `bus_lines_lost`); it keeps
   alternating lines, once a second, to find the network again.
 
 While a switch is under way (the active line silent, or switched less than `lost_after`
@@ -52,6 +52,7 @@ SYNCS_UNANSWERED = 2        # SYNCs with no node frame back before the active li
 IDLE_SILENCE_PERIODS = 1.5  # node heartbeat periods of silence that make an idle line silent
 SEARCH_PERIOD = 1.0         # s between switches while both lines are lost
 TICK = 0.002                # s: the rule's timer
+STARVED_SLACK = 0.020       # s: a timer pass this late was starved (health.py's slack)
 
 
 @dataclass(frozen=True)
@@ -104,7 +105,7 @@ class LineRedundancyMaster:
         self.clock = clock
         self.silence = IDLE_SILENCE_PERIODS * node_period
         self.hold_off = settings.switch_time() + 2 * master_period
-        self.lost_after = self.hold_off + master_period
+        self.lost_after = self.hold_off + 3 * master_period
         self.heard: tuple[dict[int, float], dict[int, float]] = ({}, {})
         self.line_last: list[float | None] = [None, None]
         self.unanswered = [0, 0]
@@ -113,7 +114,7 @@ class LineRedundancyMaster:
         self.failed_at: float | None = None      # the old line's last node frame, for the switch under way
         self.pending: set[int] = set()           # nodes not yet heard on the new line
         self.lost = False
-        self.left_silent = [False, False]        # left for silence, no node heard there since
+        self.left_silent_at = [float("-inf")] * 2   # when the line was left for silence (no node heard since)
         self.switches = 0
         self.bridged_cycles = 0
         self.events: list[LineEvent] = []
@@ -136,24 +137,28 @@ class LineRedundancyMaster:
         if node is None:
             return
         now = self.clock()
+        events = []
         with self._lock:
             self.heard[line][node] = now
             self.line_last[line] = now
             self.unanswered[line] = 0
-            self.left_silent[line] = False
+            self.left_silent_at[line] = float("-inf")
+            self.lost = False
             if can_id == od.HEARTBEAT_BASE + node and len(data) == 1:
                 if data[0] & 0x7F == od.NMT_STATE_OPERATIONAL:
                     self.operational.add(node)
                 else:
                     self.operational.discard(node)
-            self.lost = False
-            events = []
-            if line == self.bus.active and node in self.pending:
-                self.pending.discard(node)
-                if not self.pending:
-                    events.append(self._complete(now))
-            events += self._decide(now)
-        self._emit(events)
+            if line == self.bus.active:
+                # the hot path (every TPDO): only a switch under way has anything to decide here
+                if node in self.pending:
+                    self.pending.discard(node)
+                    if not self.pending:
+                        events.append(self._complete(now))
+            else:
+                events += self._decide(now)
+        if events:
+            self._emit(events)
 
     def on_tx(self, line: int, can_id: int) -> None:
         if can_id != od.SYNC_COB_ID_DEFAULT or line != self.bus.active:
@@ -182,14 +187,14 @@ class LineRedundancyMaster:
                                       f"{LINE_NAMES[other]} only")]
         if self.lost:
             return [self._switch(now, "searching for the nodes")] if now - self.switched_at >= SEARCH_PERIOD else []
-        if now - self.switched_at < self.hold_off or self.left_silent[other]:
+        if now - self.switched_at < self.hold_off or now - self.left_silent_at[other] < self.lost_after:
             return []
         if self.unanswered[active] >= SYNCS_UNANSWERED:
-            self.left_silent[active] = True
+            self.left_silent_at[active] = now
             return [self._switch(now, f"{self.unanswered[active]} SYNCs on line {LINE_NAMES[active]} "
                                       "brought no node frame")]
         if now - (last if last is not None else self.switched_at) > self.silence:
-            self.left_silent[active] = True
+            self.left_silent_at[active] = now
             return [self._switch(now, f"no node frame on line {LINE_NAMES[active]} for "
                                       f"{now - (last if last is not None else self.switched_at):.3f} s")]
         return []
@@ -231,6 +236,7 @@ class LineRedundancyMaster:
     def bridging(self, now: float | None = None) -> bool:
         """Is a switch under way (missing process data is the switch, not node loss)?"""
         now = self.clock() if now is None else now
+        self.check(now)     # a loss of both lines is reported before anyone judges the silence
         with self._lock:
             if self.lost:
                 return False
@@ -259,7 +265,20 @@ class LineRedundancyMaster:
                     logger.exception("line event callback failed")
 
     def _run(self) -> None:
-        while not self._stop.wait(TICK):
+        """The timer. A pass that wakes late (this process was starved: frames may wait unread)
+        judges nothing; the time it lost is not silence of either line (as health.py does)."""
+        due = time.monotonic() + TICK
+        while not self._stop.wait(max(0.0, due - time.monotonic())):
+            late = time.monotonic() - due
+            due = time.monotonic() + TICK
+            if late > STARVED_SLACK and self.clock is time.monotonic:
+                with self._lock:
+                    for line in (0, 1):
+                        if self.line_last[line] is not None:
+                            self.line_last[line] += late
+                        for node in self.heard[line]:
+                            self.heard[line][node] += late
+                continue
             self.check()
 
     def stop(self) -> None:
@@ -280,14 +299,10 @@ def attach(net) -> LineRedundancyMaster | None:
     if not hasattr(bus, "tx_router"):
         return None
     ids = {d.node_id for d in net.drivers.values()}
-    def node_of(can_id: int) -> int | None:
-        route = net._tpdo_routes.get(can_id)
-        if route is not None:
-            return route[0].node_id
-        node_id = can_id & 0x7F
-        if can_id & 0x780 in (od.EMCY_BASE, od.SDO_TX_BASE, od.HEARTBEAT_BASE) and node_id in ids:
-            return node_id
-        return None
+    # which node sends a COB-ID: its TPDOs (fixed at start), heartbeat, EMCY and SDO answers
+    senders = {cob: route[0].node_id for cob, route in net._tpdo_routes.items()}
+    senders.update({base + n: n for n in ids for base in (od.EMCY_BASE, od.SDO_TX_BASE, od.HEARTBEAT_BASE)})
+    node_of = senders.get
 
     def on_event(event: LineEvent) -> None:
         network_event = NetworkEvent(event.code, "bus", 0, event.message)
@@ -295,9 +310,15 @@ def attach(net) -> LineRedundancyMaster | None:
         for callback in net.event_callbacks:
             callback(network_event)
 
+    # lockstep: the rule runs on controller time (a SYNC period per cycle), as the nodes beside a
+    # lockstep controller judge the master's heartbeat on SYNC time: a cycle that waits for a
+    # silent line, or a process that waits for a core, is no time for either side
+    period = net.controller_period
+    clock = (lambda: net._sync * period) if period is not None else time.monotonic
     master = LineRedundancyMaster(
         bus, sorted(ids), node_of, node_period=max(n.heartbeat_period for n in net.config.nodes),
-        master_period=net.config.bus.master_heartbeat_period, settings=settings_of(net.config), on_event=on_event)
+        master_period=net.config.bus.master_heartbeat_period, settings=settings_of(net.config), on_event=on_event,
+        clock=clock)
     net.line_redundancy = master
     return master
 

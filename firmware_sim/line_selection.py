@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen import redundancy_object as rdn
-from spacearm.base.transport.redundant import LINE_NAMES, rx_line
+from spacearm.base.transport.redundant import LINE_NAMES, rx_line, rx_state
 
 TICK = 0.002   # s: the toggle timer's resolution
 
@@ -104,6 +104,13 @@ class NodeLineRule:
         return "no_master"
 
 
+class _OnLineA:
+    """A node without the redundancy object: always on line A."""
+    line = 0
+
+
+_ON_LINE_A = _OnLineA()
+
 # the node's receive entry points a frame of the other line must not reach
 _GATED = ("on_rpdo", "on_nmt", "on_sdo_request", "on_guard_request", "send_tpdos")
 
@@ -116,7 +123,7 @@ class LineSelection:
         self.bus = sim.bus
         self.rules: dict[int, NodeLineRule] = {}
         self.events: list[LineEvent] = []
-        self._owners: dict[int, int] = {}        # COB-ID -> sending node ID (found once)
+        self._owners: dict[int, object] = {}     # COB-ID -> its sending node's rule (found once)
         for node in sim.nodes.values():
             if rdn.REDUNDANCY in node.od and od.CONSUMER_HEARTBEAT in node.od:
                 self.rules[node.node_id] = NodeLineRule(node)
@@ -138,14 +145,13 @@ class LineSelection:
     def tx_line(self, can_id: int) -> int | None:
         """The line a frame goes out on: its sending node's; None (both) for the simulator's
         own frames (its timing report, the fault-injection unit's answers)."""
-        owner = self._owners.get(can_id)
-        if owner is None:
+        rule = self._owners.get(can_id)
+        if rule is None:
             owner = self._sender(can_id)
             if owner is None:
                 return None
-            self._owners[can_id] = owner
-        node = self.sim.nodes[owner]
-        return self.line_of(node)
+            rule = self._owners[can_id] = self.rules.get(owner, _ON_LINE_A)
+        return rule.line
 
     def _sender(self, can_id: int) -> int | None:
         function, node_id = can_id & 0x780, can_id & 0x7F
@@ -190,8 +196,12 @@ class LineSelection:
         node.on_heartbeat, node.check_consumers = heartbeat, consumers
 
     def _gated(self, node, original):
-        def gated(*args):
-            if self.hears(node):
+        rule = self.rules.get(node.node_id)
+        rx = rx_state
+
+        def gated(*args):       # hears(node), inlined: it runs for every frame a node gets
+            line = getattr(rx, "line", None)
+            if line is None or line == (rule.line if rule is not None else 0):
                 return original(*args)
             return None
         return gated

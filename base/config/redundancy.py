@@ -24,7 +24,7 @@ class RedundancySettings(StrictModel):
     master_heartbeat_period: float = Field(default=0.02, ge=0.005, le=1.0, description=(
         "s; on a pair the controller's heartbeat runs at this period: the nodes follow it to the "
         "other line, so it sets how fast they do"))
-    master_heartbeat_timeout: float = Field(default=0.1, ge=0.01, le=3.0, description=(
+    master_heartbeat_timeout: float = Field(default=0.06, ge=0.01, le=3.0, description=(
         "s; on a pair the nodes' consumer time for the controller's heartbeat (1016h:1)"))
 
     @model_validator(mode="after")

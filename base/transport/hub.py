@@ -24,10 +24,12 @@ import sys
 import threading
 import time
 import uuid
+from pathlib import Path
 
 import can
 
 from . import wire
+from .line_faults import LineFault, LineFaultError
 from spacearm.base.canopen import peer_timing
 from spacearm.base.runtime.child_process import REPO_ROOT, module_env, readline_within
 from spacearm.base.runtime.priority import use_fifo
@@ -99,6 +101,12 @@ class LoopbackHub:
         # disconnect requests cut every TCP client of a channel (they reconnect by themselves).
         self.fault_filter = None
         self._disconnect_requests: list[str] = []
+        # Line faults per channel (line_faults.py: cut, babble, ...), from `fault()` or a fault
+        # file (`spacearm hub --fault-file PATH`, re-read when it changes): the hub is the
+        # line, so a fault here is the same for every client of the channel.
+        self.line_faults: dict[str, LineFault] = {}
+        self.fault_file: Path | None = None
+        self._fault_file_stamp: float | None = None
 
     # ----------------------------------------------------------------- lifecycle
     @property
@@ -141,6 +149,8 @@ class LoopbackHub:
                             self._on_readable(client)
                         if mask & selectors.EVENT_WRITE and client.cid in self._clients:
                             self._flush(client)
+                if self.fault_file is not None:
+                    self._read_fault_file()
                 while self._disconnect_requests:
                     channel = self._disconnect_requests.pop()
                     for client in list(self._channels.get(channel, ())):
@@ -171,6 +181,58 @@ class LoopbackHub:
             self._wake_w.send(b"x")
         except OSError:
             pass
+
+    def fault(self, channel: str, mode: str, loss: float | None = None) -> None:
+        """Inject a line fault on `channel` ("ok" ends it); raises LineFaultError."""
+        fault = self.line_faults.get(channel) or LineFault(channel, seed=sum(channel.encode()))
+        fault.set(mode, loss)
+        if fault.active:
+            self.line_faults[channel] = fault
+        else:
+            self.line_faults.pop(channel, None)
+        log.warning("line fault on channel '%s': %s", channel, fault.describe())
+
+    def _read_fault_file(self) -> None:
+        """Lines "CHANNEL MODE [LOSS]"; a channel not named has no fault. A bad line is one log line."""
+        try:
+            stamp = self.fault_file.stat().st_mtime_ns
+        except OSError:
+            stamp = None
+        if stamp == self._fault_file_stamp:
+            return
+        self._fault_file_stamp = stamp
+        wanted: dict[str, tuple[str, float | None]] = {}
+        text = self.fault_file.read_text() if stamp is not None else ""
+        for number, line in enumerate(text.splitlines(), 1):
+            words = line.split("#")[0].split()
+            if not words:
+                continue
+            try:
+                if len(words) not in (2, 3):
+                    raise LineFaultError("expected CHANNEL MODE [LOSS]")
+                wanted[words[0]] = (words[1], float(words[2]) if len(words) == 3 else None)
+                LineFault().set(*wanted[words[0]])
+            except (LineFaultError, ValueError) as exc:
+                log.warning("%s:%d: %s (line ignored)", self.fault_file, number, exc)
+                wanted.pop(words[0], None)
+        for channel in set(self.line_faults) - set(wanted):
+            self.fault(channel, "ok")
+        for channel, (mode, loss) in wanted.items():
+            self.fault(channel, mode, loss)
+
+    def _apply_line_fault(self, channel: str, records: list[bytes]) -> list[bytes]:
+        fault = self.line_faults.get(channel)
+        if fault is None:
+            return records
+        out = []
+        for record in records:
+            if fault.passes():
+                out.append(record)
+                continue
+            for can_id, data, error in fault.replacement():
+                out.append(wire.encode_frame(can.Message(arbitration_id=can_id, data=data, is_extended_id=False,
+                                                         is_error_frame=error)))
+        return out
 
     # ----------------------------------------------------------------- internals
     def _timing_tick(self, tick: float, now: float) -> float:
@@ -230,7 +292,7 @@ class LoopbackHub:
             self._drop(client, "disconnected", quiet=True)
             return
         client.inbuf += data
-        if client.channel is not None and self.fault_filter is None:
+        if client.channel is not None and self.fault_filter is None and client.channel not in self.line_faults:
             self._forward_frames(client)
             return
         try:
@@ -259,6 +321,7 @@ class LoopbackHub:
             out.append(bytes((len(body) + 1, wire.T_FRAME)) + body)
         if self.fault_filter is not None:
             out = self.fault_filter(client.channel, out)
+        out = self._apply_line_fault(client.channel, out)
         if out:
             self._fan_out(client, b"".join(out), len(out))
 
@@ -333,10 +396,11 @@ class LoopbackHub:
 class HubProcess:
     """A hub in its own process on a free 127.0.0.1 port (for the session or one test)."""
 
-    def __init__(self, port: int = 0, ready_timeout: float = 15.0, rt_priority: int = 0):
+    def __init__(self, port: int = 0, ready_timeout: float = 15.0, rt_priority: int = 0,
+                 fault_file: Path | None = None):
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "spacearm.base.transport.hub", "--host", "127.0.0.1", "--port", str(port),
-             "--rt-priority", str(rt_priority)],
+             "--rt-priority", str(rt_priority), *(["--fault-file", str(fault_file)] if fault_file else [])],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=str(REPO_ROOT), env=module_env())
         line = readline_within(self.proc, ready_timeout)
         m = re.search(r"listening on ([\d.]+):(\d+)", line or "")
@@ -382,13 +446,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="exit 0 silently if the port is already taken (used by auto-start)")
     parser.add_argument("--rt-priority", type=int, default=0,
                         help="SCHED_FIFO priority 1..99 (0 = normal scheduling; base/runtime/priority.py)")
+    parser.add_argument("--fault-file", type=Path, default=None,
+                        help='line faults, re-read when changed: lines "CHANNEL MODE [LOSS]" (line_faults.py)')
     parser.add_argument("-v", "--verbose", action="store_true")
     args = parser.parse_args(argv)
-    return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose, args.rt_priority)
+    return run(args.host, args.port, args.idle_exit, args.quiet_if_running, args.verbose, args.rt_priority,
+               args.fault_file)
 
 
 def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = False,
-        verbose: bool = False, rt_priority: int = 0) -> int:
+        verbose: bool = False, rt_priority: int = 0, fault_file: Path | None = None) -> int:
     if rt_priority:
         problem = use_fifo(rt_priority)     # before the serving thread starts: it inherits it
         if problem:
@@ -408,6 +475,7 @@ def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = F
             return 2
         print(f"spacearm hub: cannot bind {host}:{port}: {exc}", file=sys.stderr)
         return 2
+    hub.fault_file = fault_file
     signal.signal(signal.SIGTERM, lambda *_: hub.stop(0))
     print(f"spacearm hub listening on {hub.host}:{hub.port} (pid {os.getpid()})", flush=True)
     try:

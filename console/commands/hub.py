@@ -1,6 +1,6 @@
 """`spacearm hub`: run the loopback CAN hub for `--bus loopback:...` in the foreground.
 
-    spacearm hub [--host 127.0.0.1] [--port 29536] [--idle-exit SECONDS] [--rt-priority N]
+    spacearm hub [--host 127.0.0.1] [--port 29536] [--idle-exit SECONDS] [--rt-priority N] [--fault-file PATH]
 
 Optional: the first `loopback:` client on this machine starts a hub by itself when none
 answers (it exits after 30 s without clients). Run it explicitly to keep one up, to see its
@@ -8,6 +8,8 @@ log, or with SPACEARM_HUB_AUTOSTART=0 on the clients. Prints one line
 "spacearm hub listening on HOST:PORT (pid N)" when ready.
 """
 from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
@@ -30,8 +32,11 @@ def register(app: typer.Typer) -> None:
         verbose: bool = typer.Option(False, "--verbose", "-v", help="log every client join/leave at debug level"),
         rt_priority: int = typer.Option(0, "--rt-priority", min=0, max=99,
                                         help="SCHED_FIFO priority (0: normal scheduling; README, real-time scheduling)"),
+        fault_file: Path = typer.Option(None, "--fault-file", help=(
+            'line faults, re-read when the file changes: lines "CHANNEL MODE [LOSS]", MODE one of cut, babble, '
+            "stuck_dominant, error_passive, intermittent (README, redundant pairs)")),
     ) -> None:
         """Run the loopback CAN hub (multi-process bus on one machine, 127.0.0.1 by default)."""
         from spacearm.base.transport.hub import run
 
-        raise typer.Exit(run(host, port, idle_exit, verbose=verbose, rt_priority=rt_priority))
+        raise typer.Exit(run(host, port, idle_exit, verbose=verbose, rt_priority=rt_priority, fault_file=fault_file))

@@ -19,8 +19,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from spacearm.controller.cycle import (NODE_FINDINGS, Command, Finding, FindingCode, MachineState, Measurement, Mode,
-                                       ModeOutput)
+from spacearm.controller.cycle import (EVENT_ONLY, NODE_FINDINGS, Command, Finding, FindingCode, MachineState,
+                                       Measurement, Mode, ModeOutput)
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
 from spacearm.controller.daemon.stops import DriveRequest, StopMonitor, StopPolicy, stop_policy
 from spacearm.controller.daemon.supervision import Supervisor
@@ -111,10 +111,10 @@ class ControllerCore:
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m
         self._apply_pending(m)
-        for event in m.events:   # the controller's own starvation: recorded with its code, not a stop
-            if event.kind is FindingCode.LATE_CYCLE:
-                self._event(m.time, "late_cycle", event.detail,
-                            Finding(FindingCode.LATE_CYCLE, event.detail, node=event.node or None))
+        for event in m.events:   # the controller's starvation, bus line switches: recorded with their code, not a stop
+            if event.kind in EVENT_ONLY:
+                self._event(m.time, event.kind.value, event.detail,
+                            Finding(event.kind, event.detail, node=event.node or None))
         moving = self.state is MachineState.ENABLED and self.mode is not None and self.mode.moving
         if self.state in (MachineState.ENABLED, MachineState.ENABLING):
             findings = self.supervisor.check(m, self.last_target, moving)
@@ -143,7 +143,8 @@ class ControllerCore:
                                      f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}",
                                      joint=slow[0] if slow else None))
         command = self._command(m)
-        self.motion_time += self.period
+        if not m.bridged:        # a bus line switch: the drives get nothing, so the path waits for them
+            self.motion_time += self.period
         return command
 
     def _command(self, m: Measurement) -> Command:
@@ -155,6 +156,10 @@ class ControllerCore:
                 self.state = MachineState.DISABLED
                 self._event(m.time, "state", "disabled at rest, brakes on")
         if self.state is MachineState.ENABLED and self.mode is not None:
+            if m.bridged and self.last_setpoint is not None:
+                # the drives hold the last target they got; resuming from it avoids a catch-up
+                # faster than the joints' limits once the switch completes
+                return Command(self.last_setpoint.q.copy(), np.zeros_like(m.q), enable=True)
             mode = self.mode
             out = mode.update(self.motion_time, m)
             self.mode_output = out

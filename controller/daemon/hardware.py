@@ -8,7 +8,7 @@ controller's command into drive state-machine requests and RPDOs.
 from __future__ import annotations
 
 import time as time_module
-
+from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
@@ -39,7 +39,9 @@ QUICK_STOP_OPTION = 2
 
 # Network event kinds the supervisor treats as faults (others are informational).
 FAULT_EVENTS = {"heartbeat_lost": FindingCode.HEARTBEAT_LOST, "bootup": FindingCode.BOOTUP, "emcy": FindingCode.EMCY,
-                "fault_reset_failed": FindingCode.FAULT}
+                "fault_reset_failed": FindingCode.FAULT, "bus_lines_lost": FindingCode.BUS_LINES_LOST}
+# Network event kinds recorded with their code (drivers/line_redundancy.py), never a stop.
+RECORDED_EVENTS = {"line_switch": FindingCode.LINE_SWITCH, "line_switch_complete": FindingCode.LINE_SWITCH_COMPLETE}
 
 
 def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits] = (),
@@ -118,7 +120,9 @@ class CanopenHardware:
         self.network.fault_reset()
 
     def statistics(self) -> dict:
-        return {**vars(self.network.stats), "late_cycles": self.late_cycles}
+        lines = self.network.line_redundancy
+        return {**vars(self.network.stats), "late_cycles": self.late_cycles,
+                **({"bus_lines": lines.status()} if lines is not None else {})}
 
     def bringup_report(self) -> dict:
         """Per node: SDO writes at bring-up, optional objects its EDS lacks, how it is guarded."""
@@ -142,13 +146,18 @@ class CanopenHardware:
         state = self.network.read(complete)
         events = []
         for event in self.network.poll_events():
-            kind = FAULT_EVENTS.get(event.kind)
+            kind = FAULT_EVENTS.get(event.kind) or RECORDED_EVENTS.get(event.kind)
             if kind is None:
                 self.info_events.append(str(event))
             else:
                 events.append(DeviceEvent(event.node, kind, event.message))
         starved = late > LATE_CYCLE_SLACK * self.period
-        return self._measurement(time, sync, state, tuple(events), late if starved else 0.0)
+        measurement = self._measurement(time, sync, state, tuple(events), late if starved else 0.0)
+        redundancy = self.network.line_redundancy
+        if measurement.missing and redundancy is not None and redundancy.bridging():
+            redundancy.bridged_cycles += 1      # the missing data is the line switch's (bounded)
+            measurement = replace(measurement, bridged=True)
+        return measurement
 
     def _measurement(self, time: float, sync: int, state: ArmState,
                      events: tuple[DeviceEvent, ...], late: float = 0.0) -> Measurement:

@@ -34,7 +34,8 @@ class SupervisionLimits:
 LATE_CYCLES_EXCUSED = 3
 
 EVENT_LABELS = {FindingCode.HEARTBEAT_LOST: "heartbeat lost", FindingCode.EMCY: "emergency message",
-                FindingCode.FAULT: "drive fault", FindingCode.BOOTUP: "unexpected boot-up (node restarted)"}
+                FindingCode.FAULT: "drive fault", FindingCode.BOOTUP: "unexpected boot-up (node restarted)",
+                FindingCode.BUS_LINES_LOST: "both bus lines lost"}
 
 
 class Supervisor:
@@ -61,7 +62,7 @@ class Supervisor:
             if node not in m.missing:
                 del self._missing_count[node]
                 self._excused.pop(node, None)
-        for node in m.missing:
+        for node in m.missing if not m.bridged else ():   # a line switch under way (bounded)
             if m.late and self._excused.get(node, 0) < LATE_CYCLES_EXCUSED:
                 # The cycle itself ran late (this process was starved): the data may be sitting
                 # unread, so the cycle is no evidence of a lost node; the count is held, not
@@ -84,7 +85,7 @@ class Supervisor:
         for i in np.flatnonzero(np.abs(m.dq) > lim.v_max * (1.0 + lim.velocity_tolerance)):
             findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} rad/s "
                                     f"above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
-        if moving and last_target is not None:
+        if moving and last_target is not None and not m.bridged:    # bridged: the positions are stale
             error = np.abs(last_target - m.q)
             window = np.broadcast_to(lim.following_error, error.shape)
             for i in np.flatnonzero(error > window):

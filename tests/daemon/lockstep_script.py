@@ -61,12 +61,12 @@ class Script:
 @contextmanager
 def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
                     record_dir: Path | None = None, enable: bool = True,
-                    cycle_hook: Callable[[], None] | None = None) -> Iterator[Script]:
-    """A simulator on a fresh virtual bus and a lockstep daemon cycled by the caller.
-    cycle_hook runs after every cycle (a test slows the process with it)."""
+                    cycle_hook: Callable[[], None] | None = None, bus: str | None = None) -> Iterator[Script]:
+    """A simulator on a fresh virtual bus (or `bus`, e.g. a redundant pair) and a lockstep
+    daemon cycled by the caller. cycle_hook runs after every cycle (a test slows the process with it)."""
     from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
     from spacearm.firmware_sim.runner import start_simulator
-    bus = f"virtual:script-{uuid.uuid4().hex[:8]}"
+    bus = bus or f"virtual:script-{uuid.uuid4().hex[:8]}"
     sim = start_simulator(bus, bus_config, plant=plant, time_base="sync")
     options = DaemonOptions(bus=bus, bus_config=bus_config, clock="lockstep", api=None, record_dir=record_dir)
     if arm is not None:

@@ -1,0 +1,168 @@
+#!/usr/bin/env python3
+"""Bus redundancy benchmark (issue 34): line switches and the cost of a second line.
+
+    .venv/bin/python bench/bench_redundancy.py [--trials 5] [--cycles 2000] [--transport virtual|loopback]
+
+1. Switch time: the simulator and the master on a redundant pair (in one process on
+   virtual lines, or through the loopback hub), cycled at the SYNC period as the daemon's
+   real-time loop does (one period's TPDO wait); the active line is cut mid-run, `--trials`
+   times (each time the line the network is on). Per trial: time from the cut until the master
+   and every node are on the other line (from their own switch events), in node heartbeat
+   periods (target <= 3) and in ms; cycles with process data missing; heartbeat-loss and
+   both-lines-lost events (target 0); the starvation of the two timers meanwhile.
+2. Lockstep cycle cost with two lines vs one (target <= 10 % above): the same enabled network
+   cycled `--cycles` times in lockstep (SYNC, wait for every TPDO, read), blocks of one line
+   and two lines alternated; CPU and wall per cycle, median of the blocks; the ratio is of
+   the same run.
+Every row prints the load average and the CPU steal of its measurement.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import sys
+import time
+import uuid
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from hil_tests.harness import CpuSteal  # noqa: E402
+from spacearm.base.config.bus import load_bus_config  # noqa: E402
+from spacearm.base.transport.line_faults import clear_all, line_fault  # noqa: E402
+from spacearm.drivers.network import ArmNetwork  # noqa: E402
+from spacearm.firmware_sim.runner import Simulator  # noqa: E402
+
+SWITCH_TARGET_PERIODS = 3.0
+COST_TARGET = 1.10
+FAULT_KINDS = {"heartbeat_lost", "bus_lines_lost", "emcy", "bootup"}
+
+
+def conditions(steal: CpuSteal) -> str:
+    return f"load {os.getloadavg()[0]:.1f}, steal {100 * steal.fraction():.1f} %"
+
+
+def line_specs(transport: str, hub) -> tuple[str, str]:
+    tag = uuid.uuid4().hex[:8]
+    if transport == "loopback":
+        return hub.spec(f"bench-a-{tag}"), hub.spec(f"bench-b-{tag}")
+    return f"virtual:bench-a-{tag}", f"virtual:bench-b-{tag}"
+
+
+def start(spec: str):
+    sim = Simulator(spec, load_bus_config()).start()
+    net = ArmNetwork(spec, load_bus_config())
+    net.boot()
+    net.enable_all()
+    return sim, net
+
+
+def paced(net: ArmNetwork, seconds: float, events: list) -> int:
+    """Real-time-like cycles for `seconds`; returns the cycles whose process data was incomplete."""
+    period = net.config.bus.sync_period
+    incomplete, next_cycle, end = 0, time.monotonic(), time.monotonic() + seconds
+    while time.monotonic() < end:
+        state = net.cycle(timeout=period)
+        incomplete += not state.complete
+        events += net.poll_events()
+        next_cycle += period
+        time.sleep(max(0.0, next_cycle - time.monotonic()))
+    return incomplete
+
+
+def switch_trials(transport: str, trials: int, hub, steal: CpuSteal) -> list[list[str]]:
+    lines = line_specs(transport, hub)
+    sim, net = start("+".join(lines))
+    master, selection = net.line_redundancy, sim.line_selection
+    hb = max(n.heartbeat_period for n in net.config.nodes)
+    rows = []
+    try:
+        events: list = []
+        paced(net, 0.5, events)
+        for trial in range(trials):
+            steal.fraction()
+            line = master.active
+            starved = sim.stats.starved_time + net.stats.starved_time
+            events = []
+            cut = time.monotonic()
+            line_fault(lines[line]).set("cut")
+            incomplete = paced(net, 1.0, events)
+            starved = sim.stats.starved_time + net.stats.starved_time - starved
+            moves = [e.time for e in selection.events if e.kind == "switch" and e.time >= cut]
+            moves += [e.time for e in master.events if e.code == "line_switch" and e.time >= cut]
+            on_other = master.active == line ^ 1 and all(r.line == line ^ 1 for r in selection.rules.values())
+            took = max(moves) - cut if moves and on_other else float("nan")
+            faults = sum(e.kind in FAULT_KINDS for e in events)
+            ok = on_other and took <= SWITCH_TARGET_PERIODS * hb and faults == 0
+            rows.append([f"{transport}: cut line {'AB'[line]} (trial {trial + 1})",
+                         f"{took / hb:.2f} hb periods ({1e3 * took:.0f} ms)", f"<= {SWITCH_TARGET_PERIODS:g}",
+                         str(incomplete), str(faults), f"{1e3 * starved:.0f} ms", "ok" if ok else "MISSED",
+                         conditions(steal)])
+            line_fault(lines[line]).clear()
+            paced(net, 0.3, [])
+    finally:
+        net.close()
+        sim.stop()
+        clear_all()
+    return rows
+
+
+def cycle_cost(cycles: int, blocks: int, steal: CpuSteal) -> list[list[str]]:
+    """Lockstep cycles on one line and on a pair, alternated in blocks; per-cycle CPU and wall."""
+    setups = {}
+    for name, spec in (("one line", f"virtual:cost-{uuid.uuid4().hex[:8]}"),
+                       ("two lines", "+".join(line_specs("virtual", None)))):
+        setups[name] = start(spec)
+    cpu = {name: [] for name in setups}
+    wall = {name: [] for name in setups}
+    steal.fraction()
+    try:
+        for _ in range(blocks):
+            for name, (_, net) in setups.items():
+                c0, w0 = time.process_time(), time.perf_counter()
+                for _ in range(cycles // blocks):
+                    net.cycle()
+                cpu[name].append((time.process_time() - c0) / (cycles // blocks))
+                wall[name].append((time.perf_counter() - w0) / (cycles // blocks))
+    finally:
+        for sim, net in setups.values():
+            net.close()
+            sim.stop()
+    one, two = statistics.median(cpu["one line"]), statistics.median(cpu["two lines"])
+    ratio = two / one
+    where = conditions(steal)
+    return [["lockstep cycle, one line (reference)", f"{1e6 * one:.0f} us CPU / {1e6 * statistics.median(wall['one line']):.0f} us wall",
+             "", "", "", "", "", where],
+            ["lockstep cycle, two lines", f"{1e6 * two:.0f} us CPU / {1e6 * statistics.median(wall['two lines']):.0f} us wall",
+             f"<= {COST_TARGET:.2f} x", f"{ratio:.3f} x", "", "", "ok" if ratio <= COST_TARGET else "MISSED", where]]
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--trials", type=int, default=5)
+    parser.add_argument("--cycles", type=int, default=2000)
+    parser.add_argument("--blocks", type=int, default=10)
+    parser.add_argument("--transport", choices=("virtual", "loopback"), default="virtual")
+    args = parser.parse_args()
+    steal = CpuSteal()
+    hub = None
+    if args.transport == "loopback":
+        from spacearm.base.transport.hub import HubProcess
+        hub = HubProcess(rt_priority=50)
+    try:
+        rows = switch_trials(args.transport, args.trials, hub, steal)
+    finally:
+        if hub is not None:
+            hub.stop()
+    rows += cycle_cost(args.cycles, args.blocks, steal)
+    header = ["figure", "measured", "target", "missing cycles / ratio", "fault events", "starved", "", "conditions"]
+    widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
+    for row in [header] + rows:
+        print("  ".join(str(c).ljust(w) for c, w in zip(row, widths)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
