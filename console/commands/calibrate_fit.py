@@ -90,7 +90,7 @@ def register_fit(cal: typer.Typer) -> None:
             fix: str = typer.Option("", help="Parameters or prefixes held fixed, e.g. 'wire_a,plane_'."),
             prior: str = typer.Option("", help=f"Regularisation: prior sigma per group or name prefix "
                                       f"'GROUP=SI,wire_a=0.002,...' ({GROUP_HELP})."),
-            bound: str = typer.Option("", help="Plausibility bounds per group 'GROUP=SI,...' (defaults: 3 deg, 50 mm, "
+            bound: str = typer.Option("", help="Plausibility bounds per group 'GROUP=SI,...' (defaults: 5 deg, 50 mm, "
                                       "100 mm, 10 deg, 0.5)."),
             holdout: float = typer.Option(0.2, min=0.0, max=0.8, help="Fraction of postures held out."),
             kfold: int = typer.Option(0, min=0, max=50, help="k-fold cross-validation instead (k > 1)."),

@@ -35,8 +35,9 @@ def group_of(name: str) -> str:
 
 @dataclass(frozen=True)
 class Bounds:
-    """Largest physically plausible correction per group (SI). A fit beyond them is rejected."""
-    joint_angle: float = np.radians(3.0)
+    """Largest physically plausible correction per group (SI). A fit beyond them is rejected.
+    Joint angles: 5 deg (a real TIAGo's arm_5 zero is ~3 deg off, FIGAROH finds the same)."""
+    joint_angle: float = np.radians(5.0)
     joint_length: float = 0.05
     frame_length: float = 0.10
     frame_angle: float = np.radians(10.0)
@@ -110,8 +111,9 @@ def instrument_bounds(problem: CompositeProblem, bounds: Bounds) -> Bounds:
 
 
 # An error of plausible size (its bound) must move the whitened readings by this many noise
-# sigmas, beyond what the parameters kept before it can absorb, to be estimated at all.
-DETECTABLE_SIGMAS = 10.0
+# sigmas, beyond what the parameters kept before it can absorb, to be estimated at all: the
+# usual 3-sigma detection limit.
+DETECTABLE_SIGMAS = 3.0
 
 
 def data_identifiability(problem: CompositeProblem, candidates: list[str], tol: float = 1e-6,

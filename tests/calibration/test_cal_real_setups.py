@@ -161,3 +161,17 @@ def test_cli_refuses_a_range_column_in_mm_naming_the_unit(tmp_path):
     assert res.exit_code != 0
     lines = [ln for ln in res.output.strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and "mm" in lines[0] and "reach" in lines[0], res.output
+
+
+@pytest.mark.parametrize("extra", [["--frames"], ["--fix", "wire_t"], ["--method", "ekf"], ["--kfold", "4"],
+                                   ["--sigma-pos", "3e-4"], ["--method", "lse"]])
+def test_cli_options_that_used_to_crash_on_the_draw_wire_run_or_refuse_in_one_line(tmp_path, extra):
+    case = draw_wire_case(0)                               # the old identifiability raised on this file
+    d1, _ = _wire_files(tmp_path, case)
+    app, runner = _cli()
+    res = runner.invoke(app, ["calibrate", "fit", "--data", str(d1), "--model", _arm_path(),
+                              "--anchor", "0.5,0.0,0.0", "--sigma-pos", "5e-4"] + extra)
+    assert res.exception is None or isinstance(res.exception, SystemExit), res.output
+    assert "Traceback" not in res.output and "RuntimeError" not in res.output
+    if res.exit_code != 0:
+        assert res.output.strip().splitlines()[-1].startswith(("fit rejected", "error")), res.output

@@ -20,7 +20,10 @@ def test_registration_is_estimated_not_absorbed_into_the_arm(full):
     assert {f"base_{k}" for k in ("x", "y", "z", "rx", "ry", "rz")} <= set(rep.result.free), rep.identifiability.summary()
     est = rep.result.estimate
     dh = {n: v for n, v in est.items() if n.split("_")[0] in ("theta", "alpha", "beta")}
-    assert max(abs(np.degrees(v)) for v in dh.values()) < 3.0, dh
+    # The old fit put the mocap frame's offset into theta_2 (+17 deg); now every angle is a few
+    # degrees at most (arm_5's zero, theta_6 here, is ~3 deg off: FIGAROH finds -2.8 deg too).
+    assert max(abs(np.degrees(v)) for v in dh.values()) < 5.0, dh
+    assert abs(np.degrees(est.get("theta_2", 0.0))) < 1.5
     assert rep.verdict.ok, rep.verdict.message()
 
 
