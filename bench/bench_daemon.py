@@ -113,7 +113,7 @@ def start_sim(bus: str, rt_priority: int, arm: tuple[str, str, str] = ORU):
     simulator's process id)."""
     if bus.startswith("virtual:"):
         from spacearm.firmware_sim.runner import start_simulator
-        sim = start_simulator(bus, arm[1], arm[2])
+        sim = start_simulator(bus, arm[1], arm[2], time_base="wall" if rt_priority else "sync")
         return sim.stop, sim, os.getpid()
     proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", "sim", "--bus", bus,
                              "--bus-config", arm[1], "--plant", arm[2], "--rt-priority", str(rt_priority)], cwd=ROOT,

@@ -98,7 +98,7 @@ def changeout(clock: str, bus_config: str, vision: bool = True, plant: str = DEM
     """(wall s, ChangeoutResult or None, failure message or None, vision worker times s)
     (+ the daemon, shut down, with keep_daemon)."""
     bus = f"virtual:bench-oru-{time.monotonic_ns()}"
-    sim = start_simulator(bus, bus_config, plant)
+    sim = start_simulator(bus, bus_config, plant, time_base="sync" if clock == "lockstep" else "wall")
     ring = camera = None
     if vision:
         ring, camera = start_camera(sim, frame_rate)

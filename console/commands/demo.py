@@ -79,7 +79,7 @@ def register(app: typer.Typer) -> None:
             if problem:
                 console.print(f"scheduling: {problem}")
         nodes_scheduling = describe()
-        simulator = start_simulator(bus, bus_config, plant)
+        simulator = start_simulator(bus, bus_config, plant, time_base="sync" if clock == "lockstep" else "wall")
         daemon = None
         scheduling = ""
         ring = None

@@ -108,7 +108,7 @@ def run_checkout_trial(params: dict[str, float], options: dict[str, Any], seed: 
 
     opts = {**CHECKOUT.options, **options}
     bus = f"virtual:campaign-{os.getpid()}-{threading.get_ident()}-{seed}-{time.monotonic_ns()}"
-    sim = start_simulator(bus, opts["bus_config"], opts["plant"])
+    sim = start_simulator(bus, opts["bus_config"], opts["plant"], time_base="sync")
     daemon = Daemon(DaemonOptions(bus=bus, arm=opts["arm"], bus_config=opts["bus_config"], clock="lockstep",
                                   api=None, record_dir=None, gil_switch_interval=None))
     started = time.perf_counter()

@@ -66,7 +66,8 @@ def record_can(config: PlantConfig, trajectory: Trajectory, out: Path, arm: Path
     bus = f"virtual:record-sim-{uuid.uuid4().hex[:8]}"
     workdir = tempfile.TemporaryDirectory()
     bus_config = _patient_heartbeats(Path(bus_config), Path(workdir.name))
-    simulator = start_simulator(bus, bus_config, starting_at(config, trajectory.q[0]))
+    simulator = start_simulator(bus, bus_config, starting_at(config, trajectory.q[0]),
+                                time_base="sync" if clock == "lockstep" else "wall")
     daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock=clock, api=None,
                                   record_dir=None))
     thread = None

@@ -20,7 +20,7 @@ def enabled_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: Pa
     from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
     from spacearm.firmware_sim.runner import start_simulator
     bus = f"virtual:test-{uuid.uuid4().hex[:8]}"
-    sim = start_simulator(bus, bus_config, plant=plant)
+    sim = start_simulator(bus, bus_config, plant=plant, time_base="sync")
     options = DaemonOptions(bus=bus, bus_config=bus_config, clock="lockstep", api=None, record_dir=record_dir)
     if arm is not None:
         options.arm = arm
