@@ -167,7 +167,16 @@ class PlantConfig(StrictModel):
 
 
 def load_plant_config(path: str | Path | None) -> PlantConfig:
-    return PlantConfig() if path is None else load_toml_model(path, PlantConfig)
+    if path is None:
+        return PlantConfig()
+    config = load_toml_model(path, PlantConfig)
+    arm = Path(config.geometry.arm)
+    beside = Path(path).resolve().parent / arm
+    if not arm.is_absolute() and beside.is_file():
+        # a plant file written next to its arm file (spacearm arm import --plant) names it relative to
+        # itself; the project's own plant files name theirs relative to the project root
+        config = config.model_copy(update={"geometry": config.geometry.model_copy(update={"arm": str(beside)})})
+    return config
 
 
 class Environment(Protocol):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import typer
@@ -24,7 +25,7 @@ def plant_toml(config: ArmConfig, arm_path: Path, gravity: tuple[float, float, f
     lines = [f"# Nominal simulated plant of {config.arm.name} (spacearm arm import): joints start at the",
              "# arm's home posture; coupled rigid-body dynamics from the arm file's [[links]] (Pinocchio).",
              "# Schema: firmware_sim/plant.py and firmware_sim/rigid_body.py. SI units.", "seed = 1", "",
-             "[geometry]", f"arm = {str(arm_path)!r}", ""]
+             "[geometry]", f"arm = {arm_path.as_posix()!r}   # relative to this file", ""]
     if config.links:
         lines += ["[rigid_body]", f"gravity = [{', '.join(repr(float(g) + 0.0) for g in gravity)}]   # m/s^2, base frame",
                   ""]
@@ -73,7 +74,9 @@ def register(app: typer.Typer) -> None:
                 raise CommandFailed("--plant needs --out (the plant file refers to the arm file)")
             if not math.isfinite(gravity) or abs(gravity) > 100.0:
                 raise CommandFailed(f"--gravity {gravity}: expected 0..100 m/s^2")
-            _write(plant, plant_toml(config, out, (0.0, 0.0, -gravity)))
+            # the arm path relative to the plant file, which the loader resolves it against
+            arm_path = Path(os.path.relpath(out.resolve(), plant.resolve().parent))
+            _write(plant, plant_toml(config, arm_path, (0.0, 0.0, -gravity)))
             print(f"{plant}: nominal plant, gravity {gravity} m/s^2")
 
     app.add_typer(arm_app, name="arm")

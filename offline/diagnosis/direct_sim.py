@@ -198,7 +198,11 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     an environment couples them), which is what the diagnosis does per candidate effect."""
     q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
     rows, n = q_cmd.shape
-    index = list(range(n)) if joints is None else list(joints)
+    wanted = list(range(n)) if joints is None else list(joints)
+    # coupled dynamics (an imported arm's rigid body, a contact world) move every joint together:
+    # all of them are simulated and the wanted columns returned
+    coupled = config.rigid_body is not None or config.contact is not None
+    index = list(range(n)) if coupled else wanted
     settings = settings or drive_settings(config, n)
     if len(settings) < n:
         settings = list(settings) + [settings[-1]] * (n - len(settings))
@@ -243,4 +247,5 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     t = t0 + dt * np.arange(1, rows + 1)
     window = min((config.following_error[i] for i in index if i < len(config.following_error)), default=math.inf) \
         if isinstance(config, ArmPlant) else math.inf
-    return SimTraces(t, cols.copy(), q, dq, tau, wrench, fe, window)
+    keep = [index.index(i) for i in wanted]
+    return SimTraces(t, cols[:, keep].copy(), q[:, keep], dq[:, keep], tau[:, keep], wrench, fe, window)
