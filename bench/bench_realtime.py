@@ -41,6 +41,8 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import signal
+import subprocess
 import sys
 import threading
 import time
@@ -262,11 +264,134 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     return ["  figure | measured | target | status | reference | conditions"] + rows
 
 
+def _spawn(args: list[str], ready: str, log: Path) -> subprocess.Popen:
+    """`spacearm ARGS` in its own session, output to `log`; returns once `ready` was printed."""
+    out = open(log, "w")
+    proc = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", *args], cwd=ROOT, stdout=out,
+                            stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, start_new_session=True)
+    out.close()
+    deadline = time.monotonic() + 60.0
+    while ready not in log.read_text(errors="replace"):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"spacearm {' '.join(args)}: no {ready!r}:\n{log.read_text(errors='replace')[-2000:]}")
+        time.sleep(0.05)
+    return proc
+
+
+def _end(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def changeout(runs: int, steal: CpuSteal) -> list[str]:
+    """The issue's separate-process run: hub and sim at --rt-priority 50 (configs/oru/plant_cell.toml),
+    daemon on the realtime clock (SCHED_FIFO 50), `oru run --stages 1`, `runs` times."""
+    import tempfile
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.base.transport.hub import HubProcess
+    from spacearm.console.client import ApiClient
+    from hil_tests.harness import free_port
+    rows, done = [], 0
+    ready_q = load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]
+    with tempfile.TemporaryDirectory() as work, CpuLoad(2):
+        hub = HubProcess(rt_priority=50)
+        try:
+            for run in range(runs):
+                steal.fraction()
+                bus, api = hub.spec(f"rt-bench-{os.getpid()}-{run}"), f"tcp:127.0.0.1:{free_port()}"
+                sim = _spawn(["sim", "--bus", bus, "--plant", "configs/oru/plant_cell.toml", "--rt-priority", "50"],
+                             "nodes ready", Path(work) / f"sim{run}.log")
+                daemon = None
+                try:
+                    daemon = _spawn(["daemon", "--bus", bus, "--clock", "realtime", "--rt-priority", "50", "--api", api,
+                                     "--no-record"], "spacearm daemon:", Path(work) / f"daemon{run}.log")
+                    outcome, status = _fly_stage_1(ApiClient(api, timeout=10.0), ready_q)
+                finally:
+                    if daemon is not None:
+                        _end(daemon)
+                    _end(sim)
+                stats, peers = status["stats"], (status.get("nodes") or {}).get("peers") or {}
+                done += outcome == "done"
+                sim_view = peers.get("simulator") or {}
+                rows.append(f"  separate-process changeout stage 1, run {run + 1} | {outcome} | stop "
+                            f"{(status.get('stop') or {}).get('code', '-')} | skipped {stats['skipped_cycles']} of "
+                            f"{stats['cycles']} cycles, period error p99 {1e3 * stats['period_error_p99']:.2f} ms, "
+                            f"max {1e3 * stats['period_error_max']:.1f} ms | simulator late "
+                            f"{sim_view.get('late_cycles', '-')} of {sim_view.get('cycles', '-')}, max "
+                            f"{1e3 * sim_view.get('max_lateness', float('nan')):.1f} ms "
+                            f"({sim_view.get('cause') or '-'}) | {conditions(steal)}")
+        finally:
+            hub.stop()
+    rows.insert(0, f"  separate-process changeout stage 1, real time, beside 2 CPU-bound | {done} of {runs} done | "
+                   f"{runs} of {runs} | {'met' if done == runs else 'MISSED'}")
+    return rows
+
+
+def _fly_stage_1(client, ready_q) -> tuple[str, dict]:
+    """Enable, move to ready, fly stage 1; ("done" or what ended it, the daemon's last status)."""
+    lease = client.call("control.take", holder="bench_realtime")["lease"]
+    client.call("enable", lease=lease)
+    deadline = time.monotonic() + 30.0
+    while client.call("status")["state"] != "enabled" and time.monotonic() < deadline:
+        time.sleep(0.1)
+    finished = client.call("status")["motions_finished"]
+    client.call("move_joints", q=list(ready_q), lease=lease)
+    deadline = time.monotonic() + 120.0
+    while client.call("status")["motions_finished"] <= finished and time.monotonic() < deadline:
+        time.sleep(0.2)
+    client.call("oru.run", stages=[1], lease=lease)
+    deadline = time.monotonic() + 600.0
+    while (oru := client.call("oru.status"))["state"] in ("running", "paused") and not oru.get("pause"):
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.5)
+    status = client.call("status")
+    outcome = oru["state"] if not status.get("stop") else f"stopped ({status['stop']['code']})"
+    return outcome, status
+
+
+def mainjob(stages: str, steal: CpuSteal) -> list[str]:
+    """`spacearm demo` (real time, camera) beside two CPU-bound processes: its summary's figures."""
+    import re
+    import tempfile
+    with tempfile.TemporaryDirectory() as work, CpuLoad(2):
+        steal.fraction()
+        args = [sys.executable, "-m", "spacearm.console.main", "demo", "--record-dir", work] + \
+            (["--stages", stages] if stages else [])
+        out = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, stdin=subprocess.DEVNULL,
+                             env={**os.environ, "COLUMNS": "200"})
+    text = out.stdout + out.stderr
+    cond = conditions(steal)
+    summary = re.search(r"period error median ([\d.]+) ms, p99 ([\d.]+) ms, max ([\d.]+) ms; execution p99 "
+                        r"([\d.]+) ms; overruns (\d+) \((\d+) cycles skipped\)", text)
+    scheduling = re.search(r"scheduling: (.*)", text)
+    stage_rows = re.findall(r"│ (\d) ([^│]*?)\s*│\s*([\d.]+) │", text)
+    if out.returncode != 0 or summary is None:
+        return [f"  main job (demo{' --stages ' + stages if stages else ''}) | FAILED (exit {out.returncode}) | "
+                f"{text.strip().splitlines()[-1] if text.strip() else ''} | {cond}"]
+    p99, skipped, stops = float(summary.group(2)), int(summary.group(6)), 0
+    n_stages = len(stage_rows)
+    want = len(stages.split(",")) if stages else 4
+    met = skipped == 0 and p99 <= 1.0 and n_stages == want
+    return [f"  main job (demo, real time, camera{', stages ' + stages if stages else ''}) beside 2 CPU-bound | "
+            f"{n_stages} of {want} stages, {stops} stops, {skipped} skipped cycles ({summary.group(5)} overruns), "
+            f"period error p99 {p99:.3f} ms, max {float(summary.group(3)):.1f} ms | 0 skipped, p99 <= 1 ms, "
+            f"{want} stages | {'met' if met else 'MISSED'} | {cond}",
+            f"  main job scheduling | {scheduling.group(1) if scheduling else '-'}"]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "all"))
     ap.add_argument("--seconds", type=float, default=20.0, help="gil: probe time per neighbour")
     ap.add_argument("--frames", type=int, default=20, help="render: frames per distance band")
+    ap.add_argument("--runs", type=int, default=5, help="changeout: runs")
+    ap.add_argument("--stages", default="", help="mainjob: stages, e.g. 1 (default: all four)")
     args = ap.parse_args()
     t0, steal = time.monotonic(), CpuSteal()
     rows: list[str] = []
@@ -274,6 +399,10 @@ def main() -> None:
         rows += gil(args.seconds, steal)
     if args.section in ("render", "all"):
         rows += render(args.frames, steal)
+    if args.section in ("changeout", "all"):
+        rows += changeout(args.runs, steal)
+    if args.section in ("mainjob", "all"):
+        rows += mainjob(args.stages, steal)
     print("\n".join(rows))
     print(f"\nbench_realtime on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}), "
           f"Python {platform.python_version()}, switch interval {1e3 * sys.getswitchinterval():.1f} ms, "

@@ -9,13 +9,19 @@ camera pose, stores holding an ORU) to a spawned process that renders it with it
 CameraService (same scene, seeds and noise stream, so the same frames) into the same
 shared-memory ring, and waits for the answer without the GIL. Needs a named ShmFrameRing.
 
-Priority: the child starts from a thread at normal priority and nice RENDER_NICE (Linux
-threads and the processes they start inherit the starting thread's policy and nice), so its
-start-up (~3 s of imports and scene set-up) runs neither at the nodes' SCHED_FIFO priority nor
-beside them at their nice: at nice 0 it starved normal-priority nodes' heartbeats for 0.75 s
-at load 15 (bench_lockstep_camera.py). Once set up it renders at nice 0 where it may (frames
-from a niced renderer kept lockstep cycles waiting > 2 s at load 15): a frame costs about
-10 ms of CPU, bounded by the frame rate.
+Priority: the child starts from a thread of its own (Linux threads and the processes they
+start inherit the starting thread's policy and nice), never at the nodes' priority.
+- Beside nodes at SCHED_FIFO (`spacearm sim --rt-priority`, `demo`) it runs at SCHED_FIFO
+  RENDER_PRIORITY (1): below every real-time thread of the stack (nodes, hub, cycle 50, vision
+  40), above ordinary processes, as the camera's own processor would be. At normal priority
+  it shares its session's CPU slice (autogroup) with whatever else runs there: beside two
+  CPU-bound processes on a loaded machine (load 17-26) it drew 5 % of a core, its start-up took
+  minutes and the main job's approach saw no frame for 30 s (bench/bench_realtime.py mainjob).
+  Bounded: a frame costs tens of ms, free-run frames are paced (CameraService.min_gap) and
+  lockstep frames render only while the cycle waits for them.
+- Beside nodes at normal priority it starts at nice RENDER_NICE (its ~3 s start-up at their
+  nice starved their heartbeats for 0.75 s at load 15, bench_lockstep_camera.py) and renders
+  at nice 0 where it may (niced frames kept lockstep cycles waiting > 2 s at load 15).
 """
 from __future__ import annotations
 
@@ -23,8 +29,8 @@ import multiprocessing as mp
 import os
 import threading
 
-RENDER_NICE = 10        # while the child starts up
-SERVE_NICE = 0          # once it renders
+RENDER_PRIORITY = 1     # SCHED_FIFO beside nodes at SCHED_FIFO
+RENDER_NICE = 10        # while the child starts up beside nodes at normal priority
 
 
 class RenderProcess:
@@ -32,26 +38,33 @@ class RenderProcess:
                  render_noise: bool):
         ctx = mp.get_context("spawn")          # no copy of the parent's threads and locks
         self._conn, child = ctx.Pipe()
+        from spacearm.base.runtime.priority import current
+        scheduling = current()
+        priority = RENDER_PRIORITY if scheduling is not None and scheduling[0] == os.SCHED_FIFO else 0
         self._proc = ctx.Process(target=_serve, name="sim-camera-render", daemon=True,
-                                 args=(child, ring_name, scene, frame_rate, scene_seed, noise_seed, render_noise))
-        starter = threading.Thread(target=self._start_niced, name="sim-camera-render-start", daemon=True)
+                                 args=(child, ring_name, scene, frame_rate, scene_seed, noise_seed, render_noise,
+                                       priority))
+        starter = threading.Thread(target=self._start, args=(priority,), name="sim-camera-render-start",
+                                   daemon=True)
         starter.start()
         starter.join()
         child.close()
 
-    def _start_niced(self) -> None:
-        from spacearm.base.runtime.priority import use_normal
+    def _start(self, priority: int) -> None:
+        from spacearm.base.runtime.priority import use_fifo, use_normal
         use_normal()
-        me = threading.get_native_id()          # Linux: nice is per thread
-        os.setpriority(os.PRIO_PROCESS, me, max(os.getpriority(os.PRIO_PROCESS, me), RENDER_NICE))
+        if not priority or use_fifo(priority) is not None:
+            me = threading.get_native_id()      # Linux: nice is per thread
+            os.setpriority(os.PRIO_PROCESS, me, max(os.getpriority(os.PRIO_PROCESS, me), RENDER_NICE))
         self._proc.start()
 
     def scheduling(self) -> str:
-        """The child's scheduling as the kernel has it now, e.g. "own process, normal, nice 0"."""
+        """The child's scheduling as the kernel has it now, e.g. "own process, SCHED_FIFO 1"."""
         pid = self._proc.pid
         try:
-            policy = "SCHED_FIFO" if os.sched_getscheduler(pid) == os.SCHED_FIFO else "normal"
-            return f"own process, {policy}, nice {os.getpriority(os.PRIO_PROCESS, pid)}"
+            if os.sched_getscheduler(pid) == os.SCHED_FIFO:
+                return f"own process, SCHED_FIFO {os.sched_getparam(pid).sched_priority}"
+            return f"own process, normal, nice {os.getpriority(os.PRIO_PROCESS, pid)}"
         except (OSError, TypeError):
             return "own process (ended)"
 
@@ -83,19 +96,18 @@ class RenderProcess:
 
 
 def _serve(conn, ring_name: str, scene, frame_rate: float, scene_seed: int, noise_seed: int | None,
-           render_noise: bool) -> None:
-    from spacearm.base.runtime.priority import use_normal
+           render_noise: bool, priority: int) -> None:
     from spacearm.base.vision.frames import ShmFrameRing
     from spacearm.firmware_sim.camera.service import CameraService
 
-    use_normal()          # already so (see the module's doc); never the nodes' SCHED_FIFO
     ring = ShmFrameRing.attach(ring_name, shared_tracker=True)
     service = CameraService.from_files(None, ring, scene, frame_rate, scene_seed, noise_seed)
     service.render_noise = render_noise
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, SERVE_NICE)
-    except PermissionError:       # without CAP_SYS_NICE it stays niced: frames come later
-        pass
+    if not priority:
+        try:
+            os.setpriority(os.PRIO_PROCESS, 0, 0)
+        except PermissionError:       # without CAP_SYS_NICE it stays niced: frames come later
+            pass
     try:
         while True:
             try:
