@@ -55,7 +55,7 @@ def register(app: typer.Typer) -> None:
                                              help="SCHED_FIFO priority of the cycle and the simulated nodes with "
                                                   "--clock realtime, as `daemon` runs its cycle (0: normal "
                                                   "scheduling); vision runs 10 below, the camera renders in its "
-                                                  "own process at normal priority")) -> None:
+                                                  "own process at SCHED_FIFO 1")) -> None:
         """Main job: boot the simulated arm over CAN, run the ORU changeout, summarise."""
         if job not in ("changeout", "checkout"):
             raise CommandFailed(f"--job: expected changeout or checkout, got {job!r}")
@@ -81,6 +81,7 @@ def register(app: typer.Typer) -> None:
         nodes_scheduling = describe()
         simulator = start_simulator(bus, bus_config, plant, time_base="sync" if clock == "lockstep" else "wall")
         daemon = None
+        cycle_thread = None
         scheduling = ""
         ring = None
         try:
@@ -123,6 +124,8 @@ def register(app: typer.Typer) -> None:
         finally:
             if daemon is not None:
                 daemon.request_stop()
+                if cycle_thread is not None:
+                    cycle_thread.join(timeout=5)    # its last cycles still use the network
                 daemon.shutdown()
             simulator.stop()
             if ring is not None:
@@ -182,7 +185,7 @@ def _changeout_summary(console: Console, result) -> None:
     console.print(f"changeout {result.arm_time:.1f} s arm time; {result.cycles} cycles in {result.wall_time:.1f} s wall; "
                   f"period error median {1e3 * s['period_error_median']:.3f} ms, p99 {1e3 * s['period_error_p99']:.3f} ms, "
                   f"max {1e3 * s['period_error_max']:.3f} ms; execution p99 {1e3 * s['execution_p99']:.3f} ms; "
-                  f"overruns {s['overruns']}")
+                  f"overruns {s['overruns']} ({s.get('skipped_cycles', 0)} cycles skipped)")
 
 
 def _ms(value) -> str:
