@@ -22,9 +22,9 @@ from spacearm.base.canopen import od
 from spacearm.base.canopen.codes import (ABORT_NO_OBJECT, ABORT_NO_SUBINDEX, ABORT_READ_ONLY, SDO_RX_BASE,
                                          SDO_TX_BASE, abort_text)
 from spacearm.base.canopen.eds import load_od
-from spacearm.base.config.bus import BusConfig, NodeConfig
+from spacearm.base.config.bus import BusConfig, NodeConfig, dump_toml
 from spacearm.base.transport import open_bus
-from spacearm.drivers.devices import DRIVERS
+from spacearm.drivers.devices import DRIVERS, DeviceDriver
 
 PROFILE_DEVICES = {402: "joint_drive"}    # a device profile this stack has a driver type for
 ALL_NODE_IDS = range(1, 128)
@@ -90,8 +90,9 @@ def scan(bus_spec: str, node_ids=ALL_NODE_IDS, timeout: float = 0.2) -> list[Fou
         bus.shutdown()
 
 
-def compare(found: list[FoundNode], config: BusConfig, bus_spec: str, sdo_timeout: float = 0.3) -> list[str]:
-    """One line per difference between the bus found and the bus file (with each node's EDS)."""
+def compare(found: list[FoundNode], config: BusConfig, bus_spec: str) -> list[str]:
+    """One line per difference between the bus found and the bus file (with each node's EDS);
+    SDO answers are awaited for the bus file's sdo_timeout."""
     lines = []
     by_id = {f.node_id: f for f in found}
     for cfg in config.nodes:
@@ -105,7 +106,7 @@ def compare(found: list[FoundNode], config: BusConfig, bus_spec: str, sdo_timeou
             lines.append(f"node {node.node_id}: on the bus, not in the bus file ({node.describe()})")
     present = [c for c in config.nodes if c.node_id in by_id]
     if present:
-        lines += _compare_objects(present, config, bus_spec, sdo_timeout)
+        lines += _compare_objects(present, config, bus_spec, config.bus.sdo_timeout)
     return lines
 
 
@@ -163,7 +164,7 @@ def _compare_objects(nodes: list[NodeConfig], config: BusConfig, bus_spec: str, 
 
 def _written_at_bringup(cfg: NodeConfig, config: BusConfig, eds) -> set[tuple[int, int]]:
     """The objects outside the PDO area that bring-up writes to this node."""
-    driver = DRIVERS[cfg.device](cfg, config.bus, eds)
+    driver = DRIVERS.get(cfg.device, DeviceDriver)(cfg, config.bus, eds)
     out = {(od.PRODUCER_HEARTBEAT, 0), (od.CONSUMER_HEARTBEAT, 1), (od.COB_ID_SYNC, 0), (od.COMM_CYCLE_PERIOD, 0),
            (od.GUARD_TIME, 0), (od.LIFE_TIME_FACTOR, 0)}
     out |= {(i, s) for i, s, _ in driver.hardware_objects() + driver.config_writes()}
@@ -180,11 +181,12 @@ def starting_bus_file(found: list[FoundNode], config: BusConfig | None = None) -
     has the node-ID, else a CiA 402 drive as a joint_drive; other profiles commented out
     (their device type must be named by hand)."""
     known = {n.node_id: n for n in config.nodes} if config else {}
-    lines = ["# Written by `spacearm bus scan`: the nodes found on the bus. Check each one's EDS", "",
-             "[bus]"]
-    if config is not None:
-        lines += [f"{k} = {v!r}" for k, v in config.bus.model_dump().items()]
-    elif any(n.node_id == 127 for n in found):   # 127 is the master's heartbeat ID by default
+    lines = ["# Written by `spacearm bus scan`: the nodes found on the bus. Check each one's EDS", ""]
+    if config is not None:               # the bus file's [bus] table as it is
+        lines += dump_toml(config).split("\n\n[[nodes]]")[0].splitlines()
+    else:
+        lines.append("[bus]")
+    if config is None and any(n.node_id == 127 for n in found):   # the master's heartbeat ID by default
         used = {n.node_id for n in found}
         lines.append(f"master_node_id = {max(i for i in ALL_NODE_IDS if i not in used)}")
     joints = 0

@@ -78,3 +78,18 @@ def test_bus_config_errors_name_file_and_key(tmp_path):
     p.write_text('[[nodes]]\nname = "a"\nnode_id = 2\ndevice = "ft_sensor"\n[nodes.joint]\nlower = 0\n')
     with pytest.raises(ConfigError, match=r"\[joint\] settings given for a ft_sensor node"):
         load_toml_model(p, BusConfig)
+
+
+def test_eds_with_empty_device_info_numbers_loads(tmp_path):
+    """Vendors leave [DeviceInfo] VendorNumber/ProductNumber empty (CANopenNode's example profile
+    does); the identity that matters is 1018h, so the file loads."""
+    from spacearm.base.canopen.eds import load_od
+    from spacearm.base.config.bus import EDS_DIR
+
+    text = (EDS_DIR / "joint_drive.eds").read_text()
+    lines = [("VendorNumber=" if line.startswith("VendorNumber=") else
+              "ProductNumber=" if line.startswith("ProductNumber=") else line) for line in text.splitlines()]
+    path = tmp_path / "vendor.eds"
+    path.write_text("\n".join(lines) + "\n")
+    od = load_od(path, 3)
+    assert od[0x1018][1].default == load_od(EDS_DIR / "joint_drive.eds", 3)[0x1018][1].default
