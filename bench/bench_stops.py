@@ -63,6 +63,11 @@ def stop_while_stopping(run):
     run.cycles(int(1.5 / run.daemon.options.period))
 
 
+def disable_mid_motion(run):
+    run.apply(run.core.cmd_disable)
+    run.cycles(int(1.5 / run.daemon.options.period))
+
+
 def sigterm(run):
     run.daemon.request_stop()
     run.daemon.run()
@@ -79,6 +84,7 @@ PATHS = [
     ("drive ignores quick stop", ignores_quick_stop, 0, 0.02),
     ("stop while stopping", stop_while_stopping, 0, 0.02),
     ("SIGTERM", sigterm, 3, 0.02),
+    ("disable during a motion", disable_mid_motion, 3, 0.02),
 ]
 
 
@@ -100,13 +106,15 @@ def run_path(trigger, joint, period, folder: Path) -> dict:
         faulted = [int(i) + 1 for i in np.flatnonzero(m.joints_faulted)]
         _, _, events, cycles = run.recording()
         arm = run.daemon.arm
-    t, q, t_stop = recorded_stop([c.data for c in cycles], events, period)
+    marked = events if any(e["kind"] == "protective_stop" for e in events) else [
+        {**e, "kind": "protective_stop"} for e in events if "disabling" in e["message"]]   # disable: no stop reason
+    t, q, t_stop = recorded_stop([c.data for c in cycles], marked, period)
     a_max = np.array([j.limits.acceleration for j in arm.joints])
     v_max = np.array([j.limits.velocity for j in arm.joints])
     figures = stop_figures(t, q, t_stop, v_max, a_max, period, one_path=joint is None)
     judged = figures if joint is None else [figures[joint]]
     worst = max(judged, key=lambda f: f.distance / f.distance_bound)
-    stop = next(e for e in events if e["kind"] == "protective_stop")
+    stop = next((e for e in events if e["kind"] == "protective_stop"), {"code": "(disable: no stop)"})
     escalated = [e["code"] for e in events if e["kind"] == "stop_escalated"]
     state = f"drives {drives}, brakes {brakes}" + (f", fault: joint {', '.join(map(str, faulted))}" if faulted else "")
     return {"figure": worst, "problems": [p for f in figures for p in f.problems()], "code": stop["code"],
