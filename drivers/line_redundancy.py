@@ -7,9 +7,10 @@ and sends everything (its heartbeat, SYNC, RPDOs, SDO, NMT) on the active one. T
 follow its heartbeat, so moving the active line moves the network. The rule it moves by
 (Lely leaves this decision to the application; ours, from the nodes' traffic per line):
 
-* the active line is silent: two SYNCs in a row went out on it while nodes were
-  OPERATIONAL and no node frame came back (a dead line shows within two cycles), or no
-  node frame for 1.5 of the slowest node's heartbeat periods (an idle network) -> switch;
+* the active line is silent (judged only while nodes are OPERATIONAL: in bring-up a node
+  talks only when asked): two SYNCs in a row went out on it and no node frame came back (a
+  dead line shows within two cycles), or no node frame for 1.5 of the slowest node's
+  heartbeat periods (an idle network) -> switch;
 * most nodes are heard on the other line more recently than on the active one (they
   toggled there: the active line does not reach them) -> switch;
 * after a switch it waits `hold_off` (the nodes' toggle time plus two master heartbeat
@@ -187,6 +188,10 @@ class LineRedundancyMaster:
                                       f"{LINE_NAMES[other]} only")]
         if self.lost:
             return [self._switch(now, "searching for the nodes")] if now - self.switched_at >= SEARCH_PERIOD else []
+        # silence counts only while nodes are OPERATIONAL (as the nodes' own rule): in bring-up a
+        # node talks only when asked, and a slow SDO answer is no dead line
+        if not self.operational:
+            return []
         if now - self.switched_at < self.hold_off or now - self.left_silent_at[other] < self.lost_after:
             return []
         if self.unanswered[active] >= SYNCS_UNANSWERED:
@@ -226,7 +231,7 @@ class LineRedundancyMaster:
         with self._lock:
             events = self._decide(now)
             heard = [t for t in self.line_last if t is not None]
-            if heard and not self.lost and now - max(heard) > self.lost_after:
+            if heard and self.operational and not self.lost and now - max(heard) > self.lost_after:
                 self.lost = True
                 events.append(LineEvent(now, LINES_LOST, self.bus.active,
                                         f"both bus lines lost: no node frame on line A or B for "
