@@ -54,7 +54,7 @@ def test_camera_calibration_on_the_daemon_cuts_held_out_pose_error(loopback_hub,
     bus = loopback_hub.spec(f"camcal-{free_port()}")
     bus_config = patient_bus(tmp_path / "bus.toml")
     launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT), "--camera", camera, "--board", str(BOARD),
-            "--bus-config", str(bus_config)], bus_spec=bus, ready="nodes ready")
+            "--bus-config", str(bus_config), "--time-base", "sync"], bus_spec=bus, ready="nodes ready")
     arm = fast_copy(ARM, tmp_path / "oru_arm_fast.toml")
     api = f"tcp:127.0.0.1:{free_port()}"
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--arm", str(arm), "--api", api, "--no-record",

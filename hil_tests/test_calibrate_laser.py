@@ -59,7 +59,8 @@ def true_distances(Q: np.ndarray) -> np.ndarray:
 
 def test_laser_calibration_on_the_daemon_cuts_absolute_error(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"laser-{free_port()}")
-    sim = launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT)], bus_spec=bus, ready="nodes ready")
+    sim = launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT), "--time-base", "sync"], bus_spec=bus,
+                 ready="nodes ready")         # beside a lockstep daemon (README), a load stall is no lost controller
     port = re.search(r"laser ranger on (\S+)", sim.log_paths[0].read_text()).group(1)
     arm = fast_copy(ARM, tmp_path / "laser_arm_fast.toml")
     api = f"tcp:127.0.0.1:{free_port()}"
