@@ -1,5 +1,6 @@
 """Command-to-daemon latency of the console: `spacearm stop`, `status`, `enable`, `disable`,
-`reset` as the operator types them (a new process each), idle and with a 2-process CPU load.
+`reset`, `oru pause`, `oru status`, `control take`, `watch` as the operator types them (a new
+process each), idle and with a 2-process CPU load.
 
 The console talks to the daemon through a forwarding proxy in this process that notes when each
 connection's first request line arrives: command-to-daemon = that moment - the moment the
@@ -35,9 +36,14 @@ from bench.bench_web import start, stop  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
 from spacearm.base.runtime.priority import describe, use_fifo  # noqa: E402
 
-COMMANDS = ("reset", "enable", "status", "disable", "stop", "stop-nort")
-NO_RT = {"stop-nort": ("stop", {"SPACEARM_STOP_RT_PRIORITY": "0"})}   # stop without its SCHED_FIFO request
-TARGETS = {"stop": (0.150, 0.500), "stop-nort": (0.150, 0.500)}      # s: idle, loaded (issue 21)
+COMMANDS = ("reset", "enable", "status", "disable", "stop", "stop-nort", "oru pause", "oru status", "control take",
+            "watch")
+# command -> (words typed, extra environment)
+TYPED = {"stop-nort": (["stop"], {"SPACEARM_STOP_RT_PRIORITY": "0"}),   # stop without its SCHED_FIFO request
+         "watch": (["watch", "--count", "1"], {})}
+TARGETS = {"stop": (0.150, 0.500), "stop-nort": (0.150, 0.500),      # s: idle, loaded (issue 21)
+           "oru pause": (0.150, None), "oru status": (0.150, None), "control take": (0.150, None),
+           "watch": (0.150, None)}                                    # idle (issue 33)
 SPACEARM = str(Path(sys.executable).parent / "spacearm")
 PROXY_RT_PRIORITY = 50      # the daemon's API threads' (spacearm daemon --rt-priority default)
 
@@ -92,8 +98,8 @@ def measure(proxy: ArrivalProxy, rounds: int, env: dict) -> dict[str, tuple[list
         for command in COMMANDS:
             before, answered = len(proxy.arrivals), len(proxy.answers)
             spawned = time.monotonic()
-            word, extra = NO_RT.get(command, (command, {}))
-            subprocess.run([SPACEARM, word, "--api", f"tcp:127.0.0.1:{proxy.port}"], env={**env, **extra},
+            words, extra = TYPED.get(command, (command.split(), {}))
+            subprocess.run([SPACEARM, *words, "--api", f"tcp:127.0.0.1:{proxy.port}"], env={**env, **extra},
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, timeout=60)
             ended = time.monotonic()
             if len(proxy.arrivals) > before:
@@ -163,17 +169,17 @@ def main() -> None:
             stop(proc)
     print(f"\nconsole command-to-daemon latency ({args.rounds} runs per command and phase; "
           f"{platform.node()}, {os.cpu_count()} CPUs, Python {platform.python_version()})")
-    print(f"{'phase':<7} {'command':<10} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
+    print(f"{'phase':<7} {'command':<12} {'to daemon median':>17} {'p99':>8} {'round trip median':>18} "
           f"{'p99':>8} {'daemon answer median':>21} {'p99':>8} {'target ms (to daemon)':>34} {'load':>5} {'steal':>6}")
     for phase, results, load, steal in rows:
         for command, (arrive, total, answer) in results.items():
             target = TARGETS.get(command)
-            limit = None if target is None else target[0 if phase == "idle" else 1]
+            limit = None if target is None else target[0 if phase == "idle" else 1]   # None: no target
             med, p99 = (1e3 * np.median(arrive), 1e3 * np.percentile(arrive, 99)) if arrive else (float("nan"),) * 2
             a_med, a_p99 = (1e3 * np.median(answer), 1e3 * np.percentile(answer, 99)) if answer else (float("nan"),) * 2
             verdict = "-" if limit is None else (f"<= {1e3 * limit:.0f}: median " + ("ok" if med <= 1e3 * limit else "MISSED")
                                                  + ", p99 " + ("ok" if p99 <= 1e3 * limit else "MISSED"))
-            print(f"{phase:<7} {command:<10} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
+            print(f"{phase:<7} {command:<12} {med:14.1f} ms {p99:5.1f} ms {1e3 * np.median(total):15.1f} ms "
                   f"{1e3 * np.percentile(total, 99):5.1f} ms {a_med:18.1f} ms {a_p99:5.1f} ms {verdict:>34} {load:5.1f} {100 * steal:5.1f}%")
     print("command-to-daemon: process spawn -> its first request at the daemon's API (proxy in front). "
           "daemon answer: that request -> the first byte of the daemon's answer (its API thread and the cycle). "

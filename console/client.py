@@ -28,8 +28,12 @@ class ApiClient:
                 host, _, port = rest.rpartition(":")
                 self._sock = socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout)
             else:
-                raise CommandFailed(f"bad API address {address!r}: use tcp:HOST:PORT or unix:/path")
-        except (OSError, ValueError) as exc:
+                raise CommandFailed(f"bad API address {address!r}: use tcp:HOST:PORT or unix:/path",
+                                    ErrorCode.BAD_ARGUMENT)
+        except ValueError:
+            raise CommandFailed(f"bad API address {address!r}: use tcp:HOST:PORT or unix:/path",
+                                ErrorCode.BAD_ARGUMENT) from None
+        except OSError as exc:
             raise CommandFailed(f"cannot reach the daemon at {address}: {exc} "
                                 "(is `spacearm daemon` running?)", ErrorCode.NO_CONNECTION) from None
         self._stream = self._sock.makefile("rwb")

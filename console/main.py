@@ -93,6 +93,17 @@ STOP_RT_PRIORITY = 20
 
 def main(argv: list[str] | None = None) -> None:
     """Run one command under the error contract (console/errors.py) and exit with its code."""
+    try:
+        _main(argv)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # The reader went away (`status --json | head -c 600`): what it wanted it has; no
+        # traceback, and none either from the interpreter's own flush of the dead pipe at exit.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        raise SystemExit(0) from None
+
+
+def _main(argv: list[str] | None) -> None:
     args = sys.argv[1:] if argv is None else list(argv)
     if args[:1] == ["stop"] and argv is None:
         from spacearm.base.runtime.priority import use_fifo

@@ -1,0 +1,58 @@
+"""Small console contracts an operator ran into (issue 33): output into a pipe that closes
+early, and a bad API address, each one line with its code, never a traceback."""
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+import threading
+
+import pytest
+
+
+@pytest.fixture
+def fake_daemon():
+    """A loopback server answering every request line with a large status (like a real one's
+    `status --json`, ~10 kB), standing in for the daemon."""
+    server = socket.create_server(("127.0.0.1", 0))
+    status = {"state": "enabled", "joints": [{"name": f"j{i}", "q": 0.1 * i, "dq": 0.0, "tau": 0.0, "enabled": True}
+                                             for i in range(6)], "events": [{"t": i, "kind": "x", "message": "y" * 80}
+                                                                             for i in range(100)]}
+    answer = json.dumps({"id": 1, "ok": True, "result": status}).encode() + b"\n"
+
+    def serve():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            with conn:
+                stream = conn.makefile("rwb")
+                while stream.readline():
+                    stream.write(answer)
+                    stream.flush()
+    threading.Thread(target=serve, daemon=True).start()
+    yield f"tcp:127.0.0.1:{server.getsockname()[1]}"
+    server.close()
+
+
+def spacearm(*args: str, **kwargs) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "spacearm.console.main", *args], capture_output=True, text=True,
+                          timeout=120, **kwargs)
+
+
+def test_status_json_into_a_pipe_that_closes_early_prints_no_traceback(fake_daemon):
+    # head reads 600 bytes and exits; the status is larger, so the console writes into a dead pipe
+    pipeline = subprocess.run(f"{sys.executable} -m spacearm.console.main status --json --api {fake_daemon} "
+                              "| head -c 600", shell=True, capture_output=True, text=True, timeout=120)
+    assert len(pipeline.stdout) == 600
+    assert pipeline.stderr == "", pipeline.stderr
+
+
+@pytest.mark.parametrize("address", ["bogus", "tcp:127.0.0.1:notaport"])
+def test_a_bad_api_address_is_bad_input_with_its_code(address):
+    for args in (["status"], ["oru", "status"], ["jog", "1", "1deg"]):
+        done = spacearm(*args, "--api", address)
+        assert done.returncode == 2, (args, done.stderr)
+        assert done.stderr.startswith("error[bad_argument]: bad API address"), (args, done.stderr)
