@@ -34,6 +34,7 @@ from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plan
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
 from spacearm.offline.diagnosis.honesty import confirmed, count_reversals, equally_good, moved, uncertain
 from spacearm.offline.diagnosis.joint_units import units_of
+from spacearm.offline.diagnosis.physical import parameter_violations
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.breakaway import at_breakaway
@@ -84,6 +85,12 @@ class Diagnosis:
     t: np.ndarray | None = field(default=None, repr=False)
     not_reported: list[str] = field(default_factory=list)   # fits left out, and why
     sensor_findings: list[SensorFinding] = field(default_factory=list)
+    repairs: list[str] = field(default_factory=list)          # how the time base was repaired (rows dropped, ...)
+
+    @property
+    def model_wrong(self) -> list[str]:
+        """Fits that needed a physically impossible value: where the model is wrong, not a finding."""
+        return [w for w in self.not_reported if w.startswith(MODEL_WRONG)]
 
     @property
     def unexplained(self) -> list[ChannelResult]:
@@ -91,9 +98,10 @@ class Diagnosis:
 
     @property
     def verdict(self) -> str:
-        if not self.findings and not self.unexplained and not self.sensor_findings:
+        if not self.findings and not self.unexplained and not self.sensor_findings and not self.model_wrong:
             return "no significant mismatch between the recording and the nominal simulation"
         words = [s.text for s in self.sensor_findings] + [f.text + "".join(f" -- or equally well: {a}" for a in f.alternatives) for f in self.findings]
+        words += [w.replace(" (not reported)", "") for w in self.model_wrong]
         if self.unexplained:
             words.append("mismatch no catalogue effect explains on " + ", ".join(
                 f"{c.name} ({c.excess_after:.1f}x the significance threshold"
@@ -309,7 +317,8 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
     quanta = ([nominal.joint_params(j).position_quantum for j in range(n)],   # torque: 6077h is per mille
               [rated_joint_torque(settings[j], nominal.joint_params(j)) / 1000.0 for j in range(n)])
     kinds = [nominal.joint_params(j).kind for j in range(n)]
-    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active, kinds)
+    sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, (sim.q, sim.dq), quanta, active, kinds,
+                              table.q_cmd)
     coarse_torque = {f.joint for f in sensors if f.effect == "torque_quantisation"}
     for j in active:
         report(f"fitting joint {j + 1}", 0.1 + 0.6 * j / n)
@@ -427,6 +436,16 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         reversals = count_reversals(quiet.dq[:, fit.index]) if fit.channel == "tau" else None
         kind = kinds[fit.index] if fit.channel != "wrench" else "revolute"
         text = describe(fit, params, errs, reversals, kind)
+        impossible = parameter_violations(params)
+        if impossible:
+            rejected.append((fit, f"{MODEL_WRONG}: {text} would need {'; '.join(impossible)}, which no joint has "
+                                  "(not reported)"))
+            continue
+        worse = _made_worse(fit, channels)
+        if worse:
+            rejected.append((fit, f"{text} (makes {', '.join(worse)} worse on the held-out rows by more than its "
+                                  "noise: not accepted)"))
+            continue
         if not fit.by_envelope and uncertain(params, errs):
             rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
             continue
@@ -451,6 +470,19 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
+
+
+MODEL_WRONG = "the model is wrong here"
+
+
+def _made_worse(fit: ChannelFit, channels: list[ChannelResult]) -> list[str]:
+    """The fitted joint's channels whose held-out RMS the re-simulation with the fits raises by
+    more than the channel's noise: a better torque bought with a worse position is no finding."""
+    if fit.channel == "wrench" or fit.by_envelope:
+        return []
+    own = (f"q_{fit.index + 1}", f"tau_{fit.index + 1}")
+    return [f"{c.name} {c.rms_before:.3g} -> {c.rms_after:.3g} (noise {c.noise:.2g})" for c in channels
+            if c.name in own and c.rms_after > c.rms_before + c.noise]
 
 
 def _why_alike(dq: np.ndarray, kind: str = "revolute", best: ChannelFit | None = None,

@@ -363,7 +363,11 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
             text, p, e = _describe_friction(fit, v[:, j], kinds[j])
             before_j = _rms((r - rb)[~train, j])
             solo = _rms((r - rb)[~train, j] - fit.prediction[~train])
-            if uncertain(p, e):
+            if parameter_violations(p):
+                # the fit keeps friction >= 0 (a negative law is refused), so this is a guard, not a path
+                model_wrong.append(f"the model is wrong here: {text} would need {'; '.join(parameter_violations(p))}")
+                after = _rms((r - rb)[~train, j])
+            elif uncertain(p, e):
                 not_reported.append(text + " (standard error larger than half the value: not reported)")
                 after = _rms((r - rb)[~train, j])
             elif solo > (1 - MIN_CONFIRMED_REDUCTION) * before_j:

@@ -19,6 +19,8 @@ def summary(d: Diagnosis) -> dict:
         "unexplained_channels": [c.name for c in d.unexplained],
         "heldout_from_s": d.heldout_start,
         "not_reported": d.not_reported,
+        "model_wrong": d.model_wrong,
+        "time_base_repairs": d.repairs,
         "joints": [{"joint": j + 1, "kind": kind, "position_unit": units_of(kind).position,
                     "effort_unit": units_of(kind).effort} for j, kind in enumerate(kinds)],
         "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
@@ -100,6 +102,9 @@ def write_report(d: Diagnosis, out: Path, source: str, nominal: PlantConfig) -> 
             [f"- {f.text}" for f in d.sensor_findings] + [""]
     if d.not_reported:
         lines += ["Fitted but not reported:", ""] + [f"- {w}" for w in d.not_reported] + [""]
+    if d.repairs:
+        lines += ["Time base (how the recording was put on one period before the replay):", ""] + \
+            [f"- {w}" for w in d.repairs] + [""]
     lines += ["Mismatch statistic: residual vs noise as a multiple of the significance limit (> 1: significant).",
               "", "| channel | noise | held-out RMS before | after | reduction | mismatch before | after |",
               "| --- | --- | --- | --- | --- | --- | --- |"]
