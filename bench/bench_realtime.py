@@ -298,8 +298,8 @@ def changeout(runs: int, steal: CpuSteal) -> list[str]:
     from hil_tests.harness import free_port
     rows, done = [], 0
     ready_q = load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]
+    hub = HubProcess(rt_priority=50, ready_timeout=60.0)     # before the neighbours: its start-up is not measured
     with tempfile.TemporaryDirectory() as work, CpuLoad(2):
-        hub = HubProcess(rt_priority=50)
         try:
             for run in range(runs):
                 steal.fraction()
@@ -334,6 +334,17 @@ def changeout(runs: int, steal: CpuSteal) -> list[str]:
 
 def _fly_stage_1(client, ready_q) -> tuple[str, dict]:
     """Enable, move to ready, fly stage 1; ("done" or what ended it, the daemon's last status)."""
+    from spacearm.console.errors import CommandFailed
+    try:
+        oru = _enable_and_fly(client, ready_q)
+    except CommandFailed as exc:
+        oru = {"state": f"refused ({exc})"}
+    status = client.call("status")
+    outcome = oru["state"] if not status.get("stop") else f"stopped ({status['stop']['code']})"
+    return outcome, status
+
+
+def _enable_and_fly(client, ready_q) -> dict:
     lease = client.call("control.take", holder="bench_realtime")["lease"]
     client.call("enable", lease=lease)
     deadline = time.monotonic() + 30.0
@@ -350,9 +361,7 @@ def _fly_stage_1(client, ready_q) -> tuple[str, dict]:
         if time.monotonic() > deadline:
             break
         time.sleep(0.5)
-    status = client.call("status")
-    outcome = oru["state"] if not status.get("stop") else f"stopped ({status['stop']['code']})"
-    return outcome, status
+    return oru
 
 
 def mainjob(stages: str, steal: CpuSteal) -> list[str]:
