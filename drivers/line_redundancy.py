@@ -8,9 +8,9 @@ follow its heartbeat, so moving the active line moves the network. The rule it m
 (Lely leaves this decision to the application; ours, from the nodes' traffic per line):
 
 * the active line is silent (judged only while nodes are OPERATIONAL: in bring-up a node
-  talks only when asked): two SYNCs in a row went out on it and no node frame came back (a
-  dead line shows within two cycles), or no node frame for 1.5 of the slowest node's
-  heartbeat periods (an idle network) -> switch;
+  talks only when asked): two SYNCs in a row went out on it and no node frame came back for
+  two master heartbeat periods (a dead line shows within two or three cycles), or no node
+  frame for 1.5 of the slowest node's heartbeat periods (an idle network) -> switch;
 * most nodes are heard on the other line more recently than on the active one (they
   toggled there: the active line does not reach them) -> switch;
 * after a switch it waits `hold_off` (the nodes' toggle time plus two master heartbeat
@@ -105,6 +105,7 @@ class LineRedundancyMaster:
         self.on_event = on_event
         self.clock = clock
         self.silence = IDLE_SILENCE_PERIODS * node_period
+        self.master_period = master_period
         self.hold_off = settings.switch_time() + 2 * master_period
         self.lost_after = self.hold_off + 3 * master_period
         self.heard: tuple[dict[int, float], dict[int, float]] = ({}, {})
@@ -194,7 +195,9 @@ class LineRedundancyMaster:
             return []
         if now - self.switched_at < self.hold_off or now - self.left_silent_at[other] < self.lost_after:
             return []
-        if self.unanswered[active] >= SYNCS_UNANSWERED:
+        # two master heartbeat periods of silence too: a loaded machine's late answers are no dead line
+        if self.unanswered[active] >= SYNCS_UNANSWERED and now - (last if last is not None else self.switched_at) \
+                >= SYNCS_UNANSWERED * self.master_period:
             self.left_silent_at[active] = now
             return [self._switch(now, f"{self.unanswered[active]} SYNCs on line {LINE_NAMES[active]} "
                                       "brought no node frame")]

@@ -154,6 +154,10 @@ class RedundantBus(can.BusABC):
                     return
                 continue
             if msg is not None:
+                # observed here, as it arrives: the queue's reader (a Notifier) may run much later
+                # on a loaded machine, and the master's rule judges a line by when its frames came
+                if not (self._rx_blocked(line) and not msg.is_error_frame):
+                    self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
                 self._queue.put((line, msg))
 
     def _recv_internal(self, timeout):
@@ -163,7 +167,6 @@ class RedundantBus(can.BusABC):
             return None, False
         if self._rx_blocked(line) and not msg.is_error_frame:
             return None, False
-        self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
         _rx.line = line
         return msg, False
 

@@ -94,6 +94,9 @@ def test_master_switches_after_two_unanswered_syncs_and_completes():
     assert bus.active == 0 and master.bridging()
     clock.t = 0.03
     master.on_tx(0, 0x080)
+    assert bus.active == 0          # two SYNCs, but not yet two master heartbeat periods of silence
+    clock.t = 0.05
+    master.on_tx(0, 0x080)
     assert bus.active == 1 and [e.code for e in master.events] == [LINE_SWITCH]
     hear(master, clock, 1, (1, 2), 0.1)
     assert master.bridging()
@@ -115,7 +118,7 @@ def test_master_follows_nodes_heard_on_the_other_line():
 def test_master_does_not_chase_back_to_a_line_it_left_for_silence():
     master, bus, clock = make_master()
     hear(master, clock, 0, (1, 2, 3), 0.0)
-    for t in (0.01, 0.03):
+    for t in (0.01, 0.05):
         clock.t = t
         master.on_tx(0, 0x080)
     assert bus.active == 1
@@ -126,7 +129,7 @@ def test_master_does_not_chase_back_to_a_line_it_left_for_silence():
 def test_master_reports_both_lines_lost_once_then_searches_slowly():
     master, bus, clock = make_master()
     hear(master, clock, 0, (1, 2, 3), 0.0)
-    for t in (0.01, 0.03):
+    for t in (0.01, 0.05):
         clock.t = t
         master.on_tx(0, 0x080)
     for t in (0.1, 0.2, 0.3, 0.4):
