@@ -89,9 +89,15 @@ def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarra
         if stop_time > 0.0:
             a_limit = np.minimum(a_limit, np.maximum(v_all, 1e-9) / stop_time)
     out = []
+    # the pre-stop speed: the last window's, or the mean of the last 100 ms if larger (a
+    # resolver step in the last window alone reads a cruising joint 3.5 % slow)
+    long = 5 * span if k >= 5 * span else span
+    v_mean = np.abs(q[k] - q[k - long]) / (t[k] - t[k - long])
+    # monotonic: judged on two-window differences, where one resolver step is half as large
+    smooth = (q[2 * span:] - q[:-2 * span]) / (t[2 * span:] - t[:-2 * span])[:, None]
     for j in (range(q.shape[1]) if joints is None else joints):
         v = dq[:, j]
-        v_stop = abs(v[k - span])
+        v_stop = max(abs(v[k - span]), float(v_mean[j]))
         direction = np.sign(v[k - span]) or 1.0
         after = v[k:]
         speed = np.abs(after)
@@ -104,7 +110,7 @@ def stop_figures(t: np.ndarray, q: np.ndarray, t_stop: float, v_limit: np.ndarra
             distance_bound=(1.0 + DISTANCE_TOLERANCE) * (v_stop ** 2 / (2.0 * a_limit[j]) + v_stop * period),
             time_to_rest=float(t[k + rest] - t[k]) if rest is not None else float("inf"),
             time_bound=float(v_stop / a_limit[j] + 2.0 * period),
-            worst_rise=float(max(0.0, np.max(np.diff(np.concatenate([[v_stop], speed]))))),
+            worst_rise=float(max(0.0, np.max(np.diff(np.concatenate([[v_stop], np.abs(smooth[k:, j])]))))),
             reversed=float(max(0.0, -along.min()))))
     return out
 
