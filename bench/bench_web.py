@@ -8,8 +8,10 @@ separate processes on the loopback hub; the pages are two tabs of headless Chrom
 (Debian /usr/bin/chromium, software WebGL) driven by Playwright. Three phases of
 --duration s each: (0) no web server, (1) web server polling with no page, (2) two pages.
 Period errors come from the daemon's own recording, split by the phases' daemon times;
-latency is measured in the page: arrival time (performance.timeOrigin + now) minus the
-wall time at which the cycle woke (monotonic `woke_at` from status, same machine clock).
+latency is measured in the page: arrival time (performance.now, offset to the server's
+CLOCK_MONOTONIC by an NTP-style exchange over the WebSocket) minus the cycle's monotonic
+`woke_at` from status. Nothing moves during the bench, so a page gets one update a second (it
+gets every cycle only while what it shows changes; console/web/server.py).
 """
 from __future__ import annotations
 
@@ -145,8 +147,8 @@ def main() -> None:
         ("state latency cycle -> page, median", f"{np.median(lat):.1f} ms ({len(lat)} updates, 2 pages)", "< 20 ms",
          np.median(lat) < 20),
         ("state latency cycle -> page, p99", f"{np.percentile(lat, 99):.1f} ms", "< 60 ms", np.percentile(lat, 99) < 60),
-        ("update rate in the page (each of 2)", " / ".join(f"{r:.1f}/s" for r in rates)
-         + f" (daemon ran {daemon_rate:.1f} cycles/s)", ">= 95 %", min(rates) >= 0.95 * daemon_rate),
+        ("update rate in the page, nothing moving (each of 2)", " / ".join(f"{r:.1f}/s" for r in rates)
+         + f" (daemon ran {daemon_rate:.1f} cycles/s; idle pages get 1/s)", "", ""),
         ("server: status requests per state update", f"{info['status_polls'] / info['state_updates']:.2f} "
          f"({info['status_polls']} requests, {info['state_updates']} cycles), one connection for all pages", "", ""),
     ]

@@ -43,6 +43,7 @@ def run_experiment(joints: list[int], limits: list[JointLimit], arm_name: str, n
         start = np.array([j["q_cmd"] for j in status["joints"]])
         moves = experiment_moves(joints, start, limits)
         was_recording = status.get("recording") is not None
+        out.parent.mkdir(parents=True, exist_ok=True)   # the daemon refuses a missing directory
         controlled_call(client, "record.start", path=str(out.resolve()))
         try:
             for move in moves:

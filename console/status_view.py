@@ -26,6 +26,8 @@ def status_lines(status: dict[str, Any]) -> list[str]:
         if late and (status.get("stop") or {}).get("code") in ("pdo_missing", "heartbeat_lost"):
             lines.append(f"  likely cause: the {' and the '.join(late)} reported itself late (below); "
                          "the nodes it hosts or carries are not at fault")
+    if tool_text(status):
+        lines.append(tool_text(status))
     lines.append(f"control: {control.get('holder') or 'free'}   "
                  f"recording: {(status.get('recording') or {}).get('path') or 'off'}")
     if stats:
@@ -56,12 +58,56 @@ def status_lines(status: dict[str, Any]) -> list[str]:
     return lines
 
 
+def tool_text(status: dict[str, Any]) -> str | None:
+    """The measured tool pose as people read it: mm and degrees (the daemon sends m and rad)."""
+    tool = status.get("tool")
+    if not tool:
+        return None
+    x, y, z = (1e3 * v for v in tool["xyz"])
+    r, p, w = (math.degrees(v) for v in tool["rpy"])
+    return (f"tool (base frame): x {x:.1f} mm  y {y:.1f} mm  z {z:.1f} mm  "
+            f"roll {r:.2f} deg  pitch {p:.2f} deg  yaw {w:.2f} deg")
+
+
+def limit_margin(joint: dict[str, Any]) -> tuple[float, str] | None:
+    """(distance to the nearer joint limit, which one: 'min'/'max'), in the joint's units."""
+    if joint.get("q_min") is None or joint.get("q_max") is None:
+        return None
+    below, above = joint["q"] - joint["q_min"], joint["q_max"] - joint["q"]
+    return (below, "min") if below <= above else (above, "max")
+
+
+def _margin_text(joint: dict[str, Any]) -> str:
+    margin = limit_margin(joint)
+    return "-" if margin is None else f"{math.degrees(margin[0]):8.2f} {margin[1]}"
+
+
+EVENTS_SHOWN = 5
+
+
+def event_lines(status: dict[str, Any], count: int = EVENTS_SHOWN) -> list[str]:
+    """The last events, newest last, each with its code: `t s [code] kind: message`."""
+    lines = []
+    for event in (status.get("events") or [])[-count:]:
+        code = event.get("code") or event.get("kind")
+        where = " ".join(f"{k} {event[k]}" for k in ("node", "joint") if event.get(k) is not None)
+        lines.append(f"  {event.get('t', 0.0):9.2f} s [{code}] {event.get('message', '')}"
+                     + (f" ({where})" if where else ""))
+    return lines
+
+
 def render_status(status: dict[str, Any]) -> str:
     lines = status_lines(status)
-    lines.append(f"{'joint':<16}{'q deg':>10}{'target deg':>12}{'dq deg/s':>10}{'tau N m':>9}  enabled")
+    lines.append(f"{'joint':<16}{'q deg':>10}{'target deg':>12}{'dq deg/s':>10}{'tau N m':>9}  enabled"
+                 f"{'to limit deg':>16}")
     for joint in status.get("joints", []):
         lines.append(f"{joint['name']:<16}{_deg(joint['q']):>10}{_deg(joint.get('q_cmd')):>12}"
-                     f"{_deg(joint['dq']):>10}{joint['tau']:9.2f}  {'yes' if joint['enabled'] else 'no'}")
+                     f"{_deg(joint['dq']):>10}{joint['tau']:9.2f}  {'yes' if joint['enabled'] else 'no ':<7}"
+                     f"{_margin_text(joint):>16}")
+    events = event_lines(status)
+    if events:
+        lines.append(f"last events ({len(events)} of {len(status.get('events') or [])}):")
+        lines += events
     return "\n".join(lines)
 
 
@@ -71,11 +117,11 @@ def status_table(status: dict[str, Any]):
     from rich.table import Table
     from rich.text import Text
     table = Table(title=None, expand=False)
-    for column in ("joint", "q deg", "target deg", "dq deg/s", "tau N m", "enabled"):
+    for column in ("joint", "q deg", "target deg", "dq deg/s", "tau N m", "enabled", "to limit deg"):
         table.add_column(column, justify="left" if column == "joint" else "right")
     for joint in status.get("joints", []):
         table.add_row(joint["name"], _deg(joint["q"]), _deg(joint.get("q_cmd")), _deg(joint["dq"]),
-                      f"{joint['tau']:.2f}", "yes" if joint["enabled"] else "no")
-    header = Text("\n".join(status_lines(status)),
+                      f"{joint['tau']:.2f}", "yes" if joint["enabled"] else "no", _margin_text(joint))
+    header = Text("\n".join(status_lines(status) + event_lines(status, 3)),
                   style="bold red" if status["state"] == "stopped" else "")
     return Group(header, table)

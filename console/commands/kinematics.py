@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import typer
 
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.console.units import UnitError, parse_angle, parse_length
 from spacearm.base.kinematics import (KinematicData, analytic_ik, fk, load_model, matrix_to_rpy,
                                    rpy_to_matrix, solve_ik)
@@ -34,16 +34,31 @@ def _joints_text(model, q, column: str = "10.4f", unit: str = "  deg") -> str:
                     for v, kind in zip(q, model.joint_types))
 
 
+def _posture(arm: Path, model, name: str) -> list[float]:
+    """A named posture of the arm file (its [postures], and home), in rad/m."""
+    from spacearm.base.config.arm import load_arm_config
+    postures = load_arm_config(arm).postures
+    if name == "home" and name not in postures:
+        return list(model.q_home)
+    if name not in postures:
+        raise BadInput(f"unknown posture {name!r}; the arm file has: {', '.join(dict.fromkeys(['home', *postures]))}",
+                       "bad_argument")
+    return list(postures[name])
+
+
 def register(app: typer.Typer) -> None:
     kin_app = typer.Typer(help="Forward and inverse kinematics of an arm file.", no_args_is_help=True)
 
     @kin_app.command("fk", context_settings=NUMERIC_ARGS)
     @friendly_errors
     def forward(arm: Path = ARM_ARGUMENT,
-                q: list[str] = typer.Argument(None, help="Joint angles (rad, or with deg); default: home."),
+                q: list[str] = typer.Argument(None, help="Joint angles (rad, or with deg), or a named posture "
+                                              "of the arm file (home, ready, ...); default: home."),
                 as_json: bool = typer.Option(False, "--json")) -> None:
-        """Tool pose in the base frame for joint angles Q."""
+        """Tool pose in the base frame for joint angles Q or a named posture."""
         model = load_model(arm)
+        if q and len(q) == 1 and q[0][:1].isalpha():
+            q = [repr(v) for v in _posture(arm, model, q[0])]
         try:
             # a prismatic joint takes a length (m, or with mm)
             angles = (np.array([parse_length(v) if kind == "prismatic" else parse_angle(v)
@@ -68,7 +83,6 @@ def register(app: typer.Typer) -> None:
                 all_solutions: bool = typer.Option(False, "--all", help="List every closed-form solution."),
                 as_json: bool = typer.Option(False, "--json")) -> None:
         """Joint angles that put the tool at POSE (nearest to the seed posture)."""
-        from spacearm.base.config.arm import load_arm_config
         if len(pose) != 6:
             raise CommandFailed(f"pose needs 6 values (x y z roll pitch yaw), got {len(pose)}")
         try:
@@ -77,10 +91,7 @@ def register(app: typer.Typer) -> None:
         except UnitError as exc:
             raise CommandFailed(str(exc)) from None
         model = load_model(arm)
-        postures = load_arm_config(arm).postures
-        if seed != "home" and seed not in postures:
-            raise CommandFailed(f"unknown posture {seed!r}; the arm file has: home, {', '.join(postures)}")
-        q0 = np.array(postures[seed]) if seed in postures else np.array(model.q_home)
+        q0 = np.array(_posture(arm, model, seed))
         T = np.eye(4)
         T[:3, :3] = rpy_to_matrix(rpy)
         T[:3, 3] = xyz

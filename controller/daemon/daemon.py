@@ -31,6 +31,7 @@ from spacearm.controller.daemon.recorder_thread import RecorderThread
 from spacearm.controller.recording.can_trace import TraceLimit
 from spacearm.controller.cycle import Command, Finding, FindingCode, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
+from spacearm.base.kinematics import KinematicData, fk, matrix_to_rpy
 from spacearm.base.kinematics.model import KinematicModel
 from spacearm.controller.planning.motion_planner import MotionPlanner
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, check_axis_kinds, load_bus_config
@@ -332,8 +333,10 @@ class Daemon:
             "arm": self.model.name,
             "joints": [{"name": name, "q": float(m.q[i]), "q_cmd": float(s.command.q[i]),
                         "dq": float(m.dq[i]), "tau": float(m.tau[i]),
-                        "enabled": bool(m.joints_enabled[i]), "fault": bool(m.joints_faulted[i])}
+                        "enabled": bool(m.joints_enabled[i]), "fault": bool(m.joints_faulted[i]),
+                        "q_min": float(self.model.q_min[i]), "q_max": float(self.model.q_max[i])}
                        for i, name in enumerate(self.model.joint_names)],
+            "tool": tool_pose(self.model, m.q),   # measured, base frame: xyz m, rpy rad (R = Rz Ry Rx)
             "wrench": m.wrench.tolist(), "end_effector": m.end_effector,
             "stats": self.stats.summary().as_dict(),
             "control": {"held": self.lease.held, "holder": self.lease.holder},
@@ -355,11 +358,22 @@ class Daemon:
         pass  # the control lease is keyed, not tied to a connection (see leases.py)
 
 
+def tool_pose(model: KinematicModel, q: np.ndarray) -> dict[str, list[float]]:
+    """The tool's pose for joint positions q (its own KinematicData: API threads call this)."""
+    T = fk(model, KinematicData(model), np.asarray(q, float))
+    return {"xyz": T[:3, 3].tolist(), "rpy": matrix_to_rpy(T[:3, :3]).tolist()}
+
+
 class RecordingControl:
     def __init__(self, daemon: Daemon):
         self.daemon = daemon
 
     def start(self, path: str | None) -> dict:
+        # A directory the operator named must exist: a typo must not silently become new folders
+        # (the default, runs/, is created as before).
+        if path is not None and not Path(path).parent.is_dir():
+            raise ApiError(f"no directory {str(Path(path).parent)!r} for the recording (create it first)",
+                           ErrorCode.BAD_ARGUMENT)
         return self.daemon.start_recording(path)
 
     def stop(self) -> dict:

@@ -56,3 +56,14 @@ def test_a_bad_api_address_is_bad_input_with_its_code(address):
         done = spacearm(*args, "--api", address)
         assert done.returncode == 2, (args, done.stderr)
         assert done.stderr.startswith("error[bad_argument]: bad API address"), (args, done.stderr)
+
+
+def test_record_start_into_a_missing_directory_is_refused(tmp_path):
+    """The daemon's side of `record start PATH`: a directory that does not exist is bad input,
+    refused before any recorder starts (the daemon is never reached: None here)."""
+    from spacearm.controller.daemon.command_api import ApiError
+    from spacearm.controller.daemon.daemon import RecordingControl
+    with pytest.raises(ApiError) as refused:
+        RecordingControl(None).start(str(tmp_path / "nonexistent" / "dir" / "x.mcap"))
+    assert refused.value.code == "bad_argument" and "no directory" in str(refused.value)
+    assert not (tmp_path / "nonexistent").exists()

@@ -128,7 +128,8 @@ function renderStatus(s) {
   if (s.state === "stopped" && spacearm.scene) spacearm.scene.hideGhost();
   const tbody = $("joints").tBodies[0];
   if (tbody.rows.length !== s.joints.length) {
-    tbody.innerHTML = s.joints.map(() => "<tr>" + "<td></td>".repeat(6) + "</tr>").join("");
+    tbody.innerHTML = s.joints.map(() => "<tr>" + "<td></td>".repeat(6) +
+      '<td class="limit"><span></span> <meter min="0" max="1"></meter></td></tr>').join("");
   }
   s.joints.forEach((j, i) => {
     const drive = j.fault ? "FAULT" : j.enabled ? "enabled" : "disabled";
@@ -136,7 +137,9 @@ function renderStatus(s) {
                    j.tau.toFixed(1), drive];
     cells.forEach((v, k) => setText(tbody.rows[i].cells[k], v));
     if (tbody.rows[i].className !== (j.fault ? "bad" : "")) tbody.rows[i].className = j.fault ? "bad" : "";
+    showLimit(tbody.rows[i].cells[6], j);
   });
+  setText($("tool-pose"), toolText(s.tool));
   if ($("progress").value !== (s.progress || 0)) $("progress").value = s.progress || 0;
   setText($("progress-text"), s.mode ? `${s.mode} ${(100 * (s.progress || 0)).toFixed(0)} %` : "");
   setText($("task"), s.task ? taskText(s.task) : "");
@@ -155,7 +158,25 @@ function renderStatus(s) {
   setText($("ft-now"), `F ${w.slice(0, 3).map(v => v.toFixed(1)).join(" ")} N \u00b7 T ${w.slice(3).map(v => v.toFixed(2)).join(" ")} N m`);
   drawFt();
   setHtml($("events"), (s.events || []).slice().reverse()
-    .map(e => `<li>${e.t.toFixed(2)} s <b>${esc(e.kind)}</b> ${esc(e.message)}</li>`).join(""));
+    .map(e => `<li>${e.t.toFixed(2)} s <b>[${esc(e.code || e.kind)}]</b> ${esc(e.message)}</li>`).join(""));
+}
+
+// Where a joint stands in its range: the distance to the nearer limit in degrees, and a bar
+// over the whole range that turns amber in the outer 10 % and red in the outer 2 %.
+function showLimit(cell, j) {
+  if (j.q_min === undefined || j.q_max === undefined) return;
+  const below = j.q - j.q_min, above = j.q_max - j.q, near = Math.min(below, above);
+  setText(cell.firstChild, `${(near / DEG).toFixed(1)} ${below <= above ? "min" : "max"}`);
+  const bar = cell.lastChild, span = j.q_max - j.q_min, at = (j.q - j.q_min) / span;
+  if (bar.value !== at) bar.value = at;
+  const level = near < 0.02 * span ? "bad" : near < 0.1 * span ? "warn" : "";
+  if (cell.className !== "limit " + level) cell.className = "limit " + level;
+}
+
+function toolText(tool) {               // measured tool pose: m and rad from the daemon, mm and deg here
+  if (!tool) return "";
+  const [x, y, z] = tool.xyz.map(v => (1000 * v).toFixed(1)), [r, p, w] = tool.rpy.map(v => (v / DEG).toFixed(2));
+  return `tool (base frame): x ${x} y ${y} z ${z} mm \u00b7 roll ${r} pitch ${p} yaw ${w} deg`;
 }
 
 function taskText(t) {                   // ORU task flow (oru.status): stage, subtask, progress
