@@ -476,7 +476,10 @@ def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = F
         print(f"spacearm hub: cannot bind {host}:{port}: {exc}", file=sys.stderr)
         return 2
     hub.fault_file = fault_file
-    signal.signal(signal.SIGTERM, lambda *_: hub.stop(0))
+    # SIGINT too, explicitly: a hub started with `&` from a script inherits SIGINT ignored, and
+    # Python then installs no KeyboardInterrupt handler (it ignored Ctrl-C / kill -INT for 608 s).
+    for sig in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(sig, lambda *_: hub.stop(0))
     print(f"spacearm hub listening on {hub.host}:{hub.port} (pid {os.getpid()})", flush=True)
     try:
         hub.serve_forever()
