@@ -23,6 +23,7 @@ import pytest
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.faults import NOMINAL_PLANT, Stack, start_stack, wait_for, wait_safe
 from hil_tests.harness import free_port
+from spacearm.base.runtime.priority import use_fifo, use_normal
 from spacearm.console.client import ApiClient
 from spacearm.controller.daemon.stop_metrics import recorded_stop, stop_figures
 from spacearm.controller.recording.mcap_reader import read_recording
@@ -117,10 +118,21 @@ def _figures(path, since: float = 0.0) -> list:
     return stop_figures(t, q, t_stop, np.full(6, ARM_V_MAX), np.full(6, ARM_A_MAX), 0.02)
 
 
+@pytest.fixture
+def console_priority():
+    """The jogging console (this test) at SCHED_FIFO 20, as `spacearm stop` asks for: on a loaded
+    machine a normal-priority console misses its jog's 1 s keep-alive and the watchdog stops
+    the arm before the stop under test."""
+    use_fifo(20)
+    yield
+    use_normal()
+
+
 @pytest.mark.parametrize("joint", [1, 4])
-def test_spacearm_stop_mid_jog(stack, joint):
-    """`spacearm stop` from a second console (no lease) while a joint jogs at full speed."""
-    since = _full_speed_jog(stack, joint)
+def test_spacearm_stop_mid_jog(stack, joint, console_priority):
+    """`spacearm stop` from a second console (no lease) while a joint jogs at full speed (a
+    1.5 rad jog: 8.6 s, longer than `spacearm stop` takes to start on a loaded machine)."""
+    since = _full_speed_jog(stack, joint, 1.5)
     stopper = subprocess.Popen([sys.executable, "-m", "spacearm.console.main", "stop", "--api", stack.api],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, cwd=ROOT, env=child_env())
     while stopper.poll() is None:     # the jogging console stays alive meanwhile (its keep-alive)
@@ -131,8 +143,8 @@ def test_spacearm_stop_mid_jog(stack, joint):
 
 
 @pytest.mark.under_load
-def test_spacearm_stop_mid_jog_beside_two_cpu_bound_processes(stack):
-    since = _full_speed_jog(stack, 1)
+def test_spacearm_stop_mid_jog_beside_two_cpu_bound_processes(stack, console_priority):
+    since = _full_speed_jog(stack, 1, 1.5)
     stack.client.call("stop")
     _judge(stack, "operator_stop", 1, since)
 
