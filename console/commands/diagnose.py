@@ -121,7 +121,7 @@ def register(app: typer.Typer) -> None:
         # every channel, not only the improved ones: a finding must not buy one channel with another
         print(f"  held-out from t = {result.heldout_start:.3g} s; RMS per channel, nominal -> fitted (noise):")
         for c in result.channels:
-            change = f"{100 * (1 - c.rms_after / c.rms_before):+.0f} % lower" if c.rms_before > 1e-3 * c.noise \
+            change = f"{100 * (1 - c.rms_after / c.rms_before):.0f} % lower" if c.rms_before > 1e-3 * c.noise \
                 else "-"
             print(f"  {c.name}{' *' if c.significant else ''}: {c.rms_before:.3g} -> {c.rms_after:.3g} "
                   f"({change}; noise {c.noise:.3g}{'; ' + c.metric if c.metric != 'rms' else ''})")
