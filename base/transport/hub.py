@@ -295,6 +295,11 @@ class LoopbackHub:
         if client.channel is not None and self.fault_filter is None and client.channel not in self.line_faults:
             self._forward_frames(client)
             return
+        if client.channel is None and len(client.inbuf) >= 2 and client.inbuf[1] != wire.T_HELLO:
+            # Not our protocol (e.g. a console's JSON request sent to the hub's port by mistake):
+            # drop it now rather than at the hello deadline, so the sender fails at once.
+            self._drop(client, "protocol error: expected hello")
+            return
         try:
             records = wire.split_records(client.inbuf)
         except wire.ProtocolError as exc:

@@ -67,3 +67,22 @@ def test_record_start_into_a_missing_directory_is_refused(tmp_path):
         RecordingControl(None).start(str(tmp_path / "nonexistent" / "dir" / "x.mcap"))
     assert refused.value.code == "bad_argument" and "no directory" in str(refused.value)
     assert not (tmp_path / "nonexistent").exists()
+
+
+def test_a_command_sent_to_the_hubs_port_fails_at_once():
+    """`stop --api <the hub's port>`: the hub speaks another protocol; it drops a client whose
+    first record is not a hello as soon as it can tell (it waited for its 5 s hello deadline)."""
+    import time
+    from spacearm.base.transport.hub import HELLO_TIMEOUT, LoopbackHub
+    hub = LoopbackHub("127.0.0.1", 0)
+    threading.Thread(target=hub.serve_forever, daemon=True).start()
+    try:
+        started = time.monotonic()
+        done = spacearm("stop", "--api", f"tcp:127.0.0.1:{hub.port}")
+        took = time.monotonic() - started
+    finally:
+        hub.stop(1.0)
+    assert done.returncode == 1 and done.stderr.startswith("error[no_connection]"), done.stderr
+    # The interpreter's start is in `took` too; the hub's answer is not the 5 s deadline.
+    print(f"stop to the hub's port: {took:.2f} s")
+    assert took < HELLO_TIMEOUT, took
