@@ -66,9 +66,10 @@ def register(app: typer.Typer) -> None:
         _emit(status, as_json, describe(status))
         if status.get("pause"):
             raise CommandFailed(f"ORU changeout paused [{status['pause']['code']}]: {status['pause']['message']} "
-                                f"(spacearm oru resume | abort)")
+                                f"(spacearm oru resume | abort)", "oru_paused")
         if status["state"] != "done":
-            raise CommandFailed(f"ORU changeout {status['state']}: {status.get('failure') or 'aborted'}")
+            raise CommandFailed(f"ORU changeout {status['state']}: {status.get('failure') or 'aborted'}",
+                                "oru_failed" if status.get("failure") else "oru_aborted")
 
     for name, helptext in (("pause", "Hold still; the flow resumes where it was."),
                            ("resume", "Continue a paused changeout."),

@@ -30,6 +30,14 @@ LASER_LINE = "spacearm sim: laser ranger on {port}"   # printed before READY_LIN
 CAMERA_LINE = "spacearm sim: camera frames in shared memory {name}"   # printed before READY_LINE
 
 
+def _refused(exc: Exception) -> int:
+    """Bad input (a file, a bus name, an option): the console's one line with its code, exit 2."""
+    codes = {"ConfigError": "bad_config", "BusSpecError": "bad_bus"}
+    code = next((codes[c.__name__] for c in type(exc).__mro__ if c.__name__ in codes), "bad_argument")
+    typer.echo(f"error[{code}]: spacearm sim: {exc}", err=True)
+    return 2
+
+
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
             duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
             camera: Optional[str] = None, board: Optional[Path] = None, rt_priority: int = 0,
@@ -46,8 +54,7 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
                 raise ValueError("--board needs --camera (the board is only seen through the camera)")
             board_config = load_board(board)
         except (ConfigError, ValueError) as exc:
-            typer.echo(f"spacearm sim: {exc}", err=True)
-            return 2
+            return _refused(exc)
     # The nodes answer SYNC on the bus thread while heartbeat and camera threads run.
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     if rt_priority:
@@ -58,10 +65,9 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
         sim = Simulator(bus, bus_config, plant, control_node, time_base=time_base)
         sim.start()
     except (ConfigError, BusSpecError, ValueError) as exc:
-        typer.echo(f"spacearm sim: {exc}", err=True)
-        return 2
+        return _refused(exc)
     except Exception as exc:  # bus cannot be opened etc.
-        typer.echo(f"spacearm sim: cannot start on {bus}: {exc}", err=True)
+        typer.echo(f"error[no_connection]: spacearm sim: cannot start on {bus}: {exc}", err=True)
         return 1
     stop = threading.Event()
 

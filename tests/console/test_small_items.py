@@ -86,3 +86,10 @@ def test_a_command_sent_to_the_hubs_port_fails_at_once():
     # The interpreter's start is in `took` too; the hub's answer is not the 5 s deadline.
     print(f"stop to the hub's port: {took:.2f} s")
     assert took < HELLO_TIMEOUT, took
+
+
+def test_the_simulators_refusals_carry_a_code():
+    bad_bus = spacearm("sim", "--bus", "bogus:x")
+    assert bad_bus.returncode == 2 and bad_bus.stderr.startswith("error[bad_bus]: spacearm sim: bus 'bogus:x'"), \
+        bad_bus.stderr
+    assert "Traceback" not in bad_bus.stderr and len(bad_bus.stderr.strip().splitlines()) == 1
