@@ -87,14 +87,19 @@ def record_stop(api: str, token: str | None, as_json: bool) -> None:
 
 
 def watch(api: str, token: str | None, rate: float = 5.0, count: int = 0) -> None:
-    from rich.live import Live   # here: the other commands never pay for rich
-    from spacearm.console.status_view import status_table
-    shown = 0
-    with ApiClient(api, token) as client, Live(auto_refresh=False) as live:
-        try:
-            while count == 0 or shown < count:
-                live.update(status_table(client.call("status")), refresh=True)
-                shown += 1
-                time.sleep(1.0 / max(rate, 0.1))
-        except KeyboardInterrupt:
-            pass
+    with ApiClient(api, token) as client:
+        status = client.call("status")   # first, then rich's import (~0.1-0.5 s): the daemon hears at once
+        from rich.live import Live       # here: the other commands never pay for rich
+        from spacearm.console.status_view import status_table
+        shown = 0
+        with Live(auto_refresh=False) as live:
+            try:
+                while True:
+                    live.update(status_table(status), refresh=True)
+                    shown += 1
+                    if count and shown >= count:
+                        break
+                    time.sleep(1.0 / max(rate, 0.1))
+                    status = client.call("status")
+            except KeyboardInterrupt:
+                pass

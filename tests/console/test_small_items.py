@@ -93,3 +93,9 @@ def test_the_simulators_refusals_carry_a_code():
     assert bad_bus.returncode == 2 and bad_bus.stderr.startswith("error[bad_bus]: spacearm sim: bus 'bogus:x'"), \
         bad_bus.stderr
     assert "Traceback" not in bad_bus.stderr and len(bad_bus.stderr.strip().splitlines()) == 1
+
+
+def test_watch_ends_after_the_refreshes_asked_for_showing_the_state(fake_daemon):
+    done = spacearm("watch", "--count", "2", "--rate", "20", "--api", fake_daemon)
+    assert done.returncode == 0, done.stderr
+    assert "state enabled" in done.stdout and "j5" in done.stdout, done.stdout[-500:]
