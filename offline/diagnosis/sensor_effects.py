@@ -113,7 +113,8 @@ def sensor_findings(q: np.ndarray, dq: np.ndarray, tau: np.ndarray, dt: float,
             out.append(SensorFinding(effect, f"{name}_{j + 1}", j, {"quantum": step},
                                      f"joint {j + 1}: {what} quantised in steps of {step:.3g} {unit}{was}"))
         if commanded is not None:
-            out += scale_and_offset(q[:, j], commanded[:, j], j, quanta[0][j] if quanta else 0.0, u.position)
+            out += scale_and_offset(q[:, j], commanded[:, j], j, quanta[0][j] if quanta else 0.0, u.position,
+                                    nominal[0][:, j] if nominal is not None else None)
         if not np.any(dq[:, j]):
             continue
         lag = velocity_lag(q[:, j], dq[:, j], dt)
@@ -140,7 +141,8 @@ SCALE_TOLERANCE = 0.02       # relative: a slope within this of 1 is no scale er
 OFFSET_QUANTA = 10           # a constant difference of more quanta than this is an offset
 
 
-def scale_and_offset(q: np.ndarray, q_nominal: np.ndarray, j: int, quantum: float, unit: str) -> list[SensorFinding]:
+def scale_and_offset(q: np.ndarray, q_nominal: np.ndarray, j: int, quantum: float, unit: str,
+                     replayed: np.ndarray | None = None) -> list[SensorFinding]:
     """A position column in the wrong unit or scale (degrees for radians, a gear ratio) or off
     by a constant (an encoder zero): the recorded q against the commanded q (what the servo
     held it to; the replay itself starts from the recorded, wrongly scaled first row) as
@@ -161,6 +163,9 @@ def scale_and_offset(q: np.ndarray, q_nominal: np.ndarray, j: int, quantum: floa
         return [SensorFinding("position_scale", name, j, {"scale": float(a), "offset": float(b)},
                               f"joint {j + 1}: position column scaled x {a:.4g} against the replay (a gear ratio or "
                               "encoder resolution in the conversion)")]
+    if replayed is not None:
+        # the servo's own steady error (a slide's droop under its load) shows in the replay too
+        b -= float(np.linalg.lstsq(X, replayed, rcond=None)[0][1])
     if abs(b) > OFFSET_QUANTA * max(quantum, 1e-9):
         return [SensorFinding("position_offset", name, j, {"offset": float(b)},
                               f"joint {j + 1}: position column offset by {b:.3g} {unit} (an encoder zero or "
