@@ -59,14 +59,12 @@ class Script:
 
 
 @contextmanager
-def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
-                    record_dir: Path | None = None, enable: bool = True,
-                    cycle_hook: Callable[[], None] | None = None, bus: str | None = None) -> Iterator[Script]:
-    """A simulator on a fresh virtual bus (or `bus`, e.g. a redundant pair) and a lockstep
-    daemon cycled by the caller. cycle_hook runs after every cycle (a test slows the process with it)."""
+def lockstep_stack(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
+                   record_dir: Path | None = None, tag: str = "script") -> Iterator[object]:
+    """A simulator on SYNC time on a fresh virtual bus and a started lockstep daemon (not cycling)."""
     from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
     from spacearm.firmware_sim.runner import start_simulator
-    bus = bus or f"virtual:script-{uuid.uuid4().hex[:8]}"
+    bus = f"virtual:{tag}-{uuid.uuid4().hex[:8]}"
     sim = start_simulator(bus, bus_config, plant=plant, time_base="sync")
     options = DaemonOptions(bus=bus, bus_config=bus_config, clock="lockstep", api=None, record_dir=record_dir)
     if arm is not None:
@@ -74,6 +72,20 @@ def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: P
     daemon = Daemon(options)
     try:
         daemon.start()
+        yield daemon
+    finally:
+        daemon.request_stop()
+        daemon.shutdown()
+        sim.stop()
+
+
+@contextmanager
+def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
+                    record_dir: Path | None = None, enable: bool = True,
+                    cycle_hook: Callable[[], None] | None = None) -> Iterator[Script]:
+    """lockstep_stack cycled by the caller. cycle_hook runs after every cycle (a test slows the
+    process with it)."""
+    with lockstep_stack(plant, arm=arm, bus_config=bus_config, record_dir=record_dir) as daemon:
         if cycle_hook is not None:
             cycle_once = daemon.cycle_once
 
@@ -82,12 +94,8 @@ def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: P
                 cycle_hook()
                 return snapshot
             daemon.cycle_once = slowed_cycle
-        key = daemon.lease.take("test")
-        script = Script(daemon, key)
+        script = Script(daemon, daemon.lease.take("test"))
         if enable:
             script.call("enable")
             script.run_until(lambda s: s["state"] == "enabled", 500, "enabled")
         yield script
-    finally:
-        daemon.shutdown()
-        sim.stop()
