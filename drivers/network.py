@@ -142,7 +142,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self._following_over: dict[str, int] = {}      # joint -> cycles over its window (master-side check)
         for cfg in self.config.nodes:
             object_dictionary = load_od(cfg.eds_path, cfg.node_id)   # EdsError: bad input, exit 2
-            driver = DRIVERS[cfg.device](cfg, self.config.bus, object_dictionary)
+            driver = DRIVERS.get(cfg.device, DeviceDriver)(cfg, self.config.bus, object_dictionary)   # generic: raw values
             self.drivers[cfg.name] = driver
             self.health[cfg.name] = NodeHealth(cfg.name, cfg.node_id)
             for spec in driver.tpdos:

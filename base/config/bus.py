@@ -24,7 +24,9 @@ from spacearm.base.config.redundancy import RedundancySettings
 from spacearm.base.paths import CONFIGS
 
 EDS_DIR = CONFIGS / "eds"
-DeviceType = Literal["joint_drive", "end_effector", "ft_sensor"]
+# generic: any CiA 301 device; the master configures and supervises it and carries its PDOs as
+# raw object values, with no device-specific meaning
+DeviceType = Literal["joint_drive", "end_effector", "ft_sensor", "generic"]
 
 
 ObjectRef = Annotated[str, Field(pattern=r"^0x[0-9A-Fa-f]{4}(:(0x)?[0-9A-Fa-f]{1,2})?$",

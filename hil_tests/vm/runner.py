@@ -232,6 +232,7 @@ ip -details link show vcan0 | head -3
 cd {root} || fail "cannot cd {root}"
 export HOME=/tmp SPACEARM_IN_VM=1 PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 CI="${{CI:-}}"
 export PYTHONPATH={root}
+export SPACEARM_CANOPEND={canopend}
 export PATH={bindir}:/usr/sbin:/usr/bin:/sbin:/bin
 echo "[vm] running: {cmd}"
 {cmd} > $RW/pytest.log 2>&1
@@ -239,6 +240,18 @@ echo $? > $RW/rc
 tail -n 60 $RW/pytest.log
 echo "[vm] pytest exit code $(cat $RW/rc)"
 """
+
+
+def _prebuild_canopend(rw: Path) -> str:
+    """CANopenNode's canopend built here, natively (seconds; minutes under the VM's emulation),
+    into the shared writable directory. '' when it cannot be: the test builds it itself and
+    fails saying why."""
+    from hil_tests.interop.canopennode import BuildError, build
+    try:
+        return str(build(rw / "canopennode"))
+    except BuildError as exc:
+        print(f"[vm] canopend not prebuilt: {exc}", file=sys.stderr)
+        return ""
 
 
 def run_in_vm(extra: list[str] | None = None, budget: float = DEFAULT_BUDGET, memory: str = "2G",
@@ -253,7 +266,8 @@ def run_in_vm(extra: list[str] | None = None, budget: float = DEFAULT_BUDGET, me
         inner = " ".join(shlex.quote(a) for a in _pytest_cmd(junit, extra or [], paths))
         script = rw / "guest.sh"
         script.write_text(GUEST_SCRIPT.format(rw=shlex.quote(str(rw)), root=shlex.quote(str(ROOT)),
-                                              bindir=shlex.quote(str(Path(sys.executable).parent)), cmd=inner))
+                                              bindir=shlex.quote(str(Path(sys.executable).parent)), cmd=inner,
+                                              canopend=shlex.quote(_prebuild_canopend(rw))))
         script.chmod(0o755)
         cmd = [tools["vng"], "--run", kernel, "--force-9p", "--memory", memory, "--cpus", str(cpus),
                "--rwdir", str(rw), "--exec", f"sh {shlex.quote(str(script))}"]
