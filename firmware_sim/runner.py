@@ -70,7 +70,14 @@ class _Listener(can.Listener):
 class Simulator:
     def __init__(self, bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
                  plant: Plant | PlantConfig | str | Path | None = None, control_node_id: int | None = None,
-                 diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE):
+                 diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE, time_base: str = "wall"):
+        """time_base: "wall" (real time: heartbeat consumers judge on the monotonic clock) or
+        "sync" (beside a lockstep controller: they judge on SYNC time, the plant's clock, and
+        heartbeats fall due on it as well; _sync_time_timers)."""
+        if time_base not in ("wall", "sync"):
+            raise ValueError(f"time base must be 'wall' or 'sync', got {time_base!r}")
+        self.sync_time_base = time_base == "sync"
+        self._next_sync_heartbeat: dict[int, float] = {}
         self.bus_spec = bus_spec
         self.config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config)
         if isinstance(plant, Plant):
@@ -303,7 +310,7 @@ class Simulator:
             if len(data) != 1:
                 self.stats.malformed += 1
                 return
-            now = time.monotonic()
+            now = self.plant.time if self.sync_time_base else time.monotonic()
             for node in self.nodes.values():
                 if node.powered and not node.faults.silent:
                     node.on_heartbeat(cid - od.HEARTBEAT_BASE, now)
@@ -353,6 +360,27 @@ class Simulator:
         for node in nodes:
             if 0.0 < node.next_heartbeat <= now and node.nmt_state != od.NMT_STATE_BOOTUP:
                 self._heartbeat_due(node, now)
+        if self.sync_time_base:
+            self._sync_time_timers(nodes)
+
+    def _sync_time_timers(self, nodes: list[SimNode]) -> None:
+        """SYNC time base: heartbeats fall due, and consumed heartbeats are judged, on the
+        plant's clock. A lockstep controller's process that waits for a core stops the SYNCs
+        and with them this clock, so its silence is never a lost heartbeat; the wall-clock
+        producer goes on beside it (a consumer on either clock is served)."""
+        now = self.plant.time
+        for node in nodes:
+            if node.nmt_state == od.NMT_STATE_BOOTUP or node.faults.silent:
+                continue
+            if node.consumer_last:
+                node.check_consumers(now)
+            period = node.heartbeat_period()
+            if period <= 0.0:
+                continue
+            due = self._next_sync_heartbeat.setdefault(node.node_id, now + period)
+            if now >= due - 1e-9:
+                node.send_heartbeat()
+                self._next_sync_heartbeat[node.node_id] = max(due + period, now)
 
     def _heartbeat_loop(self) -> None:
         """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
@@ -382,7 +410,7 @@ class Simulator:
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
-                if node.consumer_last and not node.faults.silent and not starved:
+                if node.consumer_last and not node.faults.silent and not starved and not self.sync_time_base:
                     with self._sync_lock:
                         node.check_consumers(now)
                 node.check_sdo_timeout(now)
@@ -430,7 +458,9 @@ STARVED_SLACK = 0.020     # s
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,
                     plant: Plant | PlantConfig | str | Path | None = None,
                     control_node_id: int | None = None,
-                    diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE) -> Simulator:
+                    diag_node_id: int | None = peer_timing.SIMULATOR_DIAG_NODE,
+                    time_base: str = "wall") -> Simulator:
     """Start all simulated nodes of the bus config on the bus; returns the handle (.stop()).
-    control_node_id: also serve the fault-injection unit (spacearm.firmware_sim.control) at this ID."""
-    return Simulator(bus_spec, bus_config, plant, control_node_id, diag_node_id).start()
+    control_node_id: also serve the fault-injection unit (spacearm.firmware_sim.control) at this ID;
+    time_base: "sync" beside a lockstep controller (Simulator)."""
+    return Simulator(bus_spec, bus_config, plant, control_node_id, diag_node_id, time_base).start()
