@@ -60,11 +60,12 @@ class Script:
 
 @contextmanager
 def lockstep_stack(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
-                   record_dir: Path | None = None, tag: str = "script") -> Iterator[object]:
-    """A simulator on SYNC time on a fresh virtual bus and a started lockstep daemon (not cycling)."""
+                   record_dir: Path | None = None, tag: str = "script", bus: str | None = None) -> Iterator[object]:
+    """A simulator on SYNC time on a fresh virtual bus (or `bus`, e.g. a redundant pair) and a
+    started lockstep daemon (not cycling)."""
     from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
     from spacearm.firmware_sim.runner import start_simulator
-    bus = f"virtual:{tag}-{uuid.uuid4().hex[:8]}"
+    bus = bus or f"virtual:{tag}-{uuid.uuid4().hex[:8]}"
     sim = start_simulator(bus, bus_config, plant=plant, time_base="sync")
     options = DaemonOptions(bus=bus, bus_config=bus_config, clock="lockstep", api=None, record_dir=record_dir)
     if arm is not None:
@@ -82,10 +83,10 @@ def lockstep_stack(plant: str | Path, *, arm: Path | None = None, bus_config: Pa
 @contextmanager
 def scripted_daemon(plant: str | Path, *, arm: Path | None = None, bus_config: Path = DEFAULT_BUS_CONFIG,
                     record_dir: Path | None = None, enable: bool = True,
-                    cycle_hook: Callable[[], None] | None = None) -> Iterator[Script]:
+                    cycle_hook: Callable[[], None] | None = None, bus: str | None = None) -> Iterator[Script]:
     """lockstep_stack cycled by the caller. cycle_hook runs after every cycle (a test slows the
     process with it)."""
-    with lockstep_stack(plant, arm=arm, bus_config=bus_config, record_dir=record_dir) as daemon:
+    with lockstep_stack(plant, arm=arm, bus_config=bus_config, record_dir=record_dir, bus=bus) as daemon:
         if cycle_hook is not None:
             cycle_once = daemon.cycle_once
 
