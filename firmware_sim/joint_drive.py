@@ -73,7 +73,9 @@ class JointDriveNode(SimNode):
         self.halt = False
         self.ramp_quick = True                 # the ramp running is 6085h's (else 6084h's)
         self._ramp_from_actual = False         # the next servo step starts the ramp from the measurement
-        self.brake_closing = 0.0               # s the brake has been closing (power off / stop done)
+        # s the brake has been closing (power off / stop done): it starts closed, as a power-off
+        # brake is, so an unpowered joint never slips in the first SYNCs after power-on
+        self.brake_closing = BRAKE_ENGAGE_TIME
         self.joint.brake_engaged = True
         self._update_od()
 
