@@ -63,5 +63,6 @@ def test_approach_with_the_marker_out_of_view_stops_safely_with_the_reason(stack
         q_after = stack.daemon.snapshot.measurement.q
         assert np.max(np.abs(q_after - q_before)) < np.radians(1.0), "it must not wander off blind"
     finally:
+        stack.wait(lambda: stack.daemon.core.stop_finished, 30)    # reset is taken once the arm is at rest
         stack.call("reset")
         stack.enable()
