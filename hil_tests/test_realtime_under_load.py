@@ -51,6 +51,9 @@ def _unless_the_host_stopped_them(status: dict, peers: dict) -> None:
         pytest.xfail(f"{stop['code']} while the host ran neither the simulator nor the hub: {', '.join(stalled)}")
 
 
+@pytest.mark.xfail(strict=False, reason="issue 32, open: beside two CPU-bound processes the separate-process "
+                   "changeout stops with pdo_missing (end_effector) at ~20 s, in 5 of 5 bench runs, cause not found; "
+                   "the test still runs and records its figures")
 def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tmp_path, time_scale, record_property):
     steal = CpuSteal()
     bus = loopback_hub.spec(f"rt-oru-{os.getpid()}-{time.monotonic_ns()}")
