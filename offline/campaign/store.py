@@ -107,6 +107,9 @@ class ResultStore:
             if not resume and self.done_ids():
                 raise StoreError(f"{self.root}: already has {len(self.done_ids())} finished trials; "
                                  "pass --resume to continue, or use another --results directory")
+            # a trial half-written when the last run was killed: never renamed, so never counted
+            for stale in self.trials_dir.glob(".*.tmp"):
+                stale.unlink(missing_ok=True)
             if manifest["code_version"] != code_version():
                 manifest.setdefault("resumed_with", []).append(code_version())
                 self._write_json(manifest_path, manifest)
