@@ -134,7 +134,6 @@ class HealthMonitor:
             self.timer_scheduling = use_fifo(self.timer_priority) or describe()
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
-        hb_cob = od.HEARTBEAT_BASE + self.config.bus.master_node_id
         next_hb = time.monotonic()
         due = next_hb
         while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
@@ -143,10 +142,7 @@ class HealthMonitor:
             due = now + MONITOR_PERIOD
             if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
                 next_hb = max(next_hb + period, now)
-                try:
-                    self.network.send_message(hb_cob, bytes([od.NMT_STATE_OPERATIONAL]))
-                except Exception as exc:
-                    logger.warning("controller heartbeat not sent: %s", exc)
+                self._send_own_heartbeat()
             if period > 0:
                 due = min(due, next_hb)
             if not self._monitoring:
@@ -219,11 +215,15 @@ class HealthMonitor:
     def _send_lockstep_heartbeat(self) -> None:
         if self._hb_due_now:
             self._hb_due_now = False
-            try:
-                self.network.send_message(od.HEARTBEAT_BASE + self.config.bus.master_node_id,
-                                          bytes([od.NMT_STATE_OPERATIONAL]))
-            except Exception as exc:
-                logger.warning("controller heartbeat not sent: %s", exc)
+            self._send_own_heartbeat()
+
+    def _send_own_heartbeat(self) -> None:
+        """The controller's heartbeat (on the wall clock from the timer, in lockstep also per SYNC)."""
+        try:
+            self.network.send_message(od.HEARTBEAT_BASE + self.config.bus.master_node_id,
+                                      bytes([od.NMT_STATE_OPERATIONAL]))
+        except Exception as exc:
+            logger.warning("controller heartbeat not sent: %s", exc)
 
     def _excuse(self, now: float, excess: float, factor: float) -> None:
         """This process was starved for `excess` s: that time is not silence (see _monitor_loop)."""
