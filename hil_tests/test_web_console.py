@@ -472,6 +472,9 @@ def test_the_3d_view_shows_the_arm_at_two_sizes_moving_stopped_and_its_ghost(pat
     assert status(page)["state"] == "enabled", f"stopped during the move: {stop_text(page)}"
     time.sleep(1.0)
     rest = assert_arm_drawn(page, web_stack, "6-at-ready")
+    # The ghost of the move went with the move: left at the goal it would tint the arm blue.
+    blue_rest = ghost_mask(view_pixels(page)).sum()
+    assert blue_rest < blue_before + 300, f"the ghost outlived its move: {blue_before} -> {blue_rest} blue px"
     # The state at a glance: the tool pose in mm and deg, each joint's distance to its limits.
     wait_for(page, "() => document.getElementById('tool-pose').textContent.includes('mm')")
     glance = page.evaluate("() => ({tool: spacearm.lastStatus.tool, text: document.getElementById('tool-pose').textContent, "

@@ -126,6 +126,11 @@ function renderStatus(s) {
   if (banner.classList.contains("hidden") === !!s.stop_reason) banner.classList.toggle("hidden", !s.stop_reason);
   setText(banner, s.stop_reason ? "PROTECTIVE STOP: " + s.stop_reason + " (reset, then enable)" : "");
   if (s.state === "stopped" && spacearm.scene) spacearm.scene.hideGhost();
+  const sent = spacearm.ghostOfSent;       // the ghost of a sent move goes once the move is over:
+  if (sent && spacearm.scene) {            // left at the goal it would tint the arm that reached it
+    if (s.mode === sent.mode && s.progress < 1) sent.seen = true;
+    else if (sent.seen || s.mode === sent.mode || s.state !== "enabled") { spacearm.scene.hideGhost(); spacearm.ghostOfSent = null; }
+  }
   const tbody = $("joints").tBodies[0];
   if (tbody.rows.length !== s.joints.length) {
     tbody.innerHTML = s.joints.map(() => "<tr>" + "<td></td>".repeat(6) +
@@ -251,6 +256,7 @@ async function presimulate() {
   const cmd = kind(), args = commandArgs();
   $("btn-send").disabled = true;
   const r = await send("presim", cmd, args);
+  spacearm.ghostOfSent = null;
   spacearm.presim = r;
   spacearm.lastPresim = r;
   $("checks").innerHTML = r.checks.map(c => `<li class="${c.ok ? "pass" : "fail"}"><b>${esc(c.name)}</b>: ${esc(c.detail)}</li>`).join("");
@@ -273,6 +279,7 @@ async function sendPresimulated() {
   const r = await send("command", p.cmd, p.args);
   if (r.ok) {
     showResult(`sent: ${r.result.mode} started (${r.result.duration.toFixed(2)} s)`, false);
+    spacearm.ghostOfSent = { mode: r.result.mode, seen: false };
     if (p.cmd === "jog") keepAliveWhileJogging();
   } else {
     showResult("refused by the daemon: " + r.error, true);
