@@ -107,6 +107,11 @@ class ControllerCore:
         self._pending.put(pending)
         return pending.future.result(timeout=timeout)
 
+    @property
+    def requests_waiting(self) -> bool:
+        """An API thread waits for the next cycle to take its request (lockstep drivers cycle on it)."""
+        return not self._pending.empty()
+
     # ---- called by the cycle ----------------------------------------------------------
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m

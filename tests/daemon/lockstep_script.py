@@ -12,6 +12,18 @@ from typing import Callable, Iterator
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
 
 
+def call_between_cycles(daemon, api: ThreadPoolExecutor, function: Callable, *args):
+    """function(*args) on an API thread; the daemon cycles only while that thread waits for a
+    cycle to take its request, so planning happens between two cycles however long it takes."""
+    reply = api.submit(function, *args)
+    while not reply.done():
+        if daemon.core.requests_waiting:
+            daemon.cycle_once()
+        else:
+            wait([reply], timeout=0.001)
+    return reply.result()
+
+
 class Script:
     """Runs `daemon` one cycle at a time; call(command, **args) under the test's lease.
 
@@ -25,13 +37,8 @@ class Script:
         self._api = ThreadPoolExecutor(1, thread_name_prefix="script-api")
 
     def call(self, command: str, **args):
-        reply = self._api.submit(self.daemon.handlers.handle, None, command, {"lease": self.lease, **args})
-        while not reply.done():
-            if self.daemon.core._pending.qsize():
-                self.daemon.cycle_once()
-            else:
-                wait([reply], timeout=0.001)
-        return reply.result()
+        return call_between_cycles(self.daemon, self._api, self.daemon.handlers.handle,
+                                   None, command, {"lease": self.lease, **args})
 
     @property
     def cycle(self) -> int:

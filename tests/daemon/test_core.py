@@ -35,7 +35,7 @@ def run_command(core, t, apply, m=None):
     box = {}
     thread = threading.Thread(target=lambda: box.setdefault("r", _try(core.submit, apply)))
     thread.start()
-    while not core._pending.qsize() and thread.is_alive():
+    while not core.requests_waiting and thread.is_alive():
         pass
     command = core.update(m or measurement(t))
     thread.join(5)

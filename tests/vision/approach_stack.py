@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -22,6 +23,7 @@ from spacearm.base.vision.frames import LocalFrameSource
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG
 from spacearm.firmware_sim.camera.service import marker_sites
 from spacearm.firmware_sim.runner import start_simulator
+from tests.daemon.lockstep_script import call_between_cycles
 
 PLANT = "configs/plant/oru_testbed_errors.toml"
 
@@ -49,24 +51,8 @@ class ApproachStack:
         """Run `command` (which waits for the cycle); unthreaded, cycle only while it waits."""
         if self.thread is not None:
             return command()
-        out: dict = {}
-
-        def run():
-            try:
-                out["value"] = command()
-            except BaseException as exc:     # re-raised on the caller's thread
-                out["error"] = exc
-
-        worker = threading.Thread(target=run, daemon=True)
-        worker.start()
-        while worker.is_alive():
-            if self.daemon.core._pending.empty():
-                worker.join(0.001)           # the command is planning on its own thread
-            else:
-                self.daemon.cycle_once()
-        if "error" in out:
-            raise out["error"]
-        return out["value"]
+        with ThreadPoolExecutor(1, thread_name_prefix="approach-api") as api:
+            return call_between_cycles(self.daemon, api, command)
 
     def wait(self, predicate, timeout: float = 300.0, poll: float = 0.02):
         deadline = time.monotonic() + timeout
