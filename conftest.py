@@ -8,6 +8,8 @@ import os
 import resource
 import time
 
+import pytest
+
 _started: dict[str, float] = {}
 
 
@@ -33,3 +35,17 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         f"{os.cpu_count()} cores; reference loop {1e3 * _started['reference_wall']:.0f} ms wall / "
         f"{1e3 * _started['reference_cpu']:.0f} ms CPU at the start (the slower machine: 320-420 ms); "
         f"load {_started['load']:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """With pytest-xdist (the README's test command runs two workers): every HIL test on one
+    worker, one after another in file order, while the unit tests share out over both. HIL
+    stacks time real motion on 2 cores and must not pile up on each other."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class HilInOrder(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return "hil_tests" if nodeid.startswith("hil_tests/") else nodeid
+
+    return HilInOrder(config, log)

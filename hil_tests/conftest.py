@@ -67,9 +67,18 @@ def pytest_configure(config):
                                        "on a loaded machine)")
 
 
+_VCAN_REPORTS: list[str] = []
+
+
+def pytest_runtest_logreport(report):
+    """The vcan suite's outcome, a user property of its test: it comes back from an xdist
+    worker that way too."""
+    _VCAN_REPORTS.extend(value for name, value in report.user_properties if name == "vcan_report")
+
+
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
     """Show the vcan suite's outcome (VM or direct) in the closing summary, even with -q."""
-    report = getattr(config, "_spacearm_vcan_report", None)
+    report = _VCAN_REPORTS[-1] if _VCAN_REPORTS else None
     if report:
         terminalreporter.write_sep("-", "vcan HIL suite (real SocketCAN)")
         terminalreporter.write_line(report)

@@ -18,7 +18,7 @@ IN_VM = os.environ.get("SPACEARM_IN_VM") == "1"
 
 @pytest.mark.slow
 @pytest.mark.timeout(runner.DEFAULT_BUDGET + 120)
-def test_scenarios_pass_on_real_socketcan_vcan(request):
+def test_scenarios_pass_on_real_socketcan_vcan(record_property):
     if IN_VM:
         pytest.skip("already inside the vcan VM")
     if os.environ.get("SPACEARM_SKIP_VM") == "1" and not os.environ.get("CI"):
@@ -32,7 +32,7 @@ def test_scenarios_pass_on_real_socketcan_vcan(request):
     report = (f"vcan suite {where}, {res.seconds:.0f} s: {res.summary or '(no pytest summary)'}; "
               f"{res.passed} passed, {res.failed} failed, {res.errors} errors, {res.skipped} skipped")
     print(report)
-    request.config._spacearm_vcan_report = report + (f" -- {res.problem}" if res.problem else "")
+    record_property("vcan_report", report + (f" -- {res.problem}" if res.problem else ""))
     if not res.ok:
         tail = res.log[-6000:]
         if res.where == "vm":
