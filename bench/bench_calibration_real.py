@@ -214,10 +214,13 @@ def bench_fr3(steal: CpuSteal) -> None:
           f"general pipeline {gen['full_pos'] * 1e3:.3f} mm (target <= {FR3_TARGET_MM}) "
           f"[{'ok' if min(pos, gen['full_pos'] * 1e3) <= FR3_TARGET_MM else 'MISS'}] "
           f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
+    print("  dedicated study, held-out position RMS per board axis (x, y, z), median of the splits: "
+          + ", ".join(f"{v * 1e3:.3f}" for v in med["full_pos_axes"]) + " mm")
     if min(pos, gen["full_pos"] * 1e3) > FR3_TARGET_MM:
-        print(f"  why: nothing in this bench's changes models the FR3 camera better; registration only leaves "
-              f"{med['registration_pos'] * 1e3:.2f} mm and the D-H terms take it to the figure above, the rest is the "
-              "camera's own checkerboard pose error")
+        print(f"  why: registration only leaves {med['registration_pos'] * 1e3:.2f} mm and the D-H terms take it to the "
+              "figure above; two further models were tried on this data (issue 30 report) and did not lower the median: "
+              "joint elasticity under the Panda's published inertials (1.50 mm) and the D-H prior chosen by 5-fold "
+              "cross-validation inside each split's training postures (run on 3 of the splits: it picked the weakest prior, 0.006-0.022 mm lower)")
 
 
 def bench_draw_wire(steal: CpuSteal, cases: int = 5) -> None:
