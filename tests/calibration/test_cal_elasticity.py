@@ -8,17 +8,21 @@ postures, which the rigid model cannot.
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from spacearm.base.kinematics.forward import frames
 from spacearm.base.kinematics.model import KinematicData
+from spacearm.controller.calibration.calibrated_arm import apply
 from spacearm.controller.calibration.composite import Block
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.measurement_models import PointModel
 from spacearm.controller.calibration.tiago_mocap import tiago_kinematics, tiago_load
 from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
 
+ARM_FILE = Path(__file__).resolve().parents[2] / "configs" / "arm" / "panda.toml"   # never read: refused first
 MARKER = np.array([0.02, -0.03, 0.12])
 NOISE = 1e-4                                 # m per axis
 TRUE_COMPLIANCE = {"k_3": 3e-4, "k_5": 6e-4}  # rad/(N m): shoulder and elbow of the TIAGo arm
@@ -70,7 +74,9 @@ def elastic_readings(kin, load, Q, rng):
     return exact, exact + rng.normal(0.0, NOISE, exact.shape)
 
 
-def test_fit_finds_the_compliance_the_rigid_model_cannot(arm):
+@pytest.fixture(scope="module")
+def fits(arm):
+    """Rigid and elastic fits of the same readings of an arm that gives (training 80, other 40)."""
     kin, load = arm
     rng = np.random.default_rng(11)
     Qt = kin.random_configurations(80, rng, margin=0.05)
@@ -84,10 +90,24 @@ def test_fit_finds_the_compliance_the_rigid_model_cannot(arm):
     for elastic in (False, True):
         em = ErrorModel.from_kinematics(kin, load=load if elastic else None)
         cands = em.dh_names() + (list(em.names[-kin.nq:]) if elastic else [])
-        results[elastic] = fit_blocks(em, [train], FitOptions(starts=False), candidates=list(cands), validation=[valid])
-    rigid, elastic = results[False], results[True]
+        results[elastic] = (em, fit_blocks(em, [train], FitOptions(starts=False), candidates=cands,
+                                           validation=[valid]))
+    return results, floor
+
+
+def test_fit_finds_the_compliance_the_rigid_model_cannot(fits):
+    results, floor = fits
+    rigid, elastic = results[False][1], results[True][1]
     assert rigid.held_rms("after") > 3 * floor                # gravity sag is no geometry error
     assert elastic.verdict.ok, elastic.verdict.message()
     assert elastic.held_rms("after") <= 1.15 * floor
     for name, k in TRUE_COMPLIANCE.items():
         assert elastic.estimate[name] == pytest.approx(k, rel=0.05)
+
+
+def test_an_elastic_fit_is_not_written_as_geometry_alone(fits, tmp_path):
+    em, rep = fits[0][True]
+    out = tmp_path / "calibrated.toml"
+    with pytest.raises(ValueError, match="joint compliances .*k_3"):
+        apply(ARM_FILE, out, em, rep, ["synthetic"], "lm")
+    assert not out.exists()
