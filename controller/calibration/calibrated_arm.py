@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from spacearm.controller.calibration.errormodel import ErrorModel
+from spacearm.controller.calibration.fit_checks import group_of
 from spacearm.controller.calibration.laser_routine import write_calibrated_arm
 from spacearm.controller.calibration.trusted_fit import FitReport
 from spacearm.base.config.arm import Calibration
@@ -60,6 +61,11 @@ def calibration_table(em: ErrorModel, report: FitReport, data: list[str], method
 
 
 def apply(nominal_arm: Path, out: Path, em: ErrorModel, report: FitReport, data: list[str], method: str) -> None:
+    compliant = [n for n in report.result.free if group_of(n) == "joint_compliance"]
+    if compliant:
+        # An arm file holds geometry only: writing the rest would silently drop the load terms.
+        raise ValueError(f"the fit estimated joint compliances ({', '.join(compliant)}); an arm file has no place "
+                         "for them, so its geometry alone would not reproduce the fit")
     table, notes = calibration_table(em, report, data, method)
     write_calibrated_arm(nominal_arm, table, out, command="calibrate fit", comments=notes)
 

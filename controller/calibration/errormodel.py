@@ -27,10 +27,12 @@ from numpy.typing import ArrayLike, NDArray
 
 from spacearm.base.kinematics import KinematicModel
 from spacearm.base.spatial import rotx, roty, rotz, trans
+from spacearm.controller.calibration.joint_load import JointLoad
 
 Array = NDArray[np.float64]
 
 DH_KINDS = ("theta", "d", "a", "alpha", "beta")
+COMPLIANCE = "k"       # joint compliance parameters k_1..k_n (rad/(N m) or m/N)
 FRAME_KINDS = ("x", "y", "z", "rx", "ry", "rz")
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -56,6 +58,7 @@ class ErrorModel:
     tool_nominal: Array
     world_prefix: str = "base"
     tool_prefix: str = "tool"
+    load: JointLoad | None = None    # gravity load per joint: adds the compliances k_1..k_n
     names: tuple[str, ...] = field(init=False)
     nominal: Array = field(init=False)
     ops: tuple[Op, ...] = field(init=False, repr=False)
@@ -96,6 +99,10 @@ class ErrorModel:
                 add(f"d_{j}", d, "T", 2, jd)
         for k in FRAME_KINDS:
             add(f"{self.tool_prefix}_{k}", 0.0, "R" if k.startswith("r") else "T", _AXIS[k[-1]])
+        if self.load is not None:
+            # Compliances carry no motion of their own: they scale the joint's motion by its load.
+            names += [f"{COMPLIANCE}_{i + 1}" for i in range(kin.nq)]
+            nominal += [0.0] * kin.nq
         object.__setattr__(self, "names", tuple(names))
         object.__setattr__(self, "nominal", np.array(nominal))
         object.__setattr__(self, "ops", tuple(ops))
@@ -105,10 +112,11 @@ class ErrorModel:
     @classmethod
     def from_kinematics(cls, kin: KinematicModel, world: ArrayLike | None = None,
                         tool: ArrayLike | None = None, world_prefix: str = "base",
-                        tool_prefix: str = "tool") -> "ErrorModel":
-        """Error model of `kin`; `world` is prepended to kin.base, `tool` appended to kin.tool."""
+                        tool_prefix: str = "tool", load: JointLoad | None = None) -> "ErrorModel":
+        """Error model of `kin`; `world` is prepended to kin.base, `tool` appended to kin.tool;
+        with `load`, a compliance per joint (joint elasticity, see joint_load.py)."""
         return cls(kin, np.eye(4) if world is None else np.asarray(world, float),
-                   np.eye(4) if tool is None else np.asarray(tool, float), world_prefix, tool_prefix)
+                   np.eye(4) if tool is None else np.asarray(tool, float), world_prefix, tool_prefix, load)
 
     # ----------------------------------------------------------------------------- naming
     @property
@@ -167,11 +175,16 @@ class ErrorModel:
             axes = np.zeros((N, P, 3))
             origins = np.zeros((N, P, 3))
             is_rot = np.zeros(P, dtype=bool)
-        tool_start = P - len(FRAME_KINDS)
+        tool_start = len(self.ops) - len(FRAME_KINDS)
+        if self.load is not None:
+            tau = self.load.torques(Q)
+            k0 = len(self.ops)                       # the compliances follow the tool frame
         for op in self.ops:
             if op.param == tool_start:
                 T = T @ self.mid
             value = p[op.param] + (Q[:, op.joint] if op.joint >= 0 else 0.0)
+            if self.load is not None and op.joint >= 0:
+                value = value + p[k0 + op.joint] * tau[:, op.joint]
             if want_jac:
                 axes[:, op.param] = T[:, :, op.axis]
                 origins[:, op.param] = T[:, :, 3]
@@ -195,6 +208,11 @@ class ErrorModel:
         rot = np.cross(axes, lever)
         J[:, :3, :] = np.where(is_rot[None, :, None], rot, axes).transpose(0, 2, 1)
         J[:, 3:, :] = np.where(is_rot[None, :, None], axes, 0.0).transpose(0, 2, 1)
+        if self.load is not None:
+            # d pose / d k_j = (the joint's own motion) * tau_j
+            for op in self.ops:
+                if op.joint >= 0:
+                    J[:, :, k0 + op.joint] = J[:, :, op.param] * tau[:, op.joint, None]
         return out, J
 
     # -------------------------------------------------------------------- back to kinematics

@@ -14,11 +14,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spacearm.controller.calibration.composite import CompositeProblem
+from spacearm.controller.calibration.errormodel import COMPLIANCE
 from spacearm.controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
 
 Array = NDArray[np.float64]
 DH_KINDS = ("theta", "d", "a", "alpha", "beta")
-GROUPS = ("joint_angle", "joint_length", "frame_length", "frame_angle", "plane")
+GROUPS = ("joint_angle", "joint_length", "joint_compliance", "frame_length", "frame_angle", "plane")
 
 
 def group_of(name: str) -> str:
@@ -26,6 +27,8 @@ def group_of(name: str) -> str:
     head, _, tail = name.rpartition("_")
     if head in DH_KINDS:
         return "joint_length" if head in ("a", "d") else "joint_angle"
+    if head == COMPLIANCE and tail.isdigit():
+        return "joint_compliance"
     if tail in ("nx", "ny", "nz") or (tail == "f" and head.startswith("plane")):
         return "plane"
     if tail in ("x", "y", "z", "tx", "ty", "tz", "ax", "ay", "az", "l0"):
@@ -36,9 +39,11 @@ def group_of(name: str) -> str:
 @dataclass(frozen=True)
 class Bounds:
     """Largest physically plausible correction per group (SI). A fit beyond them is rejected.
-    Joint angles: 5 deg (a real TIAGo's arm_5 zero is ~3 deg off, FIGAROH finds the same)."""
+    Joint angles: 5 deg (a real TIAGo's arm_5 zero is ~3 deg off, FIGAROH finds the same).
+    Joint compliance: 1e-3 rad/(N m), a stiffness of 1000 N m/rad, softer than any arm's gearing."""
     joint_angle: float = np.radians(5.0)
     joint_length: float = 0.05
+    joint_compliance: float = 1e-3
     frame_length: float = 0.10
     frame_angle: float = np.radians(10.0)
     plane: float = 0.5
@@ -58,6 +63,7 @@ class Priors:
     anchor: ("wire_a", 0.002)), the longest matching prefix winning."""
     joint_angle: float = np.inf
     joint_length: float = np.inf
+    joint_compliance: float = np.inf
     frame_length: float = np.inf
     frame_angle: float = np.inf
     plane: float = np.inf
@@ -194,4 +200,6 @@ def format_value(name: str, value: float, unit_angle: str = "deg") -> str:
         return f"{value * 1e3:.4g} mm"
     if g == "plane":
         return f"{value:.4g}"
+    if g == "joint_compliance":
+        return f"{value:.4g} rad/(N m)"
     return f"{value * 1e3:.4g} mrad" if unit_angle == "mrad" else f"{np.degrees(value):.4g} deg"

@@ -97,6 +97,7 @@ class SplitResult:
     full: CalibrationResult
     held_pos_rms: dict[str, float]    # m
     held_rot_rms: dict[str, float]    # rad
+    held_pos_axes: dict[str, Array]   # m, RMS per board axis (x, y, z)
 
 
 def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
@@ -148,13 +149,14 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     for _ in range(3):
         full = lm(Problem(em, "pose", Qt, meas, free, cov=camera_covariances(full, em, Qt),
                           x0=full.x), x_prior=em.nominal, sigma_prior=prior)
-    pos, rot = {}, {}
+    pos, rot, axes = {}, {}, {}
     for name, res in (("registration", reg), ("full", full)):
         T = em.poses(res.x[: em.n_params], data.Q[test])
         st = compare_poses(data.board_T_cam[test], T)
         pos[name] = float(np.sqrt(np.mean(st.pos_norm ** 2)))
         rot[name] = float(np.sqrt(np.mean(np.sum(st.rot ** 2, axis=1))))
-    return SplitResult(reg, full, pos, rot)
+        axes[name] = st.rms_pos
+    return SplitResult(reg, full, pos, rot, axes)
 
 
 def _count_dh(names: list[str]) -> int:
@@ -186,6 +188,7 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
                      f"{r.held_pos_rms['full'] * 1e3:>13.3f}{np.degrees(r.held_rot_rms['full']):>14.3f}")
     med = {f"{w}_{q}": float(np.median([getattr(r, f'held_{q}_rms')[w] for r in results]))
            for w in ("registration", "full") for q in ("pos", "rot")}
+    med["full_pos_axes"] = np.median([r.held_pos_axes["full"] for r in results], axis=0)
     lines.append(f"{'median':<7}{med['registration_pos'] * 1e3:>12.3f}{np.degrees(med['registration_rot']):>13.3f}"
                  f"{med['full_pos'] * 1e3:>13.3f}{np.degrees(med['full_rot']):>14.3f}")
     lines.append("(held-out RMS of the position error norm and of the rotation angle)")

@@ -13,7 +13,7 @@ Procedure (deterministic, never raises on a rank-deficient or nearly deficient J
     absorb) and never below `tol` relative to the largest column (numerical rank).
     Tiers (kept first): the instrument's own placement (anchor, wire length offset, marker or
     tool point), then the registration (world frame), the tool mount frame, the D-H terms
-    theta, d, a, alpha, Hayati beta, the plane's coefficients, the d that beta replaces on
+    theta, d, a, alpha, Hayati beta, the joint compliances, the plane's coefficients, the d that beta replaces on
     parallel axes, and the plane's gauge last. So a set-up error is never absorbed into the
     arm's geometry; within a tier, exact ties follow the parameters' order.
  4. Each dropped column is explained by regressing it on the kept ones.
@@ -86,6 +86,8 @@ def preference_tier(problem: Problem, gauge: str | None = None) -> Callable[[str
             return 0
         if kind == "beta":
             return 1
+        if kind == "k":
+            return 2    # joint compliance: load-proportional, after the geometry it would mimic
         if plane_prefix and name.startswith(plane_prefix):
             return 4    # the laser paper keeps the plane after the arm (its 25 + 1)
         if name.startswith(problem.model.world_prefix + "_"):

@@ -21,6 +21,7 @@ from spacearm.base.paths import SHARED_DATA
 from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.fit_setup import initial_registration
+from spacearm.controller.calibration.joint_load import JointLoad
 from spacearm.controller.calibration.measurement_models import PointModel
 from spacearm.controller.calibration.trusted_fit import FitOptions, FitReport, fit_blocks
 
@@ -34,10 +35,20 @@ SIGMA = 1e-3     # m: marker noise (~0.3 mm) plus what a rigid geometric model c
 
 
 @lru_cache(maxsize=None)
-def tiago_kinematics(path: Path = URDF) -> KinematicModel:
+def _tiago(path: Path = URDF) -> tuple[KinematicModel, JointLoad]:
     from spacearm.base.kinematics.arm_import import import_arm
     _, cfg = import_arm(path, "base_link", "arm_7_link")
-    return KinematicModel.from_config(cfg)
+    kin = KinematicModel.from_config(cfg)
+    return kin, JointLoad.from_config(kin, cfg.links)
+
+
+def tiago_kinematics(path: Path = URDF) -> KinematicModel:
+    return _tiago(path)[0]
+
+
+def tiago_load(path: Path = URDF) -> JointLoad:
+    """Gravity load per joint from the URDF's inertials (the links up to arm_7_link)."""
+    return _tiago(path)[1]
 
 
 def load_session(path: Path, marker: int = 1) -> tuple[Array, Array]:
@@ -57,18 +68,35 @@ class TiagoFit:
     train_rms: float        # m
     validation_rms: float   # m
     validation_max: float   # m
+    model: ErrorModel | None = None
+
+
+def validation_day_registration(fit: TiagoFit, sigma: float = SIGMA) -> tuple[float, Array]:
+    """Diagnostic only, never a reported figure: the validation RMS (m) after fitting the six
+    registration parameters (mocap frame <- base) to the validation day itself, the calibrated arm
+    held fixed, and that day's mean position error (m, x y z) before. It measures how much of the
+    validation error is the motion-capture frame moved between the two days."""
+    from spacearm.controller.calibration.solvers import lm
+    Qv, Pv = load_session(VALIDATION)
+    em = fit.model
+    vp = CompositeProblem(em, [Block(PointModel(), Qv, Pv, sigma)], em.frame_names("world"), fit.report.result.x)
+    mean = vp.position_errors(vp.x0)[0].mean(axis=0)
+    e = vp.position_errors(lm(vp).x)[0]
+    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))), mean
 
 
 def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0),
-              opts: FitOptions = FitOptions(), sigma: float = SIGMA) -> TiagoFit:
-    """Identify on the training day, score every posture of the validation day."""
+              opts: FitOptions = FitOptions(), sigma: float = SIGMA, elastic: bool = False) -> TiagoFit:
+    """Identify on the training day, score every posture of the validation day; `elastic`: with a
+    compliance per joint under its gravity load among the candidates (FIGAROH's non-geometric terms)."""
     kin = tiago_kinematics()
     Qt, Pt = load_session(TRAINING)
     Qv, Pv = load_session(VALIDATION)
     marker = PointModel(tool_point)
     train = Block(marker, Qt, Pt, sigma, label=TRAINING.name)
     valid = Block(marker, Qv, Pv, sigma, label=VALIDATION.name)
-    em = ErrorModel.from_kinematics(kin, world=initial_registration(ErrorModel.from_kinematics(kin), [train]))
+    em = ErrorModel.from_kinematics(kin, world=initial_registration(ErrorModel.from_kinematics(kin), [train]),
+                                    load=tiago_load() if elastic else None)
     names = CompositeProblem(em, [train], []).names
     if registration_only:
         cands = em.frame_names("world") + list(marker.extra_names)
@@ -76,5 +104,6 @@ def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, f
         cands = [n for n in names if not n.startswith(em.tool_prefix + "_")]
     rep = fit_blocks(em, [train], opts, candidates=cands, validation=[valid])
     after = np.array([h.after for h in rep.held_out])
-    return TiagoFit(rep, "registration only" if registration_only else "full", len(rep.result.free),
-                    rep.train_position_rms, float(np.sqrt(np.mean(after ** 2))), float(after.max()))
+    label = "registration only" if registration_only else "full + elasticity" if elastic else "full"
+    return TiagoFit(rep, label, len(rep.result.free),
+                    rep.train_position_rms, float(np.sqrt(np.mean(after ** 2))), float(after.max()), em)

@@ -71,6 +71,7 @@ class HeldOut:
     before: float                    # position error norm with the start values, m
     after: float                     # with the fit, m
     outside: tuple[str, ...] = ()    # joints outside their training range here (extrapolation)
+    residual: tuple[float, ...] = ()  # the position error after the fit per reading axis (x, y, z), m
 
 
 @dataclass
@@ -100,6 +101,12 @@ class FitReport:
         if not self.held_out:
             return None
         return float(np.sqrt(np.mean([getattr(h, which) ** 2 for h in self.held_out])))
+
+    def held_axis_rms(self) -> Array | None:
+        """RMS of the held-out position error per reading axis (x, y, z for points), m."""
+        if not self.held_out or len({len(h.residual) for h in self.held_out}) != 1:
+            return None
+        return np.sqrt(np.mean(np.square([h.residual for h in self.held_out]), axis=0))
 
     def worst_held_out(self, count: int = 5) -> list[HeldOut]:
         return sorted(self.held_out, key=lambda h: -h.after)[:count]
@@ -171,7 +178,8 @@ def _held_out(problem: CompositeProblem, test_blocks: list[Block], rows: list[Ar
         for k in range(len(idx)):
             off = (b.Q[k] < lo) | (b.Q[k] > hi)
             out.append(HeldOut(b.label, int(idx[k]), float(np.linalg.norm(e0[k])), float(np.linalg.norm(e1[k])),
-                               tuple(str(joints[j]) if j < len(joints) else f"q{j + 1}" for j in np.flatnonzero(off))))
+                               tuple(str(joints[j]) if j < len(joints) else f"q{j + 1}" for j in np.flatnonzero(off)),
+                               tuple(float(v) for v in e1[k])))
     rw = [np.matmul(W, r[:, :, None]).reshape(-1)
           for (r, _), W in zip(hp.block_residuals(x, jacobian=False)[n_train:], hp._W[n_train:])]
     return out, float(np.sqrt(np.mean(np.concatenate(rw) ** 2)))
