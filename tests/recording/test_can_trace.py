@@ -64,9 +64,12 @@ def test_trace_of_a_redundant_pair_names_each_frames_line(kind, tmp_path):
     trace = CanTrace("+".join(lines), path)
     senders = [open_bus(spec) for spec in lines]
     try:
-        for i in range(40):
-            senders[i % 3 == 0].send(can.Message(arbitration_id=0x181 + (i % 3 == 0), data=bytes([i]),
-                                                 is_extended_id=False))
+        for i in range(40):     # both ways a sender puts a frame on a line (the stack's hot path: send_frame)
+            sender, can_id = senders[i % 3 == 0], 0x181 + (i % 3 == 0)
+            if i % 2 and hasattr(sender, "send_frame"):
+                sender.send_frame(can_id, bytes([i]))
+            else:
+                sender.send(can.Message(arbitration_id=can_id, data=bytes([i]), is_extended_id=False))
         time.sleep(0.5)
     finally:
         for sender in senders:
