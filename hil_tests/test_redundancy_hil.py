@@ -164,3 +164,53 @@ def test_moves_through_a_cut_line_each_way_then_both_lines_lost(redundant_stack)
         time.sleep(0.05)
     assert console.status()["stop"]["code"] == "bus_lines_lost", console.status()["stop"]
     assert "line A (" in redundant_stack["sim_log"].read_text()        # the simulator took the command
+
+
+def test_impedance_capture_continues_through_a_line_cut(tmp_path):
+    """The ORU cell on a redundant pair of in-process lines (lockstep, simulator on SYNC time):
+    the nominal line is cut while the end effector is being driven onto the ORU's adapter under
+    impedance control (stage 1, subtask 3). The flow must go on to pull the ORU out (plant
+    truth: the ORU is on the tool), with the contact force of the recording within the
+    impedance force limit and no stop."""
+    from spacearm.base.transport.line_faults import clear_all, line_fault
+    from hil_tests.oru_stack import OruStack
+
+    tag = f"{os.getpid()}-{time.monotonic_ns()}"
+    lines = (f"virtual:oru-a-{tag}", f"virtual:oru-b-{tag}")
+    stack = OruStack(record_dir=tmp_path / "runs", bus="+".join(lines))
+    try:
+        stack.ready()
+        stack.call("oru.run", stages=[1])
+        stack.run_until(1, 3)
+        into = stack.daemon.snapshot.tick.cycle + 25        # half a second into the capture
+        stack.wait(lambda: stack.daemon.snapshot.tick.cycle >= into, 60)
+        line_fault(lines[0]).set("cut")
+        cut_at = stack.daemon.snapshot.tick.time
+        status = stack.run_to_end()
+        assert status["state"] == "done", status["failure"]
+        assert stack.daemon.core.state == "enabled", stack.daemon.core.stop_reason
+        assert stack.world.orus["old_oru"].where == "tool"              # plant truth: it was captured and pulled
+        bus_lines = stack.daemon.status()["network"]["bus_lines"]
+        force_limit = stack.daemon.oru.impedance.force_limit
+        capture = next(r for r in status["records"] if r["number"] == 3 and r["outcome"] == "done")
+    finally:
+        stack.close()
+        clear_all()
+    [path] = (tmp_path / "runs").glob("*.mcap")
+    rec = read_recording(path)
+    events = [m.data for m in rec.topic("/events")]
+    # the flow's clock runs from its "oru started" event; what follows "oru finished" is the close
+    oru_start = next(e["t"] for e in events if e["kind"] == "motion" and e["message"].startswith("oru started"))
+    oru_end = next(e["t"] for e in events if e["kind"] == "motion" and e["message"].startswith("oru finished"))
+    events = [e for e in events if e["t"] <= oru_end]
+    begin, end = oru_start + capture["started"], oru_start + capture["started"] + capture["duration"]
+    switch = [e["t"] for e in events if e["kind"] == "line_switch"]
+    assert switch and begin <= switch[0] <= end, (switch, begin, end)          # the cut came mid-capture
+    assert any(e["kind"] == "line_switch_complete" for e in events)
+    assert not {"protective_stop", "stop"} & {e["kind"] for e in events}
+    during = [m.data for m in rec.topic("/cycle") if begin <= m.data["t"] <= end]
+    raw_force = max(float(np.linalg.norm(c["wrench"][:3])) for c in during)
+    print(f"\nload {os.getloadavg()[0]:.1f}; cut at t={cut_at:.2f} s, switch at {switch[0]:.2f} s in the capture "
+          f"({begin:.2f} to {end:.2f} s); peak contact force {capture['peak_force']:.1f} N "
+          f"(compensated), {raw_force:.1f} N raw, limit {force_limit:.0f} N; bus lines {bus_lines}")
+    assert capture["peak_force"] < force_limit and raw_force < force_limit
