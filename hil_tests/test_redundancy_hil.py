@@ -214,3 +214,67 @@ def test_impedance_capture_continues_through_a_line_cut(tmp_path):
           f"({begin:.2f} to {end:.2f} s); peak contact force {capture['peak_force']:.1f} N "
           f"(compensated), {raw_force:.1f} N raw, limit {force_limit:.0f} N; bus lines {bus_lines}")
     assert capture["peak_force"] < force_limit and raw_force < force_limit
+
+
+@pytest.mark.vcan_vm    # inside the QEMU vcan VM: vcan0 + vcan1 (hil_tests/vm/runner.py creates both)
+def test_switch_on_a_socketcan_pair(time_scale):
+    """Master and simulated nodes on a pair of kernel CAN interfaces (socketcan:vcan0+vcan1 in
+    the VM; virtual lines elsewhere), both on SYNC time (lockstep: the VM's emulation speed is
+    no silence). Line A is cut mid-run: the whole network is on B within 3 node heartbeat
+    periods of controller time, as a plain SocketCAN socket on vcan1 sees (every node's
+    heartbeat there), and the process data is complete again with every joint enabled."""
+    from spacearm.base.config.bus import BusConfig
+    from spacearm.base.transport import open_bus
+    from spacearm.base.transport.line_faults import clear_all, line_fault
+    from spacearm.drivers import line_redundancy
+    from spacearm.drivers.network import ArmNetwork
+    from spacearm.firmware_sim.runner import Simulator
+    from hil_tests.conftest import vcan_available
+
+    tag = f"{os.getpid()}-{time.monotonic_ns()}"
+    lines = (("socketcan:vcan0", "socketcan:vcan1") if vcan_available("vcan0") and vcan_available("vcan1")
+             else (f"virtual:vm-a-{tag}", f"virtual:vm-b-{tag}"))
+    spec = "+".join(lines)
+    config = line_redundancy.bus_config_for(spec, load_bus_config())
+    b = config.bus
+    config = BusConfig(bus=b.model_copy(update={"boot_timeout": b.boot_timeout * time_scale,
+                                                "sdo_timeout": min(10.0, b.sdo_timeout * time_scale)}),
+                       nodes=config.nodes)
+    sim = Simulator(spec, config, time_base="sync").start()
+    net = ArmNetwork(spec, config)
+    net.controller_period = b.sync_period
+    wire_b = open_bus(lines[1])
+    wait = 0.05 * time_scale        # s a cycle waits for its TPDOs (a cut line's cycles wait it out)
+    try:
+        net.connect()
+        net.boot()
+        net.enable_all()
+        for _ in range(20):
+            net.cycle(timeout=wait)
+        assert net.line_redundancy.active == 0
+        while wire_b.recv(0) is not None:
+            pass
+        line_fault(lines[0]).set("cut")
+        cut_sync, started = net._sync, time.monotonic()
+        while not (net.line_redundancy.active == 1 and {r.line for r in sim.line_selection.rules.values()} == {1}):
+            net.cycle(timeout=wait)
+            assert net._sync - cut_sync < 60, "the network did not move to line B"
+        switched = (net._sync - cut_sync) * b.sync_period
+        for _ in range(10):
+            state = net.cycle(timeout=wait)
+        nodes, heard = {n.node_id for n in config.nodes}, set()
+        while heard != nodes and (msg := wire_b.recv(0.5 * time_scale)) is not None:
+            if msg.arbitration_id - 0x700 in nodes:
+                heard.add(msg.arbitration_id - 0x700)
+        period = max(n.heartbeat_period for n in config.nodes)
+        print(f"\n{spec}: network on B {1e3 * switched:.0f} ms of controller time after the cut "
+              f"({switched / period:.2f} heartbeat periods, {time.monotonic() - started:.1f} s wall); "
+              f"load {os.getloadavg()[0]:.1f}")
+        assert switched <= 3 * period
+        assert heard == nodes
+        assert state.complete and all(j.enabled for j in state.joints)
+    finally:
+        wire_b.shutdown()
+        net.close()
+        sim.stop()
+        clear_all()
