@@ -14,8 +14,8 @@ BUS_CONFIG = "configs/oru/bus_shared_machine.toml"
 
 
 class OruStack:
-    def __init__(self, record_dir=None, plant: str = PLANT, bus_config: str = BUS_CONFIG):
-        self.bus = f"virtual:oru-test-{time.monotonic_ns()}"
+    def __init__(self, record_dir=None, plant: str = PLANT, bus_config: str = BUS_CONFIG, bus: str | None = None):
+        self.bus = bus or f"virtual:oru-test-{time.monotonic_ns()}"
         self.sim = start_simulator(self.bus, bus_config, plant, time_base="sync")
         self.daemon = Daemon(DaemonOptions(bus=self.bus, bus_config=bus_config, clock="lockstep", api=None,
                                            record_dir=record_dir))

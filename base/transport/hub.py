@@ -29,7 +29,7 @@ from pathlib import Path
 import can
 
 from . import wire
-from .line_faults import LineFault, LineFaultError
+from .line_faults import LineFault, parse_fault_text
 from spacearm.base.canopen import peer_timing
 from spacearm.base.runtime.child_process import REPO_ROOT, module_env, readline_within
 from spacearm.base.runtime.priority import use_fifo
@@ -201,20 +201,10 @@ class LoopbackHub:
         if stamp == self._fault_file_stamp:
             return
         self._fault_file_stamp = stamp
-        wanted: dict[str, tuple[str, float | None]] = {}
         text = self.fault_file.read_text() if stamp is not None else ""
-        for number, line in enumerate(text.splitlines(), 1):
-            words = line.split("#")[0].split()
-            if not words:
-                continue
-            try:
-                if len(words) not in (2, 3):
-                    raise LineFaultError("expected CHANNEL MODE [LOSS]")
-                wanted[words[0]] = (words[1], float(words[2]) if len(words) == 3 else None)
-                LineFault().set(*wanted[words[0]])
-            except (LineFaultError, ValueError) as exc:
-                log.warning("%s:%d: %s (line ignored)", self.fault_file, number, exc)
-                wanted.pop(words[0], None)
+        wanted, problems = parse_fault_text(text)
+        for problem in problems:
+            log.warning("%s:%s (line ignored)", self.fault_file, problem)
         for channel in set(self.line_faults) - set(wanted):
             self.fault(channel, "ok")
         for channel, (mode, loss) in wanted.items():

@@ -18,11 +18,19 @@ for all its clients (hub.py `fault`).
     ok               no fault
 
 Random losses come from a generator seeded per line (`seed`), so a test repeats exactly.
+
+A fault file injects them at run time from another process (`spacearm hub --fault-file`,
+`spacearm sim --fault-file`; `spacearm bus fault FILE LINE MODE` edits one): one
+`LINE MODE [LOSS]` per text line, `#` comments; a line not named has no fault. The file is
+re-read when it changes (FaultFileWatcher, or the hub's own loop).
 """
 from __future__ import annotations
 
+import os
 import random
 import threading
+from collections.abc import Callable
+from pathlib import Path
 
 MODES = ("ok", "cut", "babble", "stuck_dominant", "error_passive", "intermittent")
 
@@ -116,3 +124,95 @@ def clear_all() -> None:
         faults = list(_LINES.values())
     for fault in faults:
         fault.clear()
+
+
+def parse_fault_text(text: str) -> tuple[dict[str, tuple[str, float | None]], list[str]]:
+    """A fault file's text -> ({line name: (mode, loss)}, ["N: problem", ...] for lines ignored)."""
+    wanted: dict[str, tuple[str, float | None]] = {}
+    problems: list[str] = []
+    for number, text_line in enumerate(text.splitlines(), 1):
+        words = text_line.split("#")[0].split()
+        if not words:
+            continue
+        try:
+            if len(words) not in (2, 3):
+                raise LineFaultError("expected LINE MODE [LOSS]")
+            entry = (words[1], float(words[2]) if len(words) == 3 else None)
+            LineFault().set(*entry)        # checks mode and loss
+            wanted[words[0]] = entry
+        except (LineFaultError, ValueError) as exc:
+            problems.append(f"{number}: {exc}")
+    return wanted, problems
+
+
+def write_fault_entry(path: Path, line: str, mode: str, loss: float | None = None) -> None:
+    """Set one line's entry in a fault file (`ok` removes it), keeping the others; the file is
+    replaced in one rename, so a reader never sees half of it. Raises LineFaultError."""
+    LineFault().set(mode, loss)
+    if not line or any(c.isspace() or c == "#" for c in line):
+        raise LineFaultError(f"line name {line!r}: one word, no '#'")
+    path = Path(path)
+    kept = []
+    if path.exists():
+        for text_line in path.read_text().splitlines():
+            words = text_line.split("#")[0].split()
+            if not words or words[0] != line:
+                kept.append(text_line)
+    if mode != "ok":
+        kept.append(f"{line} {mode}" + (f" {loss:g}" if loss is not None else ""))
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text("".join(f"{t}\n" for t in kept))
+    tmp.replace(path)
+
+
+class FaultFileWatcher:
+    """Applies a fault file to named lines while it runs (`lines`: every name a line may go by,
+    e.g. A, arm-a and virtual:arm-a, -> its LineFault); `report(text)` gets one line per change
+    or ignored text line."""
+
+    PERIOD = 0.05   # s between looks at the file's modification time
+
+    def __init__(self, path: Path, lines: dict[str, LineFault], report: Callable[[str], None]):
+        self.path, self.lines, self.report = Path(path), lines, report
+        self._stamp: int | None = -1
+        self._stop = threading.Event()
+        self.poll()
+        self._thread = threading.Thread(target=self._run, name="line-fault-file", daemon=True)
+        self._thread.start()
+
+    def poll(self) -> None:
+        try:
+            stamp = self.path.stat().st_mtime_ns
+            text = self.path.read_text()
+        except OSError:
+            stamp, text = None, ""
+        if stamp == self._stamp:
+            return
+        self._stamp = stamp
+        wanted, problems = parse_fault_text(text)
+        for problem in problems:
+            self.report(f"{self.path}:{problem} (ignored)")
+        for name in wanted:
+            if name not in self.lines:
+                self.report(f"{self.path}: no line {name!r} here (known: {', '.join(self.lines)}; ignored)")
+        target: dict[int, tuple[LineFault, str, float | None, str]] = {}
+        for name, fault in self.lines.items():
+            target.setdefault(id(fault), (fault, "ok", None, name))
+        for name, (mode, loss) in wanted.items():
+            fault = self.lines.get(name)
+            if fault is not None:
+                target[id(fault)] = (fault, mode, loss, name)
+        for fault, mode, loss, name in target.values():
+            wanted_state = LineFault()
+            wanted_state.set(mode, loss)
+            if (fault.mode, fault.loss) != (wanted_state.mode, wanted_state.loss):
+                fault.set(mode, loss)
+                self.report(f"line {name} ({fault.spec}): {fault.describe()}")
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.PERIOD):
+            self.poll()
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)

@@ -64,6 +64,12 @@ def split_pair(spec: str) -> tuple[str, str] | None:
     return parts[0], parts[1]
 
 
+def line_channel(spec: str) -> str:
+    """A line's name in a CAN trace's channel column, as `candump -l any` names an interface:
+    'virtual:arm-a' -> arm-a, 'loopback:arm-a@127.0.0.1:5000' -> arm-a, 'socketcan:vcan1' -> vcan1."""
+    return spec.partition(":")[2].partition("@")[0] or spec
+
+
 class _LineListener(can.Listener):
     """Delivers one line's frames to an application listener in the sender's thread
     (the in-process bus), tagged with the line."""
@@ -112,6 +118,7 @@ class RedundantBus(can.BusABC):
         from . import frame_sender, frames_sender
 
         self.specs = (spec_a, spec_b)
+        self.line_channels = (line_channel(spec_a), line_channel(spec_b))
         first = open_line(spec_a, **kwargs)
         try:
             second = open_line(spec_b, **kwargs)
@@ -168,6 +175,7 @@ class RedundantBus(can.BusABC):
         if self._rx_blocked(line) and not msg.is_error_frame:
             return None, False
         _rx.line = line
+        msg.channel = self.line_channels[line]     # a trace of the pair names each frame's line
         return msg, False
 
     # ------------------------------------------------------------------ transmit

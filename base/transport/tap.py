@@ -11,6 +11,9 @@ FLUSH_PERIOD, in the writer's own candump format, in arrival order.
     tap.add_inline_listener(buffered)
     ...
     buffered.stop()          # formats what is left, closes the writer
+
+On a redundant pair (`line_channels`: the two lines' names) each frame's line is the channel
+column, as `candump -l any` names each frame's interface.
 """
 from __future__ import annotations
 
@@ -18,16 +21,21 @@ import threading
 
 import can
 
+from .redundant import rx_state
+
 FLUSH_PERIOD = 0.2   # s
 WRITE_LINES = 256    # lines per write between a rotating writer's size checks
 
 
 class BufferedTap(can.Listener):
-    def __init__(self, writer: can.Listener, channel: str):
+    def __init__(self, writer: can.Listener, channel: str, line_channels: tuple[str, str] | None = None):
         # writer: candump format with `file`, `last_timestamp`, `rotate_if_full()` and `stop()`
         # (can_trace.RotatingTraceWriter: python-can's CanutilsLogWriter under a size limit)
         self.writer = writer
         self.channel = channel
+        self.line_channels = line_channels
+        if line_channels is not None:
+            self.on_frame = self._on_pair_frame
         self._frames: list = []
         self._stop = threading.Event()
         self._lock = threading.Lock()        # formatting (flush thread vs stop), never the hot path
@@ -43,7 +51,17 @@ class BufferedTap(can.Listener):
     def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
         self._frames.append((timestamp, can_id, data))
 
+    def _on_pair_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
+        line = rx_state.line
+        self._frames.append((timestamp, can_id, data, self.line_channels[line] if line is not None else self.channel))
+
     def on_message_received(self, msg: can.Message) -> None:
+        line = getattr(rx_state, "line", None)
+        if self.line_channels is not None and line is not None:
+            msg = can.Message(timestamp=msg.timestamp, arbitration_id=msg.arbitration_id, data=msg.data,
+                              is_extended_id=msg.is_extended_id, is_error_frame=msg.is_error_frame,
+                              is_remote_frame=msg.is_remote_frame, dlc=msg.dlc, channel=self.line_channels[line],
+                              check=False)
         self._frames.append(msg)
 
     def _run(self) -> None:
@@ -63,8 +81,9 @@ class BufferedTap(can.Listener):
             lines = []
             for item in frames:
                 if isinstance(item, tuple):     # a received standard data frame, as the writer prints it
-                    ts, can_id, data = item
-                    lines.append(f"({max(ts, floor):f}) {self.channel} {can_id:03X}#{data.hex().upper()} R\n")
+                    ts, can_id, data = item[:3]
+                    channel = item[3] if len(item) > 3 else self.channel
+                    lines.append(f"({max(ts, floor):f}) {channel} {can_id:03X}#{data.hex().upper()} R\n")
                     if len(lines) >= WRITE_LINES:
                         self._write(lines)
                         lines = []

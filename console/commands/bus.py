@@ -2,6 +2,13 @@
 
     spacearm bus scan socketcan:can0 [--bus-file configs/bus/arm.toml] [--write found.toml] [--json]
 
+    spacearm bus fault FILE LINE MODE [--loss P]
+
+`fault` sets LINE's entry in a line-fault file that `spacearm sim --fault-file FILE` or
+`spacearm hub --fault-file FILE` re-reads at once (LINE: A, B or a line's name for the
+simulator, a channel name for the hub; MODE cut, babble, stuck_dominant, error_passive,
+intermittent, ok = restore; base/transport/line_faults.py).
+
 BUS is a bus spec (virtual:NAME, loopback:NAME, socketcan:CHANNEL). The scan is an SDO upload of
 1000h/1018h to node-IDs 1-127 (no NMT command); with --bus-file each node is compared with its
 entry and EDS (identity, objects the device lacks, read-only where the EDS says writable: the
@@ -19,6 +26,22 @@ from spacearm.console.errors import friendly_errors
 
 def register(app: typer.Typer) -> None:
     bus_app = typer.Typer(help="Look at a CAN bus: which CANopen nodes are on it.", no_args_is_help=True)
+
+    @bus_app.command("fault")
+    def fault(file: Path = typer.Argument(..., help="the fault file the simulator or hub was started with"),
+              line: str = typer.Argument(..., help="A, B or a line's name (arm-a, vcan1; the hub: its channel)"),
+              mode: str = typer.Argument(..., help="cut, babble, stuck_dominant, error_passive, intermittent, ok"),
+              loss: float | None = typer.Option(None, "--loss", help="loss probability 0..1 (intermittent, "
+                                                                     "error_passive)")) -> None:
+        """Cut, disturb or restore one line of a redundant pair at run time (a simulator's or hub's fault file)."""
+        from spacearm.base.transport.line_faults import LineFaultError, write_fault_entry
+
+        try:
+            write_fault_entry(file, line, mode, loss)
+        except (LineFaultError, OSError) as exc:
+            typer.echo(f"error[bad_argument]: bus fault: {exc}", err=True)
+            raise typer.Exit(2)
+        typer.echo(f"line {line}: {mode}" + (f" (loss {loss:g})" if loss is not None else "") + f" in {file}")
 
     @bus_app.command("scan")
     @friendly_errors

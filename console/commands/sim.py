@@ -7,6 +7,10 @@ with `--board FILE` that camera also sees the calibration checkerboard; SIGUSR1 
 camera (a fault to inject: frames stop, the nodes go on).
 With a `[laser]` section in the plant file it also serves the tool's laser ranger on a
 pseudo-terminal and prints "spacearm sim: laser ranger on /dev/pts/N" first.
+On a redundant pair (`--bus A+B`), `--fault-file PATH` injects line faults at run time: one
+`LINE MODE [LOSS]` per line (LINE: A, B or the line's name, e.g. arm-a or vcan1), re-read when
+the file changes (`spacearm bus fault PATH A cut` edits it; README, redundant pairs); every
+change prints "spacearm sim: line A (SPEC): MODE".
 Prints one line "spacearm sim: N nodes ready on BUS" when all nodes have sent their boot-up
 message, then runs until SIGINT/SIGTERM (or --duration seconds).
 """
@@ -41,7 +45,7 @@ def _refused(exc: Exception) -> int:
 def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Path] = None,
             duration: Optional[float] = None, stats: bool = False, control_node: Optional[int] = None,
             camera: Optional[str] = None, board: Optional[Path] = None, rt_priority: int = 0,
-            time_base: str = "wall") -> int:
+            time_base: str = "wall", fault_file: Optional[Path] = None) -> int:
     from spacearm.base.config.errors import ConfigError
     from spacearm.base.transport import BusSpecError
     from spacearm.firmware_sim.runner import Simulator
@@ -69,6 +73,12 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
     except Exception as exc:  # bus cannot be opened etc.
         typer.echo(f"error[no_connection]: spacearm sim: cannot start on {bus}: {exc}", err=True)
         return 1
+    watcher = None
+    if fault_file is not None:
+        if not hasattr(sim.bus, "line_channels"):
+            sim.stop()
+            return _refused(ValueError(f"--fault-file acts on the lines of a redundant pair; {bus} is one line"))
+        watcher = _watch_fault_file(fault_file, sim.bus)
     stop = threading.Event()
 
     def _stop(signum, frame):
@@ -103,6 +113,8 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
     try:
         stop.wait(duration)
     finally:
+        if watcher is not None:
+            watcher.stop()
         sim.stop()
         if ring is not None:
             ring.close()
@@ -111,6 +123,19 @@ def run_sim(bus: str, bus_config: Path = DEFAULT_BUS_CONFIG, plant: Optional[Pat
     if stats:
         typer.echo(f"spacearm sim: {sim.stats}")
     return 0
+
+
+def _watch_fault_file(path: Path, pair):
+    """Line faults from `path` on the simulator's own side of each line: frames it sends there
+    do not enter the line and frames there do not reach its nodes (with the controller the only
+    other party, a cut line as both see it)."""
+    from spacearm.base.transport.line_faults import FaultFileWatcher
+    from spacearm.base.transport.redundant import LINE_NAMES
+
+    names = {}
+    for i, fault in enumerate(pair.faults):
+        names.update({LINE_NAMES[i]: fault, pair.line_channels[i]: fault, pair.specs[i]: fault})
+    return FaultFileWatcher(path, names, lambda text: typer.echo(f"spacearm sim: {text}", err=True))
 
 
 def register(app: typer.Typer) -> None:
@@ -139,7 +164,12 @@ def register(app: typer.Typer) -> None:
             help="wall: the drives judge the controller's heartbeat on the clock (real time); sync: on "
                  "SYNC time, beside a `--clock lockstep` daemon, so a stalled or slow lockstep run is "
                  "never a lost controller"),
+        fault_file: Optional[Path] = typer.Option(
+            None, "--fault-file",
+            help='line faults at run time on a redundant pair, re-read when the file changes: lines "LINE MODE '
+                 '[LOSS]", LINE A, B or the line\'s name, MODE cut, babble, stuck_dominant, error_passive, '
+                 "intermittent or ok (`spacearm bus fault` edits it)"),
     ) -> None:
         """Run the simulated CANopen nodes (6 joint drives, end effector, F/T sensor)."""
         raise typer.Exit(run_sim(bus, bus_config, plant, duration, stats, control_node, camera, board,
-                                 rt_priority, time_base))
+                                 rt_priority, time_base, fault_file))

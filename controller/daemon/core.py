@@ -76,6 +76,13 @@ class ControllerCore:
         # Motions are sampled on their own clock, one period per executed cycle: after an
         # overrun (skipped cycles) a motion continues where it was instead of jumping ahead.
         self.motion_time = 0.0
+        # After a bus line switch (bridged cycles: the path waited, the drives held their last
+        # target) the path's clock speeds back up from 0 to 1 within the joints' acceleration
+        # limits: resumed at full rate it asked a held drive for its full path speed at once,
+        # and the drive's catch-up overshot the velocity limit (seen over the loopback hub).
+        self.resume_rate = 1.0
+        self._resume_per_s = 0.0
+        self._sampled_at = 0.0         # motion time of the last setpoint sent
         # Motion numbers let a console wait for *its* motion: started counts up when a motion
         # is accepted, finished is set when that motion ends normally.
         self.motions_started = 0
@@ -148,9 +155,25 @@ class ControllerCore:
                                      f"joints not enabled within {ENABLE_TIMEOUT:.0f} s: {', '.join(slow)}",
                                      joint=slow[0] if slow else None))
         command = self._command(m)
-        if not m.bridged:        # a bus line switch: the drives get nothing, so the path waits for them
+        if m.bridged:            # a bus line switch: the drives get nothing, so the path waits for them
+            if self.resume_rate > 0.0:
+                # it resumes at the last target sent (the one the drives hold), not a step beyond it
+                self.motion_time = self._sampled_at
+                self.resume_rate, self._resume_per_s = 0.0, self._resume_ramp()
+        elif self.stopping is not None or self.resume_rate >= 1.0:
             self.motion_time += self.period
+        else:
+            self.resume_rate = min(1.0, self.resume_rate + self.period * self._resume_per_s)
+            self.motion_time += self.period * self.resume_rate
         return command
+
+    def _resume_ramp(self) -> float:
+        """1/s the path's clock rate rises by after a bridged gap: the paused path velocity
+        reached at the joints' acceleration limits (at once without limits or velocity)."""
+        if self.last_setpoint is None or self.a_max is None:
+            return float("inf")
+        ramp = float(np.max(np.abs(self.last_setpoint.dq) / self.a_max, initial=0.0))
+        return 1.0 / ramp if ramp > self.period else float("inf")
 
     def _command(self, m: Measurement) -> Command:
         if self.stopping is not None and self.state in (MachineState.STOPPED, MachineState.ENABLED):
@@ -166,6 +189,7 @@ class ControllerCore:
                 # faster than the joints' limits once the switch completes
                 return Command(self.last_setpoint.q.copy(), np.zeros_like(m.q), enable=True)
             mode = self.mode
+            self._sampled_at = self.motion_time
             out = mode.update(self.motion_time, m)
             self.mode_output = out
             if out.failure is not None:
@@ -183,7 +207,8 @@ class ControllerCore:
                 self.motions_finished = self.motions_started
                 self._set_mode(HoldMode(setpoint.q.copy()))
             self.last_target = setpoint.q.copy()
-            return Command(setpoint.q.copy(), setpoint.dq.copy(), enable=True, end_effector=out.end_effector)
+            return Command(setpoint.q.copy(), setpoint.dq * self.resume_rate, enable=True,
+                           end_effector=out.end_effector)
         # Not enabled: targets follow the measurement so enabling never causes a jump.
         self.last_target = None
         self.last_setpoint = None

@@ -5,7 +5,9 @@ Receiving and formatting ~1000 frames/s in Python inside the daemon's process ta
 from the control cycle (measured on 2 cores: worst cycle write 16 ms with the tap in the
 daemon, 6 ms without), so on a bus another process can open (loopback hub, SocketCAN) the
 tap runs as a low-priority child process. python-can's virtual bus exists
-only inside one process, so there the tap stays a thread.
+only inside one process, so there the tap stays a thread. On a redundant pair the tap hears
+both lines and each frame's channel column is its line's name (`arm-a`, `vcan1`;
+base/transport/redundant.py `line_channel`), as `candump -l any` writes it.
 
     python -m spacearm.controller.recording.can_trace BUS OUT.log [MAX_BYTES KEEP]   # what the daemon starts
 
@@ -152,7 +154,7 @@ def _open_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC,
         # in-process bus: frames are appended in the sender's thread and formatted in batches
         # (base/transport/tap.py), not one Message, queue hop and write per frame on the cycle
         from spacearm.base.transport.tap import BufferedTap
-        buffered = BufferedTap(writer, str(tap.channel_id))
+        buffered = BufferedTap(writer, str(tap.channel_id), getattr(tap, "line_channels", None))
         tap.add_inline_listener(buffered)
         return tap, can.Notifier(tap, [buffered], timeout=0.1), buffered
     return tap, can.Notifier(tap, [writer], timeout=0.1), writer

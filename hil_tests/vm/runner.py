@@ -226,8 +226,10 @@ echo 1 > $RW/started
 echo "[vm] kernel $(uname -r), $(nproc) cpus"
 fail() {{ echo "[vm] $1"; echo "$1" > $RW/problem; echo 90 > $RW/rc; exit 90; }}
 modprobe vcan || fail "modprobe vcan failed"
-ip link add dev vcan0 type vcan || fail "ip link add vcan0 failed"
-ip link set up vcan0 || fail "ip link set up vcan0 failed"
+for dev in vcan0 vcan1; do    # vcan1: the redundant line of a pair (hil_tests/test_redundancy_hil.py)
+  ip link add dev $dev type vcan || fail "ip link add $dev failed"
+  ip link set up $dev || fail "ip link set up $dev failed"
+done
 ip -details link show vcan0 | head -3
 cd {root} || fail "cannot cd {root}"
 export HOME=/tmp SPACEARM_IN_VM=1 PYTHONDONTWRITEBYTECODE=1 PYTHONUNBUFFERED=1 CI="${{CI:-}}"

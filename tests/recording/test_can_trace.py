@@ -51,3 +51,34 @@ def test_bus_the_child_cannot_open_is_a_clear_error(tmp_path):
 def test_bad_bus_spec_is_refused_before_starting(tmp_path):
     with pytest.raises(BusSpecError):
         CanTrace("carrier-pigeon:1", tmp_path / "x.can.log")
+
+
+@pytest.mark.parametrize("kind", ["virtual", "loopback"])
+def test_trace_of_a_redundant_pair_names_each_frames_line(kind, tmp_path):
+    """Frames put on each line by plain buses (a third party on the wire): the trace's channel
+    column is the line each came on, as `candump -l any` names the interface."""
+    hub = LoopbackHub("127.0.0.1", 0).start() if kind == "loopback" else None
+    tag = time.monotonic_ns()
+    lines = [f"loopback:tr-{x}-{tag}@127.0.0.1:{hub.port}" if hub else f"virtual:tr-{x}-{tag}" for x in "ab"]
+    path = tmp_path / "pair.can.log"
+    trace = CanTrace("+".join(lines), path)
+    senders = [open_bus(spec) for spec in lines]
+    try:
+        for i in range(40):     # both ways a sender puts a frame on a line (the stack's hot path: send_frame)
+            sender, can_id = senders[i % 3 == 0], 0x181 + (i % 3 == 0)
+            if i % 2 and hasattr(sender, "send_frame"):
+                sender.send_frame(can_id, bytes([i]))
+            else:
+                sender.send(can.Message(arbitration_id=can_id, data=bytes([i]), is_extended_id=False))
+        time.sleep(0.5)
+    finally:
+        for sender in senders:
+            sender.shutdown()
+        trace.stop()
+        if hub:
+            hub.stop()
+    logged = list(can.CanutilsLogReader(str(path)))
+    assert len(logged) == 40
+    names = {0x181: f"tr-a-{tag}", 0x182: f"tr-b-{tag}"}
+    assert [m.channel for m in logged if m.arbitration_id == 0x182] == [names[0x182]] * 14
+    assert all(m.channel == names[m.arbitration_id] for m in logged)
