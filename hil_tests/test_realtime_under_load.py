@@ -51,9 +51,6 @@ def _unless_the_host_stopped_them(status: dict, peers: dict) -> None:
         pytest.xfail(f"{stop['code']} while the host ran neither the simulator nor the hub: {', '.join(stalled)}")
 
 
-@pytest.mark.xfail(strict=False, reason="issue 32, open: beside two CPU-bound processes the separate-process "
-                   "changeout stops with pdo_missing (end_effector) at ~20 s, in 5 of 5 bench runs, cause not found; "
-                   "the test still runs and records its figures")
 def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tmp_path, time_scale, record_property):
     steal = CpuSteal()
     bus = loopback_hub.spec(f"rt-oru-{os.getpid()}-{time.monotonic_ns()}")
@@ -76,6 +73,8 @@ def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tm
     record_property("skipped_cycles", stats["skipped_cycles"])
     record_property("overruns", stats["overruns"])
     record_property("cycles", stats["cycles"])
+    # nodes' answers after the daemon's TPDO wait, within their period: slow, never counted as loss
+    record_property("late_answers", (status.get("network") or {}).get("late_answers", 0))
     record_property("period_error_p99_ms", f"{1e3 * stats['period_error_p99']:.3f}")
     record_property("scheduling", status.get("scheduling", ""))
     for name, peer in peers.items():
