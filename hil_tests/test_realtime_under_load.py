@@ -44,8 +44,9 @@ def _unless_the_host_stalled_a_vcpu(status: dict, peers: dict, steal: StealTimel
     process on that vCPU (the simulator, the hub, at any real-time priority) stood still, and
     the daemon on the other one rightly saw its nodes silent. Reported as such (xfail with the
     measured steal and the peers' own reports), not as a pass, and not as a fault of the stack.
-    Traced on the hub (issue 32): such stops came with 100 ms without a forwarded frame, and in 7
-    of 8 of those gaps one vCPU had 80-110 ms of steal."""
+    Traced on the hub (issue 32): such stops came with ~100 ms without a forwarded frame, ending
+    within 1 ms of a pinned SCHED_FIFO 99 probe's 100 ms late wake on one vCPU, and 100 ms of
+    steal on that vCPU (the host's CPU quota period)."""
     stop = status.get("stop") or {}
     if stop.get("code") not in ("pdo_missing", "heartbeat_lost"):
         return
@@ -53,13 +54,15 @@ def _unless_the_host_stalled_a_vcpu(status: dict, peers: dict, steal: StealTimel
     if not at:
         return
     stopped = status["woke_at"] - (status["time"] - at[-1])      # the stop's cycle, monotonic
-    reach = 0.1 + 2 * status["period"]
-    stolen = steal.worst_cpu(stopped - reach, stopped)
+    # the stall that silenced the nodes for the stop's reach may still be on at the stop, and
+    # the guest counts steal when its vCPU runs again: the window reaches past the stop too
+    before, after = 0.1 + 2 * status["period"], 0.12
+    stolen = steal.worst_cpu(stopped - before, stopped + after)
     if stolen >= HOST_STALL:
         reports = ", ".join(f"{name} {1e3 * p['max_lateness']:.0f} ms ({p.get('cause') or '-'})"
                             for name, p in peers.items())
         pytest.xfail(f"{stop['code']} while the host held one vCPU for {1e3 * stolen:.0f} ms of the "
-                     f"{1e3 * reach:.0f} ms before it (CPU steal); peers' worst wakes: {reports}")
+                     f"{1e3 * (before + after):.0f} ms around it (CPU steal); peers' worst wakes: {reports}")
 
 
 # s of steal on one vCPU within the stop's reach that stalls the processes on it for most of it
@@ -77,10 +80,13 @@ def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tm
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "realtime", "--rt-priority", "50", "--api", api,
             "--no-record"], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     op = Console(api, tmp_path / "operator")
-    op.run("enable")
-    # a stop on the way to ready is judged below, with the figures, as one in the changeout is
-    moved = op.run("move", "joints", *map(str, load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]),
-                   check=False)
+    # a stop before the changeout (idle, or on the way to ready) is judged below, with the
+    # figures, as one in the changeout is
+    ready = map(str, load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"])
+    for step in (["enable"], ["move", "joints", *ready]):
+        moved = op.run(*step, check=False)
+        if moved.returncode:
+            break
     oru = {"state": "not started", "failure": moved.stdout + moved.stderr}
     if moved.returncode == 0:
         op.run("oru", "run", "--stages", "1", "--no-wait")
