@@ -290,7 +290,13 @@ def _end(proc: subprocess.Popen) -> None:
 
 def changeout(runs: int, steal: CpuSteal) -> list[str]:
     """The issue's separate-process run: hub and sim at --rt-priority 50 (configs/oru/plant_cell.toml),
-    daemon on the realtime clock (SCHED_FIFO 50), `oru run --stages 1`, `runs` times."""
+    daemon on the realtime clock (SCHED_FIFO 50), `oru run --stages 1`, `runs` times.
+
+    Its old stop (pdo_missing, "end_effector": only the first of all 8 nodes by name) was the
+    simulator answering SYNCs 8.3-11.4 ms after them, 5 in a row, against the daemon's 8 ms TPDO
+    wait (a hub-side trace: its SYNC step, physics of the contact world included, is ~2-4 ms of
+    CPU, more with a wait for a core). Those answers came within their 20 ms period: they are
+    `late answers` now, not missing data (controller/daemon/hardware.py answered_late)."""
     import tempfile
     from spacearm.base.config.arm import load_arm_config
     from spacearm.base.transport.hub import HubProcess
@@ -324,7 +330,8 @@ def changeout(runs: int, steal: CpuSteal) -> list[str]:
                             f"max {1e3 * stats['period_error_max']:.1f} ms | simulator late "
                             f"{sim_view.get('late_cycles', '-')} of {sim_view.get('cycles', '-')}, max "
                             f"{1e3 * sim_view.get('max_lateness', float('nan')):.1f} ms "
-                            f"({sim_view.get('cause') or '-'}) | {conditions(steal)}")
+                            f"({sim_view.get('cause') or '-'}), late answers "
+                            f"{(status.get('network') or {}).get('late_answers', '-')} | {conditions(steal)}")
         finally:
             hub.stop()
     rows.insert(0, f"  separate-process changeout stage 1, real time, beside 2 CPU-bound | {done} of {runs} done | "

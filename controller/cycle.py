@@ -154,6 +154,8 @@ class Measurement:
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
     late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
     bridged: bool = False           # missing data of a bus line switch under way (bounded): not node loss
+    # nodes missing at the last cycle's read whose data came later in that period: slow, not silent
+    answered_late: tuple[str, ...] = ()
     # bool per joint: drive powered (operation enabled, quick stop or fault reaction active);
     # None: as joints_enabled
     joints_powered: np.ndarray | None = None

@@ -48,8 +48,10 @@ class CyclicIO:
     def send_sync(self) -> int:
         """Send one SYNC; returns its number. TPDOs arriving from now on belong to it."""
         with self._cv:
+            expected = self._expected_tpdos()
             if self._expected is not None and self._monitoring:
-                self._count_missing_tpdos(self._expected_tpdos() - self._received)
+                self._count_missing_tpdos(expected - self._received)
+            self._note_answers(expected)
             self._sync += 1
             if self.controller_period is not None:
                 self._lockstep_health(time.monotonic())
@@ -61,6 +63,20 @@ class CyclicIO:
         self._send(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync
+
+    def _note_answers(self, expected: set[int]) -> None:
+        """Which nodes answered the SYNC now ending: every TPDO of theirs it asked for arrived
+        before the next one goes out, however late in the period (answered_last_sync)."""
+        routes = self._tpdo_routes
+        absent = {routes[cob][0].name for cob in expected - self._received}
+        self._answered = {routes[cob][0].name for cob in expected} - absent
+
+    def answered_last_sync(self, names) -> list[str]:
+        """Of `names`, the nodes that answered the previous SYNC before this one went out.
+        A node missing at a real-time read whose data came later in the same period was slow
+        (it, the bus or this process), not silent: its TPDO is the evidence it is alive."""
+        with self._cv:
+            return [name for name in names if name in self._answered]
 
     def _count_missing_tpdos(self, missing: set[int]) -> None:
         """A mapped TPDO of a live node missing for tpdo_loss_cycles SYNCs in a row is a

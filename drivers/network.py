@@ -158,6 +158,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.event_callbacks: list[Callable[[NetworkEvent], None]] = []
         self._booted: set[int] = set()
         self._received: set[int] = set()
+        self._answered: set[str] = set()     # nodes that answered the previous SYNC in its period (cyclic_io.py)
         # TPDOs this SYNC should bring, fixed at the SYNC; None after a heartbeat/NMT change
         # (then every TPDO wakes the waiter, which recomputes). Waking the cycle only when the
         # set is complete saves a thread hop per TPDO.

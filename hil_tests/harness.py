@@ -51,6 +51,46 @@ class CpuSteal:
         return d_steal / d_total if d_total > 0 else 0.0
 
 
+class StealTimeline:
+    """Per-CPU steal over time (a thread at SCHED_FIFO 1 reads /proc/stat every `interval` s),
+    to ask afterwards how long the hypervisor held one vCPU within a window: a host that takes
+    a vCPU for ~100 ms (its CPU quota's period, on a machine at its quota) stalls every process
+    on it, a simulator or a hub at SCHED_FIFO 99 alike, and the controller on the other vCPU
+    rightly sees its nodes silent."""
+
+    def __init__(self, interval: float = 0.01):
+        import threading
+        import time
+        self._samples: list[tuple[float, list[int]]] = []
+        self._stop = threading.Event()
+
+        def sample():
+            from spacearm.base.runtime.priority import use_fifo
+            use_fifo(1)         # read on time beside CPU-bound neighbours (it sleeps almost always)
+            while not self._stop.wait(interval):
+                self._samples.append((time.monotonic(), self._read()))
+        self._thread = threading.Thread(target=sample, name="steal-timeline", daemon=True)
+        self._thread.start()
+
+    @staticmethod
+    def _read() -> list[int]:
+        with open("/proc/stat") as handle:
+            return [int(line.split()[8]) for line in handle if line.startswith("cpu") and line[3] != " "]
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+
+    def worst_cpu(self, start: float, end: float) -> float:
+        """s of steal of the most-stolen vCPU between the last sample before `start` and the
+        first after `end` (USER_HZ ticks: 10 ms resolution)."""
+        before = [s for t, s in self._samples if t <= start][-1:] or self._samples[:1]
+        after = [s for t, s in self._samples if t >= end][:1] or self._samples[-1:]
+        if not before or not after:
+            return 0.0
+        return max((b - a for a, b in zip(before[0], after[0])), default=0) / os.sysconf("SC_CLK_TCK")
+
+
 def stop_group(proc) -> None:
     """End a process started with start_new_session=True and everything it started: SIGTERM to
     its group, SIGKILL after 10 s."""

@@ -25,7 +25,7 @@ import pytest
 
 from spacearm.base.config.arm import load_arm_config
 from hil_tests.conftest import ROOT, child_env
-from hil_tests.harness import CpuSteal, free_port
+from hil_tests.harness import CpuSteal, StealTimeline, free_port
 from hil_tests.test_daemon_console import Console
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess, pytest.mark.slow, pytest.mark.under_load]
@@ -38,24 +38,41 @@ def _record_conditions(record_property, steal: CpuSteal) -> None:
     record_property("cpu_steal_percent", f"{100 * steal.fraction():.1f}")
 
 
-def _unless_the_host_stopped_them(status: dict, peers: dict) -> None:
-    """A stop for missing data or a lost heartbeat while the simulator and the hub both report
-    that none of their threads ran for longer than the stop's reach (100 ms: 5 cycles) is the
-    machine's, not the stack's (a vCPU not run, the real-time throttle of a machine full of
-    other SCHED_FIFO work): reported as such (xfail with the measured figures), not as a pass,
-    and not as a fault of the stack."""
+def _unless_the_host_stalled_a_vcpu(status: dict, peers: dict, steal: StealTimeline) -> None:
+    """A stop for missing data or a lost heartbeat while the hypervisor held a vCPU for most of
+    the stop's reach (5 cycles: 100 ms) just before it is the machine's, not the stack's: every
+    process on that vCPU (the simulator, the hub, at any real-time priority) stood still, and
+    the daemon on the other one rightly saw its nodes silent. Reported as such (xfail with the
+    measured steal and the peers' own reports), not as a pass, and not as a fault of the stack.
+    Traced on the hub (issue 32): such stops came with ~100 ms without a forwarded frame, ending
+    within 1 ms of a pinned SCHED_FIFO 99 probe's 100 ms late wake on one vCPU, and 100 ms of
+    steal on that vCPU (the host's CPU quota period)."""
     stop = status.get("stop") or {}
-    stalled = [f"{name} {1e3 * p['max_lateness']:.0f} ms" for name, p in peers.items()
-               if p.get("cause") == "stopped" and p["max_lateness"] >= 0.1]
-    if stop.get("code") in ("pdo_missing", "heartbeat_lost") and len(stalled) == len(peers) == 2:
-        pytest.xfail(f"{stop['code']} while the host ran neither the simulator nor the hub: {', '.join(stalled)}")
+    if stop.get("code") not in ("pdo_missing", "heartbeat_lost"):
+        return
+    at = [e["t"] for e in status.get("events", ()) if e.get("kind") == "protective_stop"]
+    if not at:
+        return
+    stopped = status["woke_at"] - (status["time"] - at[-1])      # the stop's cycle, monotonic
+    # the stall that silenced the nodes for the stop's reach may still be on at the stop, and
+    # the guest counts steal when its vCPU runs again: the window reaches past the stop too
+    before, after = 0.1 + 2 * status["period"], 0.12
+    stolen = steal.worst_cpu(stopped - before, stopped + after)
+    if stolen >= HOST_STALL:
+        reports = ", ".join(f"{name} {1e3 * p['max_lateness']:.0f} ms ({p.get('cause') or '-'})"
+                            for name, p in peers.items())
+        pytest.xfail(f"{stop['code']} while the host held one vCPU for {1e3 * stolen:.0f} ms of the "
+                     f"{1e3 * (before + after):.0f} ms around it (CPU steal); peers' worst wakes: {reports}")
 
 
-@pytest.mark.xfail(strict=False, reason="issue 32, open: beside two CPU-bound processes the separate-process "
-                   "changeout stops with pdo_missing (end_effector) at ~20 s, in 5 of 5 bench runs, cause not found; "
-                   "the test still runs and records its figures")
-def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tmp_path, time_scale, record_property):
-    steal = CpuSteal()
+# s of steal on one vCPU within the stop's reach that stalls the processes on it for most of it
+HOST_STALL = 0.06
+
+
+def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tmp_path, time_scale, record_property,
+                                                         request):
+    steal, timeline = CpuSteal(), StealTimeline()
+    request.addfinalizer(timeline.stop)
     bus = loopback_hub.spec(f"rt-oru-{os.getpid()}-{time.monotonic_ns()}")
     launch(["-m", "spacearm.console.main", "sim", "--plant", PLANT, "--rt-priority", "50"], bus_spec=bus,
            ready="nodes ready")
@@ -63,27 +80,37 @@ def test_oru_stage_1_in_real_time_on_separate_processes(loopback_hub, launch, tm
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "realtime", "--rt-priority", "50", "--api", api,
             "--no-record"], bus_spec=bus, ready="spacearm daemon:", timeout=30)
     op = Console(api, tmp_path / "operator")
-    op.run("enable")
-    op.run("move", "joints", *map(str, load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]))
-    op.run("oru", "run", "--stages", "1", "--no-wait")
-    deadline = time.monotonic() + 300 * time_scale
-    while (oru := json.loads(op.run("oru", "status", "--json").stdout))["state"] in ("running", "paused") \
-            and not oru.get("pause"):
-        assert time.monotonic() < deadline, oru
-        time.sleep(1.0)
+    # a stop before the changeout (idle, or on the way to ready) is judged below, with the
+    # figures, as one in the changeout is
+    ready = map(str, load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"])
+    for step in (["enable"], ["move", "joints", *ready]):
+        moved = op.run(*step, check=False)
+        if moved.returncode:
+            break
+    oru = {"state": "not started", "failure": moved.stdout + moved.stderr}
+    if moved.returncode == 0:
+        op.run("oru", "run", "--stages", "1", "--no-wait")
+        deadline = time.monotonic() + 300 * time_scale
+        while (oru := json.loads(op.run("oru", "status", "--json").stdout))["state"] in ("running", "paused") \
+                and not oru.get("pause"):
+            assert time.monotonic() < deadline, oru
+            time.sleep(1.0)
     status = op.status()
     stats, peers = status["stats"], (status.get("nodes") or {}).get("peers") or {}
     record_property("skipped_cycles", stats["skipped_cycles"])
     record_property("overruns", stats["overruns"])
     record_property("cycles", stats["cycles"])
+    # nodes' answers after the daemon's TPDO wait, within their period: slow, never counted as loss
+    record_property("late_answers", (status.get("network") or {}).get("late_answers", 0))
     record_property("period_error_p99_ms", f"{1e3 * stats['period_error_p99']:.3f}")
     record_property("scheduling", status.get("scheduling", ""))
     for name, peer in peers.items():
         record_property(f"{name}_late", f"{peer['late_cycles']} of {peer['cycles']}, max "
                                         f"{1e3 * peer['max_lateness']:.1f} ms, {peer.get('cause') or '-'}")
     _record_conditions(record_property, steal)
-    _unless_the_host_stopped_them(status, peers)
+    _unless_the_host_stalled_a_vcpu(status, peers, timeline)
     assert status["stop"] is None, (status["stop"], status.get("nodes"))
+    assert moved.returncode == 0, moved.stdout + moved.stderr
     assert oru["state"] == "done", (oru.get("failure"), oru.get("pause"))
     assert "SCHED_FIFO 50" in status.get("scheduling", ""), status.get("scheduling")
 

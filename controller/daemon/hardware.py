@@ -96,6 +96,8 @@ class CanopenHardware:
         self.period = self.network.config.bus.sync_period
         self._last_read: float | None = None
         self.late_cycles = 0       # cycles whose missing data was excused as the controller's own lateness
+        self.late_answers = 0      # nodes' answers that came after the TPDO wait, within their period
+        self._missing_at_read: tuple[str, ...] = ()   # nodes missing at the last read
 
     @property
     def dof(self) -> int:
@@ -121,7 +123,7 @@ class CanopenHardware:
 
     def statistics(self) -> dict:
         lines = self.network.line_redundancy
-        return {**vars(self.network.stats), "late_cycles": self.late_cycles,
+        return {**vars(self.network.stats), "late_cycles": self.late_cycles, "late_answers": self.late_answers,
                 **({"bus_lines": lines.status()} if lines is not None else {})}
 
     def bringup_report(self) -> dict:
@@ -143,6 +145,9 @@ class CanopenHardware:
                 late = started - self._last_read - self.period
             late = max(late, self.last_io_wait - self.realtime_budget)
         self._last_read = started
+        # of the nodes missing at the last read, those whose data came before this SYNC went out
+        answered_late = tuple(self.network.answered_last_sync(self._missing_at_read)) if self._missing_at_read else ()
+        self.late_answers += len(answered_late)
         state = self.network.read(complete)
         events = []
         for event in self.network.poll_events():
@@ -153,6 +158,9 @@ class CanopenHardware:
                 events.append(DeviceEvent(event.node, kind, event.message))
         starved = late > LATE_CYCLE_SLACK * self.period
         measurement = self._measurement(time, sync, state, tuple(events), late if starved else 0.0)
+        self._missing_at_read = measurement.missing
+        if answered_late:
+            measurement = replace(measurement, answered_late=answered_late)
         redundancy = self.network.line_redundancy
         if measurement.missing and redundancy is not None and redundancy.bridging():
             redundancy.bridged_cycles += 1      # the missing data is the line switch's (bounded)

@@ -59,7 +59,9 @@ class Supervisor:
                 detail = f": {event.detail}" if event.detail else ""
                 findings.append(Finding(event.kind, f"{event.node}: {label}{detail}", node=event.node))
         for node in list(self._missing_count):
-            if node not in m.missing:
+            # a node whose last missing data came after all, before this SYNC, answered: the gap
+            # ended there (it, the bus or this process was slow; a silent node never answers)
+            if node not in m.missing or node in m.answered_late:
                 del self._missing_count[node]
                 self._excused.pop(node, None)
         for node in m.missing if not m.bridged else ():   # a line switch under way (bounded)

@@ -1,5 +1,7 @@
 """Missing process data in a cycle that ran late (the controller itself starved) is no evidence
 of a lost node: the count is held a few times per gap, then a real loss still stops."""
+from dataclasses import replace
+
 import numpy as np
 
 from spacearm.controller.cycle import Measurement
@@ -50,3 +52,21 @@ def test_data_back_clears_count_and_excuses() -> None:
         sup.check(measurement(("joint_1",), True), None, False)
     sup.check(measurement((), False), None, False)
     assert cycles_to_stop(late=True) == sup.limits.missing_pdo_cycles + LATE_CYCLES_EXCUSED
+
+
+def test_a_node_whose_data_comes_after_the_wait_every_cycle_is_slow_not_lost() -> None:
+    """Missing at every read, but each time its data came later in the same period
+    (answered_late): the gap ends at each answer, so the count never reaches the limit."""
+    sup = supervisor()
+    for k in range(50):
+        m = replace(measurement(("joint_1",), False), answered_late=("joint_1",) if k else ())
+        assert not [f for f in sup.check(m, None, False) if f.code == "pdo_missing"], k
+
+
+def test_a_node_that_answered_late_then_fell_silent_stops_after_missing_pdo_cycles() -> None:
+    sup = supervisor()
+    for _ in range(10):
+        sup.check(replace(measurement(("joint_1",), False), answered_late=("joint_1",)), None, False)
+    stopped = [k for k in range(1, 20)
+               if any(f.code == "pdo_missing" for f in sup.check(measurement(("joint_1",), False), None, False))]
+    assert stopped[0] == sup.limits.missing_pdo_cycles - 1   # the first silent read was already counted
