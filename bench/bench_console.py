@@ -19,13 +19,18 @@ permitted): at normal priority the CPU hogs of the loaded phase delay the proxy 
 arrival it notes would be late by its own wait, not the command's. The bench's main thread,
 and so the commands it spawns, stay at normal priority.
 
-    .venv/bin/python bench/bench_console.py [--rounds 20] [--no-loaded]
+Then shutdown: a hub and a simulator started as a script's `&` starts them, signalled
+(SIGINT, SIGTERM alternately): wall time from the signal to the exit against the README's one
+second, and the CPU time spent in it (bench/shutdown_timing.py), at whatever load there is.
+
+    .venv/bin/python bench/bench_console.py [--rounds 20] [--no-loaded] [--shutdown-rounds 4]
 """
 from __future__ import annotations
 
 import argparse
 import os
 import platform
+import signal
 import socket
 import subprocess
 import sys
@@ -40,6 +45,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 from bench.bench_web import start, stop  # noqa: E402
 from bench.reference_work import reference_loop_seconds  # noqa: E402
+from bench.shutdown_timing import start_in_background, time_to_exit  # noqa: E402
 from hil_tests.harness import CpuSteal, free_port  # noqa: E402
 from spacearm.base.runtime.priority import describe, use_fifo  # noqa: E402
 
@@ -144,6 +150,67 @@ def measure_floors(rounds: int, env: dict) -> dict[str, tuple[list[float], ...]]
     return results
 
 
+def measure_shutdowns(rounds: int, work: Path) -> dict[tuple[str, str], tuple[list[float], list[float]]]:
+    """(process, signal) -> (wall s from the signal to the exit, CPU s spent in it): a hub and a
+    simulator on it, started as a script's `&` starts them, signalled simulator first."""
+    results: dict[tuple[str, str], tuple[list[float], list[float]]] = {}
+    for k in range(rounds):
+        sig = (signal.SIGINT, signal.SIGTERM)[k % 2]
+        port = free_port()
+        hub = start_in_background(["hub", "--port", str(port)], "listening", work / "shutdown_hub.log")
+        try:
+            sim = start_in_background(["sim", "--bus", f"loopback:bench-shutdown@127.0.0.1:{port}", "--plant",
+                                       "configs/plant/oru_testbed_nominal.toml"], "nodes ready", work / "shutdown_sim.log")
+            for name, proc in (("sim", sim), ("hub", hub)):
+                wall, cpu = time_to_exit(proc, sig)
+                walls, cpus = results.setdefault((name, signal.Signals(sig).name), ([], []))
+                walls.append(wall)
+                cpus.append(cpu)
+        finally:
+            if hub.poll() is None:
+                hub.kill()
+                hub.wait()
+    return results
+
+
+def print_shutdowns(results, load: float, reference: tuple[float, float]) -> None:
+    print(f"\nshutdown: signal -> exit of a process started with `&` (README: within a second); load {load:.1f}, "
+          f"reference loop {1e3 * reference[0]:.0f} ms wall")
+    print(f"{'process':<8} {'signal':<8} {'n':>3} {'wall median':>12} {'max':>9} {'CPU median':>11} {'target':>36}")
+    for (name, sig), (walls, cpus) in results.items():
+        verdict = "<= 1000 ms: " + ("ok" if max(walls) <= 1.0 else "MISSED")
+        if load > IDLE_LOAD:
+            verdict += " (not idle)"     # a process at normal priority waits for a core: the CPU column is its own work
+        print(f"{name:<8} {sig:<8} {len(walls):3d} {1e3 * np.median(walls):9.0f} ms {1e3 * max(walls):6.0f} ms "
+              f"{1e3 * np.median(cpus):8.0f} ms {verdict:>36}")
+
+
+EXPORT_CYCLES = 1167    # the recording issue 33 exported in 6.7 s
+
+
+def measure_export(rounds: int, work: Path) -> tuple[list[float], list[float]]:
+    """(wall s, CPU s) of `spacearm export REC --csv OUT` on a recording of EXPORT_CYCLES cycles
+    written by the daemon's recorder (50 Hz, the /cycle channel as the daemon fills it)."""
+    from spacearm.controller.recording.channels import CHANNELS
+    from spacearm.controller.recording.mcap_recorder import McapRecorder
+    path = work / "export.mcap"
+    with McapRecorder(path) as rec:
+        for topic, schema in CHANNELS.items():
+            rec.add_channel(topic, schema)
+        for k in range(EXPORT_CYCLES):
+            q = [1e-3 * k + 0.1 * j for j in range(6)]
+            rec.write("/cycle", 0.02 * k, {"t": 0.02 * k, "sync": k % 240 + 1, "cycle": k, "q_cmd": q, "q": q,
+                                           "dq": [0.05] * 6, "dq_cmd": [0.05] * 6, "tau": [1.5] * 6,
+                                           "wrench": [0.0] * 6, "end_effector": "open", "state": "enabled",
+                                           "mode": "hold", "period_error": 1e-4, "execution": 2e-3})
+    walls, cpus = [], []
+    for _ in range(rounds):
+        started = time.monotonic()
+        cpus.append(run_child([SPACEARM, "export", str(path), "--csv", str(work / "export.csv")], dict(os.environ)))
+        walls.append(time.monotonic() - started)
+    return walls, cpus
+
+
 def cpu_load(processes: int) -> list[subprocess.Popen]:
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(processes)]
 
@@ -152,6 +219,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=20, help="repetitions of each command per phase")
     parser.add_argument("--no-loaded", action="store_true", help="skip the phase with 2 CPU-bound processes added")
+    parser.add_argument("--shutdown-rounds", type=int, default=4, help="hub + simulator shutdowns (SIGINT, SIGTERM "
+                        "alternately)")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench_console_"))
     bus = f"loopback:bench-console-{os.getpid()}"
@@ -185,6 +254,11 @@ def main() -> None:
                 for p in load:
                     p.kill()
                     p.wait()
+        shutdown_reference = reference_loop_seconds(repeats=3)
+        shutdowns = measure_shutdowns(args.shutdown_rounds, work)
+        shutdown_load = os.getloadavg()[0]
+        exports = measure_export(3, work)
+        export_load = os.getloadavg()[0]
     finally:
         for proc in reversed(procs):
             stop(proc)
@@ -218,6 +292,10 @@ def main() -> None:
           f"{IDLE_LOAD} the idle target is not judged: 'not idle'); loaded = 2 CPU-bound processes added; proxy "
           f"threads: {proxy_scheduling}. stop-nort: stop without its SCHED_FIFO 20 request; python / python -S: a "
           "bare interpreter start with and without site (round trip and CPU only)")
+    print_shutdowns(shutdowns, shutdown_load, shutdown_reference)
+    print(f"\nexport: `spacearm export` of {EXPORT_CYCLES} cycles, whole command: wall median "
+          f"{1e3 * np.median(exports[0]):.0f} ms, CPU median {1e3 * np.median(exports[1]):.0f} ms "
+          f"({len(exports[0])} runs; load {export_load:.1f}; no target: issue 33 saw 6.7 s)")
 
 if __name__ == "__main__":
     main()
