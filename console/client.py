@@ -5,7 +5,10 @@ import json
 import os
 import socket
 from itertools import count
-from typing import Any
+
+TYPE_CHECKING = False   # typing itself is ~10 ms of the console's start-up: annotations only
+if TYPE_CHECKING:
+    from typing import Any
 
 from spacearm.console.errors import CommandFailed
 from spacearm.controller.daemon.api_errors import ErrorCode
@@ -26,7 +29,9 @@ class ApiClient:
                 self._sock.connect(rest)
             elif kind == "tcp":
                 host, _, port = rest.rpartition(":")
-                self._sock = socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout)
+                # the host as bytes: the resolver then skips the idna codec, whose import is
+                # ~5-10 ms of every command's start on an idle machine (a str host loads it)
+                self._sock = socket.create_connection(((host or "127.0.0.1").encode(), int(port)), timeout=timeout)
             else:
                 raise CommandFailed(f"bad API address {address!r}: use tcp:HOST:PORT or unix:/path",
                                     ErrorCode.BAD_ARGUMENT)

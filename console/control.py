@@ -5,10 +5,12 @@ console's fast path (console/quick.py) as well as from typer commands and the we
 """
 from __future__ import annotations
 
-import getpass
 import os
 import socket
-from typing import Any
+
+TYPE_CHECKING = False   # typing itself is ~10 ms of the console's start-up: annotations only
+if TYPE_CHECKING:
+    from typing import Any
 
 from spacearm.console import lease_store
 from spacearm.console.client import ApiClient
@@ -38,6 +40,7 @@ def holder_identity(session: str | None = None) -> str:
             session = os.ttyname(0)
         except OSError:
             session = "no tty"
+    import getpass      # here: only `control take` and the first lease of a console pay for it
     return f"{getpass.getuser()}@{socket.gethostname()} {session} pid {os.getpid()}"
 
 

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import json
 import time
-from typing import Any
+
+TYPE_CHECKING = False   # typing itself is ~10 ms of the console's start-up: annotations only
+if TYPE_CHECKING:
+    from typing import Any
 
 from spacearm.console import lease_store
 from spacearm.console.client import ApiClient

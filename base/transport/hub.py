@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import ipaddress
 import logging
 import os
 import re
@@ -35,6 +36,17 @@ from spacearm.base.runtime.child_process import REPO_ROOT, module_env, readline_
 from spacearm.base.runtime.priority import use_fifo
 
 log = logging.getLogger("spacearm.hub")
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or localhost: the only addresses the hub listens on (and autostarts for)."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
 
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 29536
@@ -457,18 +469,22 @@ def run(host: str, port: int, idle_exit: float = 0.0, quiet_if_running: bool = F
             print(f"spacearm hub: {problem}", file=sys.stderr)
     logging.basicConfig(level=logging.DEBUG if verbose else logging.INFO,
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
-    if host in ("0.0.0.0", "::", ""):
-        log.warning("hub bound to all interfaces (%r): any host that reaches this machine can "
-                    "inject CAN frames", host)
+    # Failures are one line with the console's error[CODE] prefix (console/errors.py) and exit 2.
+    if not is_loopback(host):
+        # anyone who reaches the address could put frames on the arm's bus: no token, no checks
+        print(f"error[bad_argument]: spacearm hub: --host {host}: the hub listens on loopback only "
+              "(127.0.0.1 or ::1); reach it from elsewhere through an SSH tunnel", file=sys.stderr)
+        return 2
     try:
         hub = LoopbackHub(host, port, idle_exit=idle_exit, timing_reports=True)
     except OSError as exc:
         if exc.errno == errno.EADDRINUSE:
             if quiet_if_running:
                 return 0
-            print(f"spacearm hub: {host}:{port} is already in use (another hub running?)", file=sys.stderr)
+            print(f"error[address_in_use]: spacearm hub: {host}:{port} is already in use (another hub running?)",
+                  file=sys.stderr)
             return 2
-        print(f"spacearm hub: cannot bind {host}:{port}: {exc}", file=sys.stderr)
+        print(f"error[bind_failed]: spacearm hub: cannot bind {host}:{port}: {exc.strerror or exc}", file=sys.stderr)
         return 2
     hub.fault_file = fault_file
     # SIGINT too, explicitly: a hub started with `&` from a script inherits SIGINT ignored, and

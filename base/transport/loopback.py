@@ -19,7 +19,6 @@ raises ``can.CanOperationError``.
 """
 from __future__ import annotations
 
-import ipaddress
 import logging
 import os
 import select
@@ -35,7 +34,7 @@ import can
 from spacearm.base.runtime.child_process import REPO_ROOT, module_env
 
 from . import wire
-from .hub import DEFAULT_HOST, DEFAULT_PORT
+from .hub import DEFAULT_HOST, DEFAULT_PORT, is_loopback
 
 log = logging.getLogger("spacearm.transport.loopback")
 
@@ -80,15 +79,6 @@ def parse_spec(rest: str) -> tuple[str, str, int]:
     return rest, host, port
 
 
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
 def _autostart_enabled(explicit: bool | None) -> bool:
     if explicit is not None:
         return explicit
@@ -129,7 +119,7 @@ class LoopbackBus(can.BusABC):
         self.channel_id = self.hub_channel       # as the in-process bus names its channel (CAN trace lines)
         self.receive_own_messages = receive_own_messages
         self.hub_reports = hub_reports      # also receive the hub's own timing reports
-        self.autostart = _autostart_enabled(autostart) and _is_loopback(self.host)
+        self.autostart = _autostart_enabled(autostart) and is_loopback(self.host)
         self.reconnect_timeout = reconnect_timeout
         self.connect_timeout = connect_timeout
         self.channel_info = f"loopback hub {self.host}:{self.port} channel '{self.hub_channel}'"
@@ -236,7 +226,7 @@ class LoopbackBus(can.BusABC):
                             self.channel_info)
             return
         hint = ("start it with `spacearm hub --port %d` (or `python -m spacearm.base.transport.hub`)" % self.port
-                if _is_loopback(self.host) else "is the hub running and reachable?")
+                if is_loopback(self.host) else "is the hub running and reachable?")
         msg = f"no loopback CAN hub answers at {self.host}:{self.port} ({last_exc}); {hint}"
         if first:
             raise HubUnavailableError(msg)

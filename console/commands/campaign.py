@@ -20,6 +20,7 @@ from rich.table import Table
 
 from spacearm.base.paths import CONFIGS
 from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
+from spacearm.console.figure_units import figure_unit
 from spacearm.offline.campaign.replay import replay as replay_trial
 from spacearm.offline.campaign.report import summarise, write_report
 from spacearm.offline.campaign.runner import RunSummary, run_campaign
@@ -102,12 +103,13 @@ def register(app: typer.Typer) -> None:
                               "differing": r.differing}))
         else:
             table = Table(title=f"replay {r.trial_id} (seed {r.seed})")
-            for col in ("figure", "stored", "replayed", "equal"):
+            for col in ("figure", "unit", "stored", "replayed", "equal"):
                 table.add_column(col)
-            table.add_row("success", str(r.success_stored), str(r.success_replayed),
+            table.add_row("success", "", str(r.success_stored), str(r.success_replayed),
                           str(r.success_stored == r.success_replayed))
             for f in r.figures:
-                table.add_row(f.name, f"{f.stored:.9g}", f"{f.replayed:.9g}", str(f.equal))
+                unit, factor = figure_unit(f.name)
+                table.add_row(f.name, unit, f"{f.stored * factor:.9g}", f"{f.replayed * factor:.9g}", str(f.equal))
             Console().print(table)
             note = "" if r.stored_version == r.replay_version else \
                 f" (stored by {r.stored_version}, replayed with {r.replay_version})"
@@ -153,11 +155,13 @@ def run_with_progress(spec: Campaign, results: Path, scheduler: str | None = Non
 def _print_summary(store: ResultStore) -> None:
     s = summarise(store)
     table = Table(title=f"campaign {s.name} ({s.kind}), code {s.code_version}")
-    for col in ("figure", "n", "median", "p95", "max"):
+    for col in ("figure", "unit", "n", "median", "p95", "max"):
         table.add_column(col)
     rate, _, interval = s.rate_text().partition(" (")
-    table.add_row("success rate", str(s.finished - s.errors), rate, interval.rstrip(")"),
+    table.add_row("success rate", "%", str(s.finished - s.errors), rate.removesuffix(" %"), interval.rstrip(")"),
                   f"{s.failed} failed, {s.errors} broken")
     for f in s.figures:
-        table.add_row(f.name, str(f.count), f"{f.median:.4g}", f"{f.p95:.4g}", f"{f.maximum:.4g}")
+        unit, factor = figure_unit(f.name)     # stored in SI; shown in mm, deg, N, s
+        table.add_row(f.name, unit, str(f.count), f"{f.median * factor:.4g}", f"{f.p95 * factor:.4g}",
+                      f"{f.maximum * factor:.4g}")
     Console().print(table)

@@ -10,7 +10,7 @@ from pathlib import Path
 import can
 import typer
 
-from spacearm.console.errors import BadInput, CommandFailed, friendly_errors, report
+from spacearm.console.errors import BadInput, CommandFailed, classify, friendly_errors, report
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.cycle_stats import CycleThresholds
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
@@ -58,8 +58,8 @@ def register(app: typer.Typer) -> None:
         code = 0
         try:
             _serve(options, max_cycles)
-        except CommandFailed as exc:
-            code = report(str(exc), exc.code, exc.exit_code, as_json=False).code
+        except CommandFailed as exc:     # bad input exits 2 like every command's (classify)
+            code = report(*classify(exc), as_json=False).code
         _quick_exit(int(code or 0))
 
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import sys
 import time
@@ -11,7 +12,8 @@ import numpy as np
 import typer
 
 from spacearm.console.commands.operate import API_OPTION, TOKEN_OPTION
-from spacearm.console.errors import EXIT_USAGE, friendly_errors
+from spacearm.console.errors import EXIT_FAILED, EXIT_USAGE, friendly_errors
+from spacearm.console.errors import report as report_error
 from spacearm.offline.diagnosis.analysis import diagnose as run_diagnosis
 from spacearm.offline.diagnosis.command_timing import replay_plant
 from spacearm.offline.diagnosis.direct_sim import SimTraces, SimulationDiverged, on_arm_drives
@@ -59,6 +61,9 @@ def register(app: typer.Typer) -> None:
                                                      "torque); default: the test bed's."),
                  as_json: bool = typer.Option(False, "--json", help="Print the JSON summary.")) -> None:
         """Locate, name and fit the physics the nominal simulator leaves out; show the fit improve."""
+        for given in (real, sim, urdf):
+            if given is not None and not given.is_file():   # before the plant files: the word typed first
+                raise FileNotFoundError(errno.ENOENT, "no such file", str(given))
         nominal_config = on_arm_drives(load_plant_config(nominal), arm, bus)
         try:
             if rate is not None and not (0.0 < rate <= 1e5):
@@ -68,6 +73,7 @@ def register(app: typer.Typer) -> None:
             read_started = time.perf_counter()
             table, lines = read_recording(real, specs, command, period)
             read_s = time.perf_counter() - read_started
+            warnings = _warn(lines)
             if dry_run:
                 print("\n".join(lines))
                 return
@@ -82,14 +88,14 @@ def register(app: typer.Typer) -> None:
                 take_control(api, token)
             traces = None
             if sim is not None:
-                s, _ = read_recording(sim, specs, command, period)
+                s, sim_lines = read_recording(sim, specs, command, period)
+                warnings += _warn(sim_lines)
                 if s.q.shape != table.q.shape:
                     raise RecordingFormatError(f"{sim}: {s.q.shape[0]} rows x {s.q.shape[1]} joints, the recording "
                                                f"has {table.q.shape[0]} x {table.q.shape[1]}")
                 traces = SimTraces(s.t, s.q_cmd, s.q, s.dq, s.tau, s.wrench)
         except RecordingFormatError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            raise SystemExit(EXIT_USAGE) from None
+            raise report_error(str(exc), "bad_recording", EXIT_USAGE, as_json) from None
         timing_note = None
         replayed = nominal_config
         if real.suffix == ".mcap" and traces is None:      # the daemon's recording: as its drives were driven
@@ -98,14 +104,14 @@ def register(app: typer.Typer) -> None:
             with _progress_bar() as progress:
                 result = run_diagnosis(table, replayed, traces, progress)
         except SimulationDiverged as exc:
-            print(f"error: nominal replay of {real.name}: {exc}; check the nominal plant file {nominal}",
-                  file=sys.stderr)
-            raise SystemExit(1) from None
+            raise report_error(f"nominal replay of {real.name}: {exc}; check the nominal plant file {nominal}",
+                               "replay_diverged", EXIT_FAILED, as_json) from None
         result.timings["read_s"] = read_s
         result.repairs = time_base_repairs(lines)
         data = write_report(result, report, real.name, nominal_config)
         if timing_note:
             data["command_timing"] = timing_note
+        data["warnings"] = [line.removeprefix("warning: ") for line in warnings]
         if experiment is not None or experiment_plant is not None or run:
             runner = _on_daemon(api, token) if run else _on_plant(experiment_plant, arm, bus)
             data["experiment"] = _experiment(result, table, nominal_config, arm, experiment or report / "experiment.csv",
@@ -129,6 +135,15 @@ def register(app: typer.Typer) -> None:
               f"{result.timings['total_s']:.1f} s")
         for line in data.get("experiment", {}).get("lines", []):
             print(line)
+
+
+def _warn(lines: list[str]) -> list[str]:
+    """The reader's warnings (a recording cut off: what was recovered), on stderr at once, before
+    minutes of diagnosis on what is left (also under --json, whose stdout stays one document)."""
+    warnings = [line for line in lines if line.startswith("warning:")]
+    for line in warnings:
+        print(line, file=sys.stderr)
+    return warnings
 
 
 def time_base_repairs(lines: list[str]) -> list[str]:

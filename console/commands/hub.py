@@ -25,7 +25,7 @@ def register(app: typer.Typer) -> None:
 
     @app.command("hub")
     def hub(
-        host: str = typer.Option(default_host, "--host", help="address to bind (default loopback only)"),
+        host: str = typer.Option(default_host, "--host", help="address to bind: 127.0.0.1 or ::1 (others are refused)"),
         port: int = typer.Option(default_port, "--port", min=0, max=65535, help="TCP port (0 = any free port)"),
         idle_exit: float = typer.Option(0.0, "--idle-exit", min=0.0,
                                         help="exit after this many seconds without clients (0 = never)"),

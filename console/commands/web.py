@@ -3,23 +3,16 @@ live state, camera monitor), served on 127.0.0.1 as one more client of the daemo
 from __future__ import annotations
 
 import asyncio
-import ipaddress
 from pathlib import Path
 
 import typer
 
 from spacearm.console.client import DEFAULT_API, ApiClient
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
+from spacearm.base.transport.hub import is_loopback
 from spacearm.base.config.arm import load_arm_config
 from spacearm.base.config.scene import DEFAULT_SCENE
 from spacearm.base.kinematics.model import KinematicModel
-
-
-def _loopback(host: str) -> bool:
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return host == "localhost"
 
 
 def register(app: typer.Typer) -> None:
@@ -40,10 +33,10 @@ def register(app: typer.Typer) -> None:
         from spacearm.console.web.scene_model import load_scene_description
         from spacearm.console.web.server import WebOptions, serve
 
-        if not _loopback(host):
+        if not is_loopback(host):
             # The page carries the operator's control lease; it is not for other machines.
-            raise CommandFailed(f"--host {host}: the web console listens on loopback only "
-                                "(use an SSH tunnel to reach it from elsewhere)")
+            raise BadInput(f"--host {host}: the web console listens on loopback only (127.0.0.1 or ::1; "
+                           "use an SSH tunnel to reach it from elsewhere)", "bad_argument")
         arm_config = load_arm_config(arm)
         model = KinematicModel.from_config(arm_config)
         with ApiClient(connect, token) as client:

@@ -55,8 +55,12 @@ def read_recording(path: str | Path, specs=None, command: str = "recorded", peri
     if not path.is_file():
         raise RecordingFormatError(f"{path}: no such file")
     if path.suffix == ".mcap":
-        table = _from_mcap(path)
+        table, problem = _from_mcap(path)
         lines = [f"{path}: MCAP recording, {len(table.t)} cycles, {table.n_joints} joints"]
+        if problem:
+            # a killed writer: what the reader got back, said before anything is read from it
+            lines.append(f"warning: {path.name} was not closed cleanly ({problem}): recovered {len(table.t)} "
+                         f"cycles, t = {table.t[0]:.2f} - {table.t[-1]:.2f} s; whatever followed was lost")
         if table.dq_cmd is not None:
             lines.append("commanded velocity offset: recorded (dq_cmd), replayed as sent")
         if command == "measured":
@@ -69,10 +73,12 @@ def read_recording(path: str | Path, specs=None, command: str = "recorded", peri
     return table, report.lines()
 
 
-def _from_mcap(path: Path) -> RecordingTable:
+def _from_mcap(path: Path) -> tuple[RecordingTable, str]:
+    """(the /cycle table, why reading stopped early or "" for a file closed cleanly)."""
     from spacearm.controller.recording.mcap_reader import read_recording as read_mcap
     try:
-        cycles = read_mcap(path).topic("/cycle")
+        recording = read_mcap(path, {"/cycle"})
+        cycles = recording.topic("/cycle")
         d = [m.data for m in cycles]
         arr = lambda key: np.array([row[key] for row in d], dtype=float)
         table = RecordingTable(arr("t"), arr("q_cmd"), arr("q"), arr("dq"), arr("tau"), arr("wrench")) if d else None
@@ -94,7 +100,7 @@ def _from_mcap(path: Path) -> RecordingTable:
     if table.q.ndim != 2 or len(table.t) < 10 or np.any(np.diff(table.t) <= 0) or not all(
             np.all(np.isfinite(x)) for x in (table.t, table.q, table.q_cmd)):
         raise RecordingFormatError(f"{path}: need at least 10 cycles with increasing t and finite positions")
-    return table
+    return table, "" if recording.complete else recording.problem
 
 
 def write_csv(path: str | Path, table: RecordingTable) -> None:

@@ -23,6 +23,9 @@ CLIENT_MODULES = {"spacearm", "spacearm.console", "spacearm.console.main", "spac
                   "spacearm.console.status_view", "spacearm.console.daemon_calls", "spacearm.console.commands", "spacearm.console.commands.operate",
                   "spacearm.console.commands.oru", "spacearm.controller", "spacearm.controller.daemon",
                   "spacearm.controller.daemon.api_errors"}
+# Standard modules the fast path does without: typing (annotations only), the idna codec (a str
+# host given to the resolver loads it), getpass (only when a lease is taken).
+SLOW_STDLIB = {"typing", "encodings.idna", "getpass"}
 HEAVY = ("numpy", "scipy", "pydantic", "can", "aiohttp", "cv2", "pandas", "dask")
 
 # Parsed without typer (console/quick.py): nothing heavy at all.
@@ -62,6 +65,9 @@ def test_a_command_to_the_daemon_imports_only_the_api_client(args, closed_api):
     allowed = {"pydantic", "pydantic_core", "annotated_types", "typing_inspection"} if args in TYPED else set()
     heavy = sorted(m for m in modules if m.split(".")[0] in HEAVY and m.split(".")[0] not in allowed)
     assert not heavy, f"spacearm {' '.join(args)} imports {heavy[:8]}"
+    if args in PLAIN:      # the fast path: not even these (~5-10 ms each of an idle start)
+        slow = sorted(SLOW_STDLIB & modules)
+        assert not slow, f"spacearm {' '.join(args)} imports {slow}"
 
 
 @pytest.mark.parametrize("args", [["--help"], [], ["oru", "--help"], ["kin", "--help"], ["hub", "--help"],

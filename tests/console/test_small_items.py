@@ -1,5 +1,6 @@
 """Small console contracts an operator ran into (issue 33): output into a pipe that closes
-early, and a bad API address, each one line with its code, never a traceback."""
+early, a bad API address, an address beyond loopback, a port in use: each one line with its
+code, never a traceback."""
 from __future__ import annotations
 
 import json
@@ -39,7 +40,7 @@ def fake_daemon():
 
 def spacearm(*args: str, **kwargs) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "spacearm.console.main", *args], capture_output=True, text=True,
-                          timeout=120, **kwargs)
+                          **{"timeout": 120, **kwargs})
 
 
 def test_status_json_into_a_pipe_that_closes_early_prints_no_traceback(fake_daemon):
@@ -99,3 +100,35 @@ def test_watch_ends_after_the_refreshes_asked_for_showing_the_state(fake_daemon)
     done = spacearm("watch", "--count", "2", "--rate", "20", "--api", fake_daemon)
     assert done.returncode == 0, done.stderr
     assert "state enabled" in done.stdout and "j5" in done.stdout, done.stdout[-500:]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("args", [["hub", "--host", "0.0.0.0"], ["hub", "--host", "::"],
+                                  ["console-web", "--host", "0.0.0.0"],
+                                  ["daemon", "--api", "tcp:0.0.0.0:{port}", "--bus", "loopback:refused", "--no-record"]],
+                         ids=lambda a: " ".join(a[:3]))
+def test_listening_beyond_loopback_is_refused_in_one_line_exit_2(args):
+    """Network rule: 127.0.0.1 / ::1 only. The hub bound 0.0.0.0 with a warning (any host could
+    put frames on the arm's bus); the web console and the daemon refused with exit 1, `jog`'s
+    bad_argument exits 2. Nothing may listen on the port afterwards either."""
+    port = free_port()
+    args = [a.format(port=port) for a in args] + (["--port", str(port)] if args[0] != "daemon" else [])
+    done = spacearm(*args, timeout=60)
+    assert done.returncode == 2, (args, done.returncode, done.stderr)
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error[bad_argument]: ") and "loopback" in lines[0], done.stderr
+    with pytest.raises(ConnectionRefusedError):
+        socket.create_connection(("127.0.0.1", port), timeout=5).close()
+
+
+def test_a_hub_on_a_port_in_use_says_so_with_its_code():
+    with socket.create_server(("127.0.0.1", 0)) as taken:
+        done = spacearm("hub", "--port", str(taken.getsockname()[1]), timeout=60)
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.startswith("error[address_in_use]: spacearm hub: 127.0.0.1:") and \
+        len(done.stderr.strip().splitlines()) == 1, done.stderr

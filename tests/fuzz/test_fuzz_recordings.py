@@ -101,7 +101,8 @@ def test_adversarial_recording_gets_one_line_or_a_diagnosis(name, tmp_path):
         assert res.exit_code in (0, 1, 2), res.output
         assert res.exception is None or isinstance(res.exception, SystemExit), repr(res.exception)
         if res.exit_code:
-            assert res.output.strip().count("\n") == 0 and res.output.startswith("error: ")
+            # one coded line (a JSON object under --json): the console's error contract
+            assert res.output.strip().count("\n") == 0 and res.output.startswith(("error[bad_recording]: ", '{"ok": false'))
 
 
 @settings(max_examples=12)
