@@ -436,3 +436,58 @@ def test_sigterm_mid_jog_stops_the_arm_before_the_daemon_ends(lockstep_stack):
     print("\nshutdown joint 4:", json.dumps({k: round(float(v), 4) for k, v in figures[3].row().items()}))
     problems = [p for g in figures for p in g.problems()]
     assert not problems, problems
+
+
+def test_stop_during_bring_up_is_taken_and_no_joint_moves(lockstep_stack):
+    """After the SIGTERM above: a new daemon on the same simulator, and a console's stop sent
+    while its drives are still being brought up (its status: `starting`, no cycle yet). The
+    stop is taken, the arm comes up stopped (enable refused until reset), no joint moves in the
+    recording, and every drive answers over SDO that it is not in operation and its brake is on."""
+    stack = lockstep_stack
+    stack.api = f"tcp:127.0.0.1:{free_port()}"
+    log = stack.workdir / "daemon_bring_up.log"
+    with open(log, "w") as out:
+        daemon = subprocess.Popen(
+            [sys.executable, "-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", stack.api,
+             "--record-dir", str(stack.workdir / "runs"), "--bus", stack.bus],
+            stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=ROOT, env=child_env(),
+            start_new_session=True)
+    stack.procs.append(daemon)
+    operator = None
+    deadline = time.monotonic() + 60
+    while operator is None:
+        try:
+            operator = ApiClient(stack.api, timeout=10.0)
+        except CommandFailed:
+            assert daemon.poll() is None and time.monotonic() < deadline, log.read_text()[-2000:]
+            time.sleep(0.005)
+    with operator:
+        before = operator.call("status")
+        answer = operator.call("stop")
+        assert before == {"state": "starting"}, before          # sent before the first cycle
+        assert "booting" in answer, answer
+        wait_for(lambda: "spacearm daemon:" in log.read_text(), 60, lambda: log.read_text()[-2000:])
+        status = operator.call("status")
+        lease = operator.call("control.take", holder="stops-suite")["lease"]
+        with pytest.raises(CommandFailed) as refused:
+            operator.call("enable", lease=lease)
+        time.sleep(1.0)                                # a second of cycles to look at
+        end = operator.call("status")
+    print(f"\nbring-up: status before the stop {before}, answer {answer!r}, then {status['state']} "
+          f"({status['stop_reason']}); enable: {refused.value}")
+    assert status["state"] == "stopped" and status["stop"]["code"] == "operator_stop", status
+    assert refused.value.code == "protective_stop", refused.value
+    path = end["recording"]["path"]
+    wait_for(lambda: _recorded_until(path) >= end["time"] - 0.2, 10, "a second in the recording")
+    rec = read_recording(path)
+    stops = [e.data for e in rec.topic("/events") if e.data["kind"] == "protective_stop"]
+    q = np.array([c.data["q"] for c in rec.topic("/cycle")])
+    assert stops and stops[0]["code"] == "operator_stop", stops
+    assert stops[0]["t"] <= rec.topic("/cycle")[0].data["t"] + 0.02, (stops[0], rec.topic("/cycle")[0].data)
+    moved = np.abs(q - q[0]).max(axis=0)
+    print(f"largest joint motion over {len(q)} recorded cycles: {1e3 * moved.max():.3f} mrad")
+    assert len(q) >= 20 and np.all(moved <= 2 * RESOLVER_STEP), moved
+    stack.rig
+    for i in range(1, 7):
+        state = decode_statusword(stack._net.sdo_read(f"joint_{i}", od.STATUSWORD))
+        assert state is not State.OPERATION_ENABLED and stack._net.sdo_read(f"joint_{i}", od.BRAKE_STATUS), (i, state)

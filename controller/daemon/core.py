@@ -107,6 +107,11 @@ class ControllerCore:
         self._pending.put(pending)
         return pending.future.result(timeout=timeout)
 
+    def queue(self, apply: Callable[[float, Measurement], Any]) -> None:
+        """Run `apply` at the start of the next cycle, nobody waiting for it (a stop sent while
+        the drives are brought up, before the first cycle)."""
+        self._pending.put(_Pending(apply))
+
     # ---- called by the cycle ----------------------------------------------------------
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m
