@@ -192,7 +192,7 @@ def _judge(stack, code: str, joint: int | None, since: float, timeout: float = 5
     # the recording as far as it reached the disk (the recorder flushes about once a second);
     # closing it for each test cost more than the client's 10 s on a loaded machine
     path, end = safe.status["recording"]["path"], safe.status["time"]
-    wait_for(lambda: _recorded_until(path) >= end, 2 * timeout, "the stop in the recording")
+    wait_for(lambda: _recorded_until(path) >= end, max(30.0, 2 * timeout), "the stop in the recording")
     figures = _figures(path, since, stack.period, one_path)
     late = safe.status["network"].get("late_cycles", 0)
     for f in figures if joint is None else [figures[joint - 1]]:
@@ -283,7 +283,7 @@ def test_oru_resume_after_a_pause_starts_without_a_step(stack):
     stack.call("move_joints", q=list(READY))          # the changeout starts at ready
     wait_for(lambda: stack.status()["mode"] == "hold", 30, "at ready")
     stack.call("oru.run", stages=[1])
-    wait_for(lambda: max(abs(j["dq"]) for j in stack.status()["joints"]) > 0.3 * ARM_V_MAX, 20,
+    wait_for(lambda: max(abs(j["dq"]) for j in stack.status()["joints"]) > 0.3 * ARM_V_MAX, 60,
              "the changeout's first path under way")
     assert stack.call("oru.pause") in ("pausing", "paused")
     wait_for(lambda: stack.client.call("oru.status")["state"] == "paused", 10, "paused")

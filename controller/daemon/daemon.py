@@ -277,7 +277,8 @@ class Daemon:
             "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
             "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
             "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
-            "io_wait": self.hardware.last_io_wait})
+            "io_wait": self.hardware.last_io_wait,
+            **({"missing": list(m.missing)} if m.missing else {})})
         for event in events:
             recorder.put("/events", event.time, event.as_dict())
         if s.tick.time - self._last_stats_time >= 1.0:

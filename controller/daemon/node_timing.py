@@ -147,13 +147,16 @@ class NodeTiming:
     def summary(self, peer_reports: dict[str, list] | None = None, now: float = 0.0) -> NodeTimingSummary:
         """The daemon's own view, and beside it the peers' own reports (name -> reports, see
         peer_summary) as of monotonic time `now`."""
-        n = len(self._io_wait)
-        waits = np.fromiter(self._io_wait, float, n) if n else np.zeros(1)
+        # copies first: the cycle thread appends while an API thread asks for status (iterating
+        # the deques themselves raised "deque mutated during iteration" in the status answer)
+        io_wait, missed, recent_gaps = tuple(self._io_wait), tuple(self._missing), tuple(self._gaps)
+        n = len(io_wait)
+        waits = np.array(io_wait, float) if n else np.zeros(1)
         p99 = float(np.percentile(waits, 99))
         late = int(np.sum(waits > LATE_SHARE * self.budget)) if self.budget > 0 else 0
-        missing = int(sum(self._missing))
-        gap, node = max(self._gaps, default=(0.0, ""))
-        gaps = sum(g > HEARTBEAT_GAP for g, _ in self._gaps)
+        missing = int(sum(missed))
+        gap, node = max(recent_gaps, default=(0.0, ""))
+        gaps = sum(g > HEARTBEAT_GAP for g, _ in recent_gaps)
         if missing:
             level, what = "starved", f"{missing} of the last {n} cycles missed process data"
         elif n and (late > LATE_CYCLES * n or gap >= HEARTBEAT_SERIOUS or gaps >= HEARTBEAT_GAPS):
