@@ -25,6 +25,10 @@ from spacearm.controller.daemon.watchdog import KeepAliveMode
 from spacearm.controller.planning.errors import PlanningError
 
 
+# What the API answers while the drives are brought up (before the first cycle): anyone may stop.
+BRING_UP_COMMANDS = frozenset({"ping", "status", "stop", "control.take", "control.release"})
+
+
 class Args(BaseModel):
     model_config = ConfigDict(extra="forbid", strict=True)
     lease: str | None = None
@@ -103,7 +107,7 @@ class CommandHandlers:
             "status": (NoArgs, False, lambda a: self.status()),
             "control.take": (TakeArgs, False, self._take),
             "control.release": (NoArgs, True, lambda a: self.lease.release(a.lease) or "released"),
-            "stop": (NoArgs, False, lambda a: self._in_cycle(self.core.cmd_stop)),
+            "stop": (NoArgs, False, lambda a: self._stop()),
             "enable": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_enable)),
             "disable": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_disable)),
             "reset": (NoArgs, True, lambda a: self._in_cycle(self.core.cmd_reset)),
@@ -121,6 +125,9 @@ class CommandHandlers:
             raise ApiError(f"unknown command {cmd!r}; known: {', '.join(sorted(self.table))}", ErrorCode.UNKNOWN_COMMAND)
         if session is not None:
             session.last_seen = time.monotonic()   # keep-alive for the command watchdog
+        if self.core.last_measurement is None and cmd not in BRING_UP_COMMANDS:
+            raise ApiError("the daemon is still bringing the drives up: only stop, status and ping until "
+                           "status shows a state", ErrorCode.BUSY)
         model, needs_lease, action = entry
         parsed = _parse(model, args)
         self._local.session = session
@@ -136,6 +143,12 @@ class CommandHandlers:
             return self.core.submit(apply, timeout=self.cycle_timeout)
         except FutureTimeout:
             raise ApiError("the control cycle did not take the command in time", ErrorCode.CYCLE_TIMEOUT) from None
+
+    def _stop(self) -> str:
+        if self.core.last_measurement is None:     # bring-up: no cycle yet to wait for
+            self.core.queue(self.core.cmd_stop)
+            return "booting, stopped from its first cycle"
+        return self._in_cycle(self.core.cmd_stop)
 
     def _take(self, a: TakeArgs) -> dict:
         return {"lease": self.lease.take(a.holder, a.lease), "holder": self.lease.holder}

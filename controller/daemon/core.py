@@ -119,6 +119,11 @@ class ControllerCore:
         """An API thread waits for the next cycle to take its request (lockstep drivers cycle on it)."""
         return not self._pending.empty()
 
+    def queue(self, apply: Callable[[float, Measurement], Any]) -> None:
+        """Run `apply` at the start of the next cycle, nobody waiting for it (a stop sent while
+        the drives are brought up, before the first cycle)."""
+        self._pending.put(_Pending(apply))
+
     # ---- called by the cycle ----------------------------------------------------------
     def update(self, m: Measurement) -> Command:
         self.last_measurement = m

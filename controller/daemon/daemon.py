@@ -156,7 +156,16 @@ class Daemon:
             # from everything else), but the drives time the master's heartbeat in wall time, so
             # a cycle starved by other load must not silence it: the timer thread alone is FIFO.
             self.hardware.network.timer_priority = self.options.rt_priority
-        self.hardware.start()
+        if self.server is not None:
+            # Listening from before bring-up: a stop sent while the drives boot is taken and
+            # applied at the first cycle; other commands are refused until then (api_handlers.py).
+            self.server.start()
+        try:
+            self.hardware.start()
+        except BaseException:
+            if self.server is not None:
+                self.server.stop()
+            raise
         if self.hardware.network.timer_priority:
             self.scheduling += f" (heartbeat timer: {self.hardware.network.timer_scheduling})"
         if self.options.camera:
@@ -164,10 +173,7 @@ class Daemon:
             self.attach_vision(ShmFrameRing.attach(self.options.camera))
         if self.options.record_dir is not None:
             self.start_recording(None)
-        # One cycle so status has something to show before the API accepts requests.
         self.cycle_once()
-        if self.server is not None:
-            self.server.start()
 
     def attach_vision(self, source) -> None:
         """Run the vision pipeline on `source` (a FrameSource) and register
@@ -271,7 +277,8 @@ class Daemon:
             "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
             "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
             "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
-            "io_wait": self.hardware.last_io_wait})
+            "io_wait": self.hardware.last_io_wait,
+            **({"missing": list(m.missing)} if m.missing else {})})
         for event in events:
             recorder.put("/events", event.time, event.as_dict())
         if s.tick.time - self._last_stats_time >= 1.0:

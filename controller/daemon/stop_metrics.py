@@ -57,11 +57,18 @@ class StopFigures:
                 "time": self.time_to_rest, "time_bound": self.time_bound}
 
 
-def recorded_stop(cycles: list[dict], events: list[dict], period: float) -> tuple[np.ndarray, np.ndarray, float]:
+def recorded_stop(cycles: list[dict], events: list[dict], period: float,
+                  joint_nodes: set[str] | None = None) -> tuple[np.ndarray, np.ndarray, float]:
     """(plant time, measured q, plant time of the first protective stop) from a recording's
     /cycle and /events messages. Time is the SYNC count times the period: the drives advance
     one period per SYNC, so a cycle the controller ran late (its clock skipped periods) is
-    still one period of motion, and dividing by the controller's clock would halve its speed."""
+    still one period of motion, and dividing by the controller's clock would halve its speed.
+    Cycles whose joint drives' process data did not all arrive ("missing"; any node's unless
+    `joint_nodes` names the drives) are left out: their positions are the last received, not
+    where the joints were (a starved simulator's stale positions read as a joint at rest, then
+    one at three times its speed)."""
+    cycles = [c for c in cycles
+              if not (joint_nodes is None and c.get("missing") or joint_nodes and joint_nodes & set(c.get("missing", ())))]
     sync = np.array([c["sync"] for c in cycles], float)
     t_plant = (sync - sync[0]) * period
     stop = next(e for e in events if e["kind"] == "protective_stop")

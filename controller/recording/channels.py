@@ -31,6 +31,9 @@ CYCLE_SCHEMA: dict[str, Any] = {
         "period_error": {"type": "number", "description": "s"},
         "execution": {"type": "number", "description": "s"},
         "io_wait": {"type": "number", "description": "s of execution spent waiting for this SYNC's TPDOs"},
+        "missing": {"type": "array", "items": {"type": "string"},
+                    "description": "nodes whose process data did not arrive this cycle (their values are the "
+                                   "last received); absent when every node's arrived"},
         "extra": {"type": "object", "description": "further channels, name -> number"},
     },
     "required": ["t", "sync", "cycle", "q_cmd", "q", "dq", "tau", "wrench"],
