@@ -345,16 +345,23 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
         if mismatch_statistic(left, 1e-3, reference_noise=tau_noise) > 1.0 and \
                 float(np.sqrt(np.mean(left ** 2))) > HUNTING_RATIO * own_noise:
             # the drive hunts or rings: try the gear effects (simulated, compared by envelope)
+            gears = []
             for effect in GEAR_EFFECTS:
                 gear = fit_gear_effect(effect, nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual,
                                        tau_noise, j, train, base_q=quiet.q[:, j], q_residual=table.q[:, j] - quiet.q[:, j],
                                        dq_cmd=table.dq_cmd)
+                if gear.significant:
+                    gears.append(gear)
                 if gear.significant and (fit is None or gear.rms_heldout_after < 0.7 * _envelope_error(
                         fit, residual, tau_noise, ~train)):
                     fit = gear
+        else:
+            gears = []
         if fit is not None:
             if fit.by_envelope:
-                alternatives.pop(j, None)
+                # play and a soft gear both make the drive hunt; where their envelopes fit alike
+                # the recording cannot tell them apart: both are named, with the experiment that can
+                alternatives[j] = gear_alternatives(fit, gears)
             fits.append(fit)
     for axis in range(6):
         fit = _ft_fit(table, sim, axis, train)
@@ -441,7 +448,7 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             rejected.append((fit, f"{MODEL_WRONG}: {text} would need {'; '.join(impossible)}, which no joint has "
                                   "(not reported)"))
             continue
-        worse = _made_worse(fit, channels)
+        worse = _made_worse(fit, channels, {f.index for f in fits if f.channel != "wrench"})
         if worse:
             rejected.append((fit, f"{text} (makes {', '.join(worse)} worse on the held-out rows by more than its "
                                   "noise: not accepted)"))
@@ -473,21 +480,41 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
 
 
 MODEL_WRONG = "the model is wrong here"
+GEAR_ALIKE = 1.25            # held-out envelope errors of backlash and elasticity within this ratio: alike
+GEAR_EXPERIMENT = (" (both make the drive hunt and their envelopes fit alike; they differ in their signatures: "
+                   "backlash is a dead band of fixed width at each reversal, elasticity a deflection that grows "
+                   "with the load. To separate them: slow reversals under two different constant loads (a dead band "
+                   "keeps its width, a deflection scales with the load), or a slow load ramp at rest)")
 
 
-def _made_worse(fit: ChannelFit, channels: list[ChannelResult]) -> list[str]:
-    """The fitted joint's channels whose held-out RMS the re-simulation with the fits raises by
-    more than the channel's noise: a better torque bought with a worse position is no finding."""
+def _made_worse(fit: ChannelFit, channels: list[ChannelResult], fitted: set[int] | None = None) -> list[str]:
+    """The channels whose held-out RMS the re-simulation with the fits raises by more than the
+    channel's noise: a better torque bought with a worse position is no finding, and neither is
+    one bought with another joint's worse error (a pooled gain hides a joint made worse). The
+    fitted joint's own channels, and those of every joint with no fit of its own (`fitted`: the
+    joints that have one; nothing but another joint's fit changed those)."""
     if fit.channel == "wrench" or fit.by_envelope:
         return []
     own = (f"q_{fit.index + 1}", f"tau_{fit.index + 1}")
+    others = {f"{c}_{j + 1}" for j in range(len(channels)) for c in ("q", "tau")
+              if fitted is not None and j not in fitted and j != fit.index}
     return [f"{c.name} {c.rms_before:.3g} -> {c.rms_after:.3g} (noise {c.noise:.2g})" for c in channels
-            if c.name in own and c.rms_after > c.rms_before + c.noise]
+            if (c.name in own or c.name in others) and c.rms_after > c.rms_before + c.noise]
+
+
+def gear_alternatives(chosen: ChannelFit, gears: list[ChannelFit]) -> list[ChannelFit]:
+    """The significant gear fits (`gears`) that explain the hunting about as well as the chosen
+    one (held-out envelope error within GEAR_ALIKE): named beside it, never dropped."""
+    if chosen not in gears:
+        return []
+    return [g for g in gears if g is not chosen and g.rms_heldout_after <= GEAR_ALIKE * chosen.rms_heldout_after]
 
 
 def _why_alike(dq: np.ndarray, kind: str = "revolute", best: ChannelFit | None = None,
                alt: ChannelFit | None = None) -> str:
     from spacearm.offline.diagnosis.honesty import one_way, same_drag, single_speed
+    if best is not None and alt is not None and {best.effects[0], alt.effects[0]} == set(GEAR_EFFECTS):
+        return GEAR_EXPERIMENT
     if best is not None and alt is not None and same_drag(best, alt, dq):
         return (" (the joint moved one way only: a constant force along the axis and friction are the same drag "
                 "there; they differ at reversals and at rest)")

@@ -31,6 +31,7 @@ from spacearm.offline.diagnosis.physical import (from_log_cholesky, levenberg_ma
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.rigid_body import ArmModel, base_columns, inverse_dynamics, regressor
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
+from spacearm.offline.diagnosis.torque_alignment import TimeOffset, shifted, torque_time_offset
 
 LOWPASS_HZ = 20.0            # q'' from dq: 4th-order Butterworth, zero phase (as Gaz et al. suggest)
 # friction laws tried per joint (features side by side), simplest first
@@ -74,6 +75,7 @@ class ArmDiagnosis:
     timings: dict[str, float] = field(default_factory=dict)
     sensor_findings: list[SensorFinding] = field(default_factory=list)
     model_wrong: list[str] = field(default_factory=list)     # fits that needed a physically impossible value
+    time_offset: TimeOffset | None = None                    # torque vs motion columns, re-aligned before fitting
 
     @property
     def to_excite(self) -> list[int]:
@@ -84,9 +86,11 @@ class ArmDiagnosis:
 
     @property
     def verdict(self) -> str:
-        if not self.findings and not self.sensor_findings and not self.model_wrong:
+        offset = [self.time_offset.text] if self.time_offset else []
+        if not self.findings and not self.sensor_findings and not self.model_wrong and not offset:
             return "no significant torque mismatch against the rigid-body model"
-        return "; ".join([s.text for s in self.sensor_findings] + [f.text for f in self.findings] + self.model_wrong)
+        return "; ".join(offset + [s.text for s in self.sensor_findings] + [f.text for f in self.findings]
+                         + self.model_wrong)
 
 
 def accelerations(table: RecordingTable) -> tuple[np.ndarray, np.ndarray]:
@@ -330,10 +334,17 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     kinds = joint_kinds(arm)
     active = [j for j in range(n) if moved(table.q[:, j], v[:, j])]
     noise = [float(np.std(np.diff(r[:, j])) / math.sqrt(2)) for j in range(n)]
+    offset = torque_time_offset(t, table.tau, tau_nom, v, train, active, noise)
+    q = table.q
+    if offset is not None:
+        # the motion onto the torque's clock (the measured torque is never resampled)
+        q, v, a = (shifted(t, x, -offset.seconds) for x in (table.q, v, a))
+        tau_nom = inverse_dynamics(arm, q, v, a)
+        r = table.tau - tau_nom
 
     findings: list[ArmFinding] = []
     not_reported: list[str] = []
-    Y = regressor(arm, table.q, v, a)
+    Y = regressor(arm, q, v, a)
     cols = base_columns(Y[train][:: max(1, int(train.sum()) // 400)])
     # friction and rigid-body errors share the residual: alternate (a wrong payload looks like
     # an offset to a per-joint fit, a friction left in looks like inertia to the coupled one)
@@ -383,7 +394,7 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     # no nominal sensor to compare with: the recording's own steps and velocity shift
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active, kinds)
     timings["total_s"] = time.perf_counter() - started
-    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong)
+    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong, offset)
 
 
 def arm_summary(d: ArmDiagnosis) -> dict:
@@ -391,6 +402,8 @@ def arm_summary(d: ArmDiagnosis) -> dict:
     return {
         "verdict": d.verdict, "heldout_from_s": d.heldout_start, "not_reported": d.not_reported,
         "model_wrong": d.model_wrong,
+        "torque_time_offset_s": d.time_offset.seconds if d.time_offset else 0.0,
+        "torque_time_offset_p": d.time_offset.p_value if d.time_offset else None,
         "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
                              "text": f.text} for f in d.sensor_findings],
         "findings": [{"rank": i + 1, "effects": list(f.effects), "joint": None if f.joint is None else f.joint + 1,
