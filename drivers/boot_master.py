@@ -1,6 +1,6 @@
-"""Bring-up of the network (the CiA 302 boot process): reset communication, wait for every
-boot-up, configure each node (drivers/bringup.py, nodes in parallel), start them, verify they
-are OPERATIONAL; and the boot-slave process again for a node that reboots during operation.
+"""Bring-up of the network (the CiA 302 boot process): reset communication; each node, once its
+boot-up is in, configured (drivers/bringup.py, nodes in parallel) and started on its own; verify
+all are OPERATIONAL; and the boot-slave process again for a node that reboots during operation.
 
 ``BootMaster`` is a part of ``ArmNetwork`` (drivers/network.py).
 """
