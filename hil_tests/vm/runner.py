@@ -348,7 +348,8 @@ def main(argv: list[str] | None = None) -> int:
     except VMUnavailable as exc:
         print(f"vcan suite: cannot start the VM: {exc}", file=sys.stderr)
         return 3
-    print(res.log[-8000:])
+    # the head keeps the tests' own progress lines (-s) and the first failure, the tail the summary
+    print(res.log if len(res.log) <= 12000 else res.log[:4000] + "\n[...]\n" + res.log[-8000:])
     if res.where == "vm" and (res.problem or res.returncode):
         print("---- VM console (tail) ----\n" + res.details.get("console", "")[-4000:])
     print(f"vcan suite ({res.where}, {res.seconds:.0f} s): {res.summary or '(no pytest summary)'}"
