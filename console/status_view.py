@@ -54,10 +54,22 @@ def status_lines(status: dict[str, Any]) -> list[str]:
                      + " ".join(f"{v:6.3f}" for v in wrench[3:]) + " N m")
     if status.get("end_effector"):
         lines.append(f"end effector: {status['end_effector']}")
-    skipped = {node: [s.split()[0] for s in r.get("skipped", [])] for node, r in (status.get("bringup") or {}).items()}
+    return lines + bringup_lines(status.get("bringup") or {})
+
+
+def bringup_lines(bringup: dict[str, dict[str, Any]]) -> list[str]:
+    """What bring-up could not do as the bus file asked, per node, and the node reboots since."""
+    lines = []
+    skipped = {node: [s.split()[0] for s in r.get("skipped", [])] for node, r in bringup.items()}
     if any(skipped.values()):
         lines.append("absent optional objects (skipped at bring-up): "
                      + "; ".join(f"{node} {' '.join(objs)}" for node, objs in skipped.items() if objs))
+    for node, report in bringup.items():
+        lines += [f"{node}: {text}" for text in report.get("refused", [])]     # each with its fallback
+        if report.get("read_only"):
+            lines.append(f"{node}: read-only, the device's value used: {' '.join(report['read_only'])}")
+        if report.get("reboot"):
+            lines.append(f"{node}: {report['reboot']} ({report.get('reboots', 1)} reboot(s) so far)")
     return lines
 
 

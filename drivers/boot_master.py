@@ -1,6 +1,6 @@
-"""Bring-up of the network (the CiA 302 boot process): reset communication, wait for every
-boot-up, configure each node (drivers/bringup.py, nodes in parallel), start them, verify they
-are OPERATIONAL; and the boot-slave process again for a node that reboots during operation.
+"""Bring-up of the network (the CiA 302 boot process): reset communication; each node, once its
+boot-up is in, configured (drivers/bringup.py, nodes in parallel) and started on its own; verify
+all are OPERATIONAL; and the boot-slave process again for a node that reboots during operation.
 
 ``BootMaster`` is a part of ``ArmNetwork`` (drivers/network.py).
 """
@@ -22,12 +22,19 @@ logger = logging.getLogger(__name__)
 MAX_PARALLEL_CONFIG = 16
 
 
+class _NoBootup(Exception):
+    """A node's boot-up did not come before the boot deadline (collected into one BootError)."""
+
+
 class BootMaster:
     # ------------------------------------------------------------------ bring-up
     def boot(self, timeout: float | None = None) -> None:
-        """Reset communication of all nodes, wait for their boot-ups, configure each by SDO
-        (heartbeat, SYNC, scaling, limits, PDO mapping), start them and verify they report
-        OPERATIONAL. Raises BootError naming the node(s) at fault."""
+        """Reset communication of all nodes; then for each node, as soon as its boot-up is in
+        (nodes side by side): configure it by SDO (heartbeat, SYNC, scaling, limits, PDO
+        mapping) and start it, as CiA 302's boot-slave process starts each slave on its own; a
+        node's wait for OPERATIONAL thus overlaps the others' configuration. Verify every node
+        reports OPERATIONAL. Raises BootError naming the node(s) at fault; then no node is
+        left started (NMT pre-operational to all)."""
         self.connect()
         timeout = self.config.bus.boot_timeout if timeout is None else timeout
         self._monitoring = False
@@ -36,39 +43,52 @@ class BootMaster:
             for h in self.health.values():
                 h.alive, h.nmt_state, h.last_heartbeat = False, None, None
         self._nmt(od.NMT_RESET_COMMUNICATION)
-        expected = {d.node_id for d in self.drivers.values()}
         deadline = time.monotonic() + timeout
-        with self._cv:
-            self._cv.wait_for(lambda: expected <= self._booted, timeout=max(0.0, deadline - time.monotonic()))
-            missing = [d for d in self.drivers.values() if d.node_id not in self._booted]
-        if missing:
-            raise BootError(f"boot failed: no boot-up message within {timeout:.1f} s from "
-                            + ", ".join(d.label for d in missing))
-        self._configure_all(list(self.drivers.values()))
-        now = time.monotonic()
-        with self._cv:
-            for h in self.health.values():
-                h.last_heartbeat, h.alive = now, True
-        self._monitoring = True
-        self._nmt(od.NMT_START)
-        wait = 3.0 * max(n.heartbeat_period for n in self.config.nodes) + 0.2
-        with self._cv:
-            self._cv.wait_for(lambda: all(h.nmt_state == od.NMT_STATE_OPERATIONAL for h in self.health.values()),
-                              timeout=wait)
-            not_op = [self.drivers[n] for n, h in self.health.items() if h.nmt_state != od.NMT_STATE_OPERATIONAL]
-        if not_op:
-            raise BootError("boot failed: not OPERATIONAL after NMT start: " + ", ".join(
-                f"{d.label} reports {self.health[d.name].nmt_state_name}" for d in not_op))
+        try:
+            missing = self._configure_all(list(self.drivers.values()), deadline)
+            if missing:
+                raise BootError(f"boot failed: no boot-up message within {timeout:.1f} s from "
+                                + ", ".join(d.label for d in missing))
+            self._monitoring = True
+            wait = 3.0 * max(n.heartbeat_period for n in self.config.nodes) + 0.2
+            with self._cv:
+                self._cv.wait_for(lambda: all(h.nmt_state == od.NMT_STATE_OPERATIONAL
+                                              for h in self.health.values()), timeout=wait)
+                not_op = [self.drivers[n] for n, h in self.health.items()
+                          if h.nmt_state != od.NMT_STATE_OPERATIONAL]
+            if not_op:
+                raise BootError("boot failed: not OPERATIONAL after NMT start: " + ", ".join(
+                    f"{d.label} reports {self.health[d.name].nmt_state_name}" for d in not_op))
+        except Exception:
+            self._monitoring = False
+            self._nmt(od.NMT_PRE_OPERATIONAL)
+            raise
 
-    def _configure_all(self, drivers: list[DeviceDriver]) -> None:
-        """Configure the nodes side by side; the first failure (in bus-file order) is raised."""
+    def _configure_all(self, drivers: list[DeviceDriver], deadline: float) -> list[DeviceDriver]:
+        """The boot-slave process of every node side by side; the first failure (in bus-file
+        order) is raised; the nodes whose boot-up never came are returned."""
         with ThreadPoolExecutor(max_workers=max(1, min(MAX_PARALLEL_CONFIG, len(drivers))),
                                 thread_name_prefix="boot-slave") as pool:
-            futures = [pool.submit(self._configure, d) for d in drivers]
-            errors = [f.exception() for f in futures]
-        for error in errors:
-            if error is not None:
+            futures = [pool.submit(self._boot_slave, d, deadline) for d in drivers]
+            results = [(f.exception(), d) for f, d in zip(futures, drivers)]
+        for error, _ in results:
+            if error is not None and not isinstance(error, _NoBootup):
                 raise error
+        return [d for error, d in results if isinstance(error, _NoBootup)]
+
+    def _boot_slave(self, driver: DeviceDriver, deadline: float) -> None:
+        with self._cv:
+            if not self._cv.wait_for(lambda: driver.node_id in self._booted,
+                                     timeout=max(0.0, deadline - time.monotonic())):
+                raise _NoBootup(driver.label)
+        self._configure(driver)
+        self._start(driver)
+
+    def _start(self, driver: DeviceDriver) -> None:
+        with self._cv:
+            h = self.health[driver.name]
+            h.last_heartbeat, h.alive = time.monotonic(), True
+        self._nmt(od.NMT_START, driver.node_id)
 
     def recover(self, node: str | int, timeout: float = 1.0) -> None:
         """The boot-slave process for one node (after a reboot): configure it by SDO again and
@@ -77,10 +97,7 @@ class BootMaster:
         driver = self._driver(node)
         with self._slave_lock(driver):
             self._configure(driver)
-            with self._cv:
-                h = self.health[driver.name]
-                h.last_heartbeat, h.alive = time.monotonic(), True
-            self._nmt(od.NMT_START, driver.node_id)
+            self._start(driver)
             with self._cv:
                 ok = self._cv.wait_for(lambda: self.health[driver.name].nmt_state == od.NMT_STATE_OPERATIONAL,
                                        timeout=timeout)

@@ -72,7 +72,7 @@ def find_var(object_dictionary: canopen.ObjectDictionary, index: int, sub: int):
 
 def pdo_numbers(object_dictionary: canopen.ObjectDictionary, comm_base: int) -> list[int]:
     """The 0-based numbers of the PDOs of one direction the EDS lists (communication objects)."""
-    return [n for n in range(512) if comm_base + n in object_dictionary]
+    return sorted(index - comm_base for index in object_dictionary.indices if 0 <= index - comm_base < 512)
 
 
 def pdo_count(object_dictionary: canopen.ObjectDictionary, comm_base: int) -> int:

@@ -32,6 +32,13 @@ from spacearm.firmware_sim.plant import Plant, PlantConfig, load_plant_config
 logger = logging.getLogger(__name__)
 
 
+def _never_rpdo(cid: int) -> bool:
+    """COB-IDs _rebuild_routes never routes to an RPDO (NMT, SDO requests, heartbeats): a frame
+    of these needs no fresh routes."""
+    return cid == od.NMT_COB_ID or od.SDO_RX_BASE < cid <= od.SDO_RX_BASE + 127 \
+        or od.HEARTBEAT_BASE < cid <= od.HEARTBEAT_BASE + 127
+
+
 @dataclass
 class SimStats:
     rx_frames: int = 0
@@ -269,8 +276,8 @@ class Simulator:
         """A standard data frame: dispatch by COB-ID (PDOs first: they are most of the traffic)."""
         if not counted:
             self.stats.rx_frames += 1
-        if self._dirty:
-            self._rebuild_routes()
+        if self._dirty and not _never_rpdo(cid):
+            self._rebuild_routes()      # not for every SDO of a PDO configuration: one at its end
         node = self._rpdo_routes.get(cid)
         if node is not None:
             if node.powered and not node.faults.silent:

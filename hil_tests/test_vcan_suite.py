@@ -30,7 +30,8 @@ def test_scenarios_pass_on_real_socketcan_vcan(record_property):
     where = "directly on this host's vcan0" if res.where == "host" else \
         f"inside a QEMU VM ({res.details.get('kernel_version')})"
     report = (f"vcan suite {where}, {res.seconds:.0f} s: {res.summary or '(no pytest summary)'}; "
-              f"{res.passed} passed, {res.failed} failed, {res.errors} errors, {res.skipped} skipped")
+              f"{res.passed} passed, {res.failed} failed, {res.errors} errors, {res.skipped} skipped"
+              f" [{res.outcome_line()}]")
     print(report)
     record_property("vcan_report", report + (f" -- {res.problem}" if res.problem else ""))
     if not res.ok:

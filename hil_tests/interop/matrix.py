@@ -16,7 +16,7 @@ from spacearm.drivers.errors import DriverError
 from spacearm.drivers.network import ArmNetwork
 from hil_tests.interop.durand_drive import HIGH_RPDO_COB, HIGH_TPDO_COB, VARIANTS, DurandDrive, Variant
 
-CHECKS = ("boot", "enable", "csp_move", "emcy", "heartbeat_loss")
+CHECKS = ("boot", "enable", "csp_move", "restart", "emcy", "heartbeat_loss")
 NODE_ID = 5         # where a variant does not say otherwise
 MOVE = 0.3          # rad (m on a linear axis), the CSP move every drive must track
 
@@ -89,6 +89,9 @@ def run_variant(name: str, workdir: Path | None = None) -> Result:
         ok = abs(state.joints[0].position - MOVE) < 1e-5 and abs(raw - expected_raw) <= 1
         result.record("csp_move", ok, f"{state.joints[0].position:.6f} {unit}, 6064h={raw} "
                                       f"(drive scaling {expected_raw}), k={joint.k:.1f}/{unit}")
+        drive = _restart(net, drive, channel, variant, result)
+        if drive is None:
+            return result
         net.poll_events()
         drive.raise_fault(0x8611)
         for _ in range(3):
@@ -106,4 +109,34 @@ def run_variant(name: str, workdir: Path | None = None) -> Result:
         return result
     finally:
         net.close()
+        if drive is not None:
+            drive.close()
+
+
+def _restart(net: ArmNetwork, drive: DurandDrive, channel: str, variant: Variant,
+             result: Result) -> DurandDrive | None:
+    """Power cycle: a new drive on the bus, as it comes up (factory or stored state). The master
+    must notice its boot-up, configure it again by itself and enable it; the PDO it then holds
+    is read from the drive's own dictionary. None (recorded) if it did not."""
+    net.poll_events()
+    drive.close()
+    drive = DurandDrive(channel, variant.node_id, variant)
+    deadline, seen = time.monotonic() + 3.0, []
+    while time.monotonic() < deadline and not {"reconfigured", "reconfigure_failed"} & {e.kind for e in seen}:
+        time.sleep(0.02)
+        seen += net.poll_events()
+    kinds = [e.kind for e in seen]
+    tpdo = net.drivers["joint_1"].tpdos[0]
+    held = drive.held_pdo("TPDO", tpdo.number + 1)
+    ok = "bootup" in kinds and "reconfigured" in kinds and held[0] == tpdo.cob_id \
+        and held[2] == [e.entry for e in tpdo.entries]
+    try:        # controlword by RPDO, statusword back by TPDO: process data both ways again
+        ok = ok and net.enable_all(max_cycles=20).all_enabled
+    except DriverError as exc:
+        kinds.append(f"then: {exc}")
+        ok = False
+    result.record("restart", ok, f"events {kinds}; {tpdo.label} held 0x{held[0]:X} {[hex(e) for e in held[2]]}")
+    if not ok:
         drive.close()
+        return None
+    return drive

@@ -18,6 +18,7 @@ import time
 
 import pytest
 
+from spacearm.base.canopen import od
 from spacearm.base.config.bus import BusConfig, BusSettings, NodeConfig, PdoLayout
 from spacearm.drivers.network import ArmNetwork
 from hil_tests.conftest import vcan_available
@@ -26,6 +27,7 @@ from hil_tests.interop.canopennode import canopend_binary, eds_path
 NODE_ID = 4
 CLIENT_COB = (0x1280, 1), (0x1280, 2)     # SDO client COB-IDs: rw, mappable both ways
 INVALID = 0x8000_0000
+ERR_GENERIC_OR_COMM = 0x11      # 1001h bits 0 and 4: the ones CANopenNode leaves OPERATIONAL for
 
 
 @pytest.fixture(scope="module")
@@ -126,14 +128,21 @@ def test_master_boots_exchanges_supervises_and_reconfigures_canopennode(canopend
         net.health["canopennode"].nmt_state = None
         device.start()
         _wait(lambda: net.health["canopennode"].nmt_state is not None, slow, "canopend's second boot-up")
-        # SYNC runs from before the configuration, as a master's SYNC producer does: CANopenNode
-        # supervises the period written to 1006h and leaves OPERATIONAL when a SYNC is late
+        # the daemon's order: boot (no SYNC yet), then its cycle sends SYNC every period.
+        # CANopenNode arms its SYNC timeout (1.5 x 1006h) at the first SYNC and its 1016h
+        # consumer at the first master heartbeat (sent from connect on): a device that kept
+        # OPERATIONAL with error register 0 over the first SYNCs saw neither fire
         driver = net.drivers["canopennode"]
         for key in CLIENT_COB:     # a client COB-ID must carry bit 31 (not valid): never send 0
             driver.rpdo_values[key] = INVALID | 0x100
-        cycler = Cycler(net).__enter__()
         net.boot()
         print("[canopennode] booted", flush=True)
+        cycler = Cycler(net).__enter__()
+        _wait(lambda: net.stats.syncs_sent >= 20, slow, "20 SYNCs")
+        assert net.health["canopennode"].nmt_state == od.NMT_STATE_OPERATIONAL
+        # its error register by TPDO2: no generic or communication error (a SYNC or 1016h timeout)
+        assert driver.value(0x1001, 0, None) is not None and driver.value(0x1001, 0) & ERR_GENERIC_OR_COMM == 0
+        assert not [e for e in _events(net, "emcy", seen) if e.code & 0xFF00 == 0x8100]   # no SYNC/HB timeout
         report = net.bringup["canopennode"]
         assert report.refused == [] and "1016h" in report.guarding
         # what the device holds, read back over SDO (expedited uploads)
@@ -145,6 +154,10 @@ def test_master_boots_exchanges_supervises_and_reconfigures_canopennode(canopend
         assert all(net.sdo_read("canopennode", 0x1800 + n, 1) & INVALID for n in (2, 3))
         assert all(net.sdo_read("canopennode", 0x1400 + n, 1) & INVALID for n in (1, 2, 3))
         assert [net.sdo_read("canopennode", 0x1A00, i) for i in range(3)] == [2, 0x1280_0120, 0x1280_0220]
+        assert [net.sdo_read("canopennode", 0x1A01, i) for i in range(2)] == [1, 0x1001_0008]
+        assert [net.sdo_read("canopennode", 0x1600, i) for i in range(3)] == [2, 0x1280_0120, 0x1280_0220]
+        assert [net.sdo_read("canopennode", index, 2) for index in (0x1400, 0x1800, 0x1801)] == [od.TRANSMISSION_SYNC] * 3
+        assert net.sdo_read("canopennode", 0x1005, 0) & 0x7FF == od.SYNC_COB_ID_DEFAULT
         for value in (INVALID | 0x123, INVALID | 0x456, INVALID | 0x7EF):
             _pdo_round_trip(net, driver, value, slow)
         assert net.sdo_read("canopennode", 0x1280, 1) == INVALID | 0x7EF       # the device holds it

@@ -7,6 +7,7 @@ import math
 import pytest
 
 from spacearm.base.config.bus import PdoLayout
+from spacearm.console.status_view import status_lines
 from spacearm.drivers.errors import BootError
 from spacearm.drivers.network import ArmNetwork
 from hil_tests.interop.durand_drive import OVERSTATED_ABSENT, OVERSTATED_READ_ONLY, VARIANTS, DurandDrive
@@ -122,6 +123,10 @@ def test_overstated_eds_boot_lists_every_refusal_and_uses_the_fallbacks(tmp_path
             assert f"0x{index:04X}" in refused and "0x06010002" in refused
         assert "1016h refused" in report.guarding and report.master_following_error
         assert "0x608F:01=131072" in report.read_only and "0x6091:01=160" in report.read_only
+        shown = "\n".join(status_lines({"state": "disabled", "bringup": {"joint_1": vars(report)}}))   # `status`
+        assert [line for line in shown.splitlines() if line.startswith("joint_1: 0x")] == \
+            [f"joint_1: {text}" for text in report.refused]
+        assert "joint_1: read-only, the device's value used: 0x608F:01=131072" in shown
         net.enable_all(max_cycles=20)
         net.poll_events()
         drive.stalled = True            # the motor stops following: only the master can notice

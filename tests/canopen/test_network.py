@@ -11,6 +11,7 @@ import pytest
 from spacearm.base.canopen import od
 from spacearm.base.config.bus import BusConfig, NodeConfig
 from spacearm.base.canopen.cia402_defs import State
+from spacearm.console.status_view import bringup_lines
 from spacearm.drivers.devices import EeCommand, EeState
 from spacearm.drivers.errors import BootError, SdoError, SdoTimeoutError
 from spacearm.drivers.network import ArmCommand, ArmNetwork
@@ -276,6 +277,8 @@ def test_node_reboot_is_an_event_and_the_node_is_reconfigured(enabled, sim):
     assert kinds == {"reconfigured"}
     report = net.bringup["joint_4"]
     assert report.reboots == 1 and "reconfigured and OPERATIONAL again" in report.reboot
+    shown = [line for line in bringup_lines({"joint_4": vars(report)}) if line.startswith("joint_4: rebooted")]
+    assert len(shown) == 1 and "OPERATIONAL again" in shown[0] and "1 reboot(s)" in shown[0]   # `status` text
     cob = net.sdo_read("joint_4", od.TPDO_COMM, od.PDO_COB_ID)   # the device holds its layout again
     assert cob == net.drivers["joint_4"].tpdos[0].cob_id
     for _ in range(10):
