@@ -249,8 +249,18 @@ class Stack:
                          f"events {s['events'][-4:]})")
 
     def recover(self) -> None:
-        """After a stop: reset (drive faults cleared by the daemon), back to disabled."""
-        self.call("reset")
+        """After a stop: reset (drive faults cleared by the daemon), back to disabled. A reset
+        is refused busy while the planned stop still brings the arm to rest: wait for that."""
+        from spacearm.console.errors import CommandFailed
+        deadline = time.monotonic() + 30.0
+        while True:
+            try:
+                self.call("reset")
+                break
+            except CommandFailed as exc:
+                if exc.code != "busy" or time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
         if self.status()["state"] == "stopped":   # stopped again while the drives were resetting
             time.sleep(0.3)
             self.call("reset")
