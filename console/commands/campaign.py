@@ -20,7 +20,7 @@ from rich.table import Table
 
 from spacearm.base.paths import CONFIGS
 from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
-from spacearm.console.figure_units import figure_unit
+from spacearm.offline.campaign.figure_units import figure_unit
 from spacearm.offline.campaign.replay import replay as replay_trial
 from spacearm.offline.campaign.report import summarise, write_report
 from spacearm.offline.campaign.runner import RunSummary, run_campaign

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from spacearm.offline.campaign.figure_units import figure_unit
 from spacearm.offline.campaign.kinds import KINDS
 from spacearm.offline.campaign.store import ResultStore
 
@@ -138,16 +139,19 @@ def write_report(store: ResultStore, out: Path | None = None) -> Path:
           f"| succeeded / failed / broken (raised) | {s.successes} / {s.failed} / {s.errors} |",
           f"| success rate (95 % Wilson interval) | {s.rate_text()} |", "",
           "![success rate](success.png)", "", "## Figures", "",
-          "| figure | n | median | p95 | max |", "| --- | --- | --- | --- | --- |"]
-    md += [f"| {f.name} | {f.count} | {f.median:.4g} | {f.p95:.4g} | {f.maximum:.4g} |" for f in s.figures]
+          "| figure | unit | n | median | p95 | max |", "| --- | --- | --- | --- | --- | --- |"]
+    for f in s.figures:          # stored in SI, shown in the unit people read (mm, deg, N, s)
+        unit, k = figure_unit(f.name)
+        md.append(f"| {f.name} | {unit} | {f.count} | {k * f.median:.4g} | {k * f.p95:.4g} | {k * f.maximum:.4g} |")
     md += [""] + [f"![{i}]({i})" for i in images]
     md += ["", f"## Worst trials (failed first, then largest {s.worst_figure})", "",
            "| trial | seed | success | failure / error | parameters | "
-           f"{s.worst_figure} |", "| --- | --- | --- | --- | --- | --- |"]
+           f"{s.worst_figure} ({figure_unit(s.worst_figure)[0]}) |", "| --- | --- | --- | --- | --- | --- |"]
     for r in s.worst:
         params = ", ".join(f"{k[2:]}={v:.4g}" for k, v in r.items() if k.startswith("p_") and v is not None)
         why = r.get("error") or r.get("failure") or ""
         value = r.get(f"f_{s.worst_figure}")
+        value = None if value is None else figure_unit(s.worst_figure)[1] * value
         md.append(f"| {r['trial_id']} | {r['seed']} | {bool(r['success'])} | {why} | {params} | "
                   f"{'' if value is None else f'{value:.4g}'} |")
     if worst_png:

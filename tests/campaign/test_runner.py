@@ -1,6 +1,7 @@
 """The Dask runner on an embedded LocalCluster: results per trial, resume, replay, a killed worker."""
 from __future__ import annotations
 
+import statistics
 
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -36,6 +37,11 @@ def test_resumed_campaign_skips_done_trials_and_equals_a_one_shot_run(tmp_path, 
     assert (report.parent / "success.png").stat().st_size > 1000
     text = report.read_text()
     assert "Wilson" in text and "Worst trials" in text and text.count("| t0000") == 5
+    # figures are stored in SI and shown with their unit: a position error in mm
+    row = next(line for line in text.splitlines() if line.startswith("| position_rms_after |"))
+    unit, _, median = (cell.strip() for cell in row.split("|")[2:5])
+    stored = statistics.median(v for v in merged.column("f_position_rms_after").to_pylist() if v is not None)
+    assert unit == "mm" and float(median) == pytest.approx(1e3 * stored, rel=1e-3)
 
 
 def test_a_different_campaign_file_is_refused_in_the_same_directory(tmp_path, ekf_campaign):

@@ -9,7 +9,7 @@ import re
 
 import pytest
 
-from spacearm.console.figure_units import figure_unit
+from spacearm.offline.campaign.figure_units import figure_unit
 
 # SI values as an insertion trial stores them
 FIGURES = {"peak_lateral_force": 12.5, "peak_torque": 3.25, "arm_time": 20.0, "final_lateral_error": 0.0012,

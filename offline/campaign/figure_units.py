@@ -1,7 +1,7 @@
 """The unit of a campaign figure, for the tables people read.
 
-Trial kinds store their figures in SI under descriptive names (offline/campaign); the console
-shows them in the units an operator thinks in: millimetres, degrees, newtons, seconds. The
+Trial kinds store their figures in SI under descriptive names; the console's tables and the
+campaign's report.md show them in the units an operator thinks in: millimetres, degrees, newtons, seconds. The
 unit follows from the name (the kinds name every figure after what it measures); a name no
 rule knows is shown in SI and says so, never as a bare number.
 """
