@@ -157,6 +157,7 @@ class Stack:
     client: ApiClient | None = None
     lease: str | None = None
     procs: list = field(default_factory=list)
+    steal: object = None       # a harness.StealTimeline, for tests that judge stops for silence
     _rig: object = None
     _net: object = None
 
@@ -219,6 +220,8 @@ class Stack:
             proc.wait(10)
 
     def close(self) -> None:
+        if self.steal is not None:
+            self.steal.stop()
         if self.client is not None:
             try:
                 self.client.close()

@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 
 from hil_tests.conftest import TIME_SCALE
-from hil_tests.harness import CHROMIUM, CHROMIUM_ARGS, free_port, patient_bus
+from hil_tests.harness import (CHROMIUM, CHROMIUM_ARGS, StealTimeline, free_port, patient_bus,
+                               xfail_if_the_host_stalled_a_vcpu)
 
 pytestmark = [pytest.mark.hil, pytest.mark.slow]
 
@@ -79,13 +80,21 @@ def start_web_stack(loopback_hub, launch, tmp_path, camera_ring, lockstep: bool 
 
 
 @pytest.fixture
-def web_stack(loopback_hub, launch, tmp_path, camera_ring):
-    return start_web_stack(loopback_hub, launch, tmp_path, camera_ring)
+def steal():
+    """Per-vCPU steal through the test: a stop for silent nodes is judged against it."""
+    timeline = StealTimeline()
+    yield timeline
+    timeline.stop()
 
 
 @pytest.fixture
-def patient_web_stack(loopback_hub, launch, tmp_path, camera_ring):
-    return start_web_stack(loopback_hub, launch, tmp_path, camera_ring, lockstep=True)
+def web_stack(loopback_hub, launch, tmp_path, camera_ring, steal):
+    return start_web_stack(loopback_hub, launch, tmp_path, camera_ring) | {"steal": steal}
+
+
+@pytest.fixture
+def patient_web_stack(loopback_hub, launch, tmp_path, camera_ring, steal):
+    return start_web_stack(loopback_hub, launch, tmp_path, camera_ring, lockstep=True) | {"steal": steal}
 
 
 def wait_for(page, expression: str, timeout: float = 20.0) -> None:
@@ -103,12 +112,20 @@ def status(page) -> dict:
     return page.evaluate("() => spacearm.lastStatus")
 
 
-def enable(page) -> None:
+def enable(page, stack: dict) -> None:
     """Enable through the page's buttons, once: a stop instead fails with its code (on a loaded
     machine starvation is coded `late_cycle` and does not stop the arm; see report_load)."""
     page.click("#btn-enable")
     wait_for(page, "() => ['enabled', 'stopped'].includes(spacearm.lastStatus.state)")
-    assert status(page)["state"] == "enabled", f"arm not enabled: {stop_text(page)}"
+    assert status(page)["state"] == "enabled", f"arm not enabled: {unexpected_stop(page, stack)}"
+
+
+def unexpected_stop(page, stack: dict) -> str:
+    """The stop's code and message; a stop for silent nodes while the host held a vCPU is the
+    machine's, not the stack's, and is reported as such (xfail naming the measured steal)."""
+    from spacearm.console.client import ApiClient
+    xfail_if_the_host_stalled_a_vcpu(ApiClient(stack["api"]).call("status"), stack["steal"])
+    return stop_text(page)
 
 
 def stop_text(page) -> str:
@@ -125,7 +142,7 @@ def presimulate_accepted(page) -> None:
         f"presimulation rejected: {page.evaluate('() => spacearm.lastPresim.reason')}"
 
 
-def send_until(page, done: str) -> None:
+def send_until(page, stack: dict, done: str) -> None:
     """Send the presimulated command and wait until the JS condition `done` holds; a refusal
     or a protective stop on the way fails the test with its code."""
     page.evaluate("() => { document.getElementById('cmd-result').textContent = ''; }")
@@ -134,7 +151,7 @@ def send_until(page, done: str) -> None:
     result = page.text_content("#cmd-result")
     assert result.startswith("sent"), f"command refused: {result}"
     wait_for(page, f"() => ({done}) || spacearm.lastStatus.state === 'stopped'", timeout=30)
-    assert page.evaluate(f"() => {done}"), f"stopped before {done}: {stop_text(page)}"
+    assert page.evaluate(f"() => {done}"), f"stopped before {done}: {unexpected_stop(page, stack)}"
 
 
 def report_load(stack, record_property) -> dict:
@@ -184,7 +201,7 @@ def test_web_console_presimulates_sends_and_stops(web_stack, browser, record_pro
     # Motion commands need the lease and an enabled arm; the page asks as a console would.
     page.click("#btn-take")
     wait_for(page, "() => document.getElementById('cmd-result').textContent.includes('taken')")
-    enable(page)
+    enable(page, web_stack)
     start = status(page)
     q_start = [j["q"] for j in start["joints"]]
 
@@ -210,7 +227,7 @@ def test_web_console_presimulates_sends_and_stops(web_stack, browser, record_pro
     time.sleep(0.5)
     shot(page, web_stack, "2-presimulated")
     tool_before = page.evaluate("() => spacearm.scene.armFrames.at(-1).slice()")
-    send_until(page, f"spacearm.lastStatus.motions_finished > {start['motions_finished']} "
+    send_until(page, web_stack, f"spacearm.lastStatus.motions_finished > {start['motions_finished']} "
                      "&& spacearm.lastStatus.state === 'enabled'")
     wait_for(page, f"() => Math.abs(spacearm.lastStatus.joints[0].q - {math.radians(target_deg)}) < 2e-3")
     moved = status(page)
@@ -226,7 +243,7 @@ def test_web_console_presimulates_sends_and_stops(web_stack, browser, record_pro
     target_deg = math.degrees(q_start[0]) - 150.0
     page.locator(".q-input").nth(0).fill(f"{target_deg:.3f}")
     presimulate_accepted(page)
-    send_until(page, "spacearm.lastStatus.mode === 'move_joints' && spacearm.lastStatus.progress > 0.02")
+    send_until(page, web_stack, "spacearm.lastStatus.mode === 'move_joints' && spacearm.lastStatus.progress > 0.02")
     page.click("#btn-stop")
     wait_for(page, "() => spacearm.lastStatus.state === 'stopped'")
     stopped = status(page)
@@ -445,7 +462,7 @@ def test_the_3d_view_shows_the_arm_at_two_sizes_moving_stopped_and_its_ghost(pat
     # The ghost of a presimulated move shows over the arm; then the arm moves and comes to rest.
     page.click("#btn-take")
     wait_for(page, "() => document.getElementById('cmd-result').textContent.includes('taken')")
-    enable(page)
+    enable(page, web_stack)
     blue_before = ghost_mask(view_pixels(page)).sum()
     # The point-to-point form starts at the arm file's ready posture (Cartesian work possible),
     # with a preset button per named posture.

@@ -64,6 +64,7 @@ class Supervisor:
             if node not in m.missing or node in m.answered_late:
                 del self._missing_count[node]
                 self._excused.pop(node, None)
+        counted = []
         for node in m.missing if not m.bridged else ():   # a line switch under way (bounded)
             if m.late and self._excused.get(node, 0) < LATE_CYCLES_EXCUSED:
                 # The cycle itself ran late (this process was starved): the data may be sitting
@@ -73,9 +74,15 @@ class Supervisor:
                 self.late_cycles_excused += 1
                 continue
             self._missing_count[node] = self._missing_count.get(node, 0) + 1
-            if self._missing_count[node] >= lim.missing_pdo_cycles:
-                findings.append(Finding(FindingCode.PDO_MISSING, f"{node}: no process data for "
-                                        f"{self._missing_count[node]} cycles", node=node))
+            counted.append(node)
+        silent = [n for n in counted if self._missing_count[n] >= lim.missing_pdo_cycles]
+        for node in silent:
+            # every node silent at once points at the bus or the devices' host, one at that node:
+            # the stop's message (the first finding's) names the others
+            others = [n for n in silent if n != node]
+            findings.append(Finding(FindingCode.PDO_MISSING, f"{node}: no process data for "
+                                    f"{self._missing_count[node]} cycles"
+                                    + (f" ({', '.join(others)} silent too)" if others else ""), node=node))
         for i in np.flatnonzero(m.joints_faulted):
             findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
         low = m.q < lim.q_min - lim.position_margin

@@ -4,7 +4,7 @@ the controller's own included, exactly as candump would.
 Receiving and formatting ~1000 frames/s in Python inside the daemon's process takes the GIL
 from the control cycle (measured on 2 cores: worst cycle write 16 ms with the tap in the
 daemon, 6 ms without), so on a bus another process can open (loopback hub, SocketCAN) the
-tap runs as a low-priority child process. python-can's virtual bus exists
+tap runs as a child process, lowered to niceness 10 once it is on the bus. python-can's virtual bus exists
 only inside one process, so there the tap stays a thread. On a redundant pair the tap hears
 both lines and each frame's channel column is its line's name (`arm-a`, `vcan1`;
 base/transport/redundant.py `line_channel`), as `candump -l any` writes it.
@@ -120,7 +120,7 @@ class CanTrace:
             [sys.executable, "-m", "spacearm.controller.recording.can_trace", bus_spec, str(self.path),
              str(limit.max_bytes), str(limit.keep)],
             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=module_env(),
-            preexec_fn=_below_the_cycle)
+            preexec_fn=use_normal)
         # Wait for the tap to be on the bus so the trace covers the recording from its start.
         line = (readline_within(self._proc, start_timeout) or "").strip()
         if line != READY:
@@ -139,12 +139,6 @@ class CanTrace:
             except subprocess.TimeoutExpired:
                 self._proc.kill()
                 self._proc.wait()
-
-
-def _below_the_cycle() -> None:
-    """In the child before exec: leave the daemon's real-time policy, then lower priority."""
-    use_normal()
-    os.nice(CHILD_NICENESS)
 
 
 def _open_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC, can.Notifier, RotatingTraceWriter]:
@@ -180,6 +174,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"can_trace: cannot open {bus_spec}: {exc}", flush=True)
         return 1
     print(READY, flush=True)
+    # Lowered only once on the bus: started at niceness 10, on a busy machine (CI: 2 test
+    # workers and their stacks) its start-up got the CPU last and outlasted the parent's 10 s.
+    os.nice(CHILD_NICENESS)
     try:
         while not done.wait(FLUSH_INTERVAL) and os.getppid() == parent:
             writer.flush()

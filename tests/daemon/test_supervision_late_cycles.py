@@ -70,3 +70,18 @@ def test_a_node_that_answered_late_then_fell_silent_stops_after_missing_pdo_cycl
     stopped = [k for k in range(1, 20)
                if any(f.code == "pdo_missing" for f in sup.check(measurement(("joint_1",), False), None, False))]
     assert stopped[0] == sup.limits.missing_pdo_cycles - 1   # the first silent read was already counted
+
+
+def test_the_stop_names_every_node_silent_with_the_first() -> None:
+    """All nodes silent at once (the bus, or the host the devices run on) reads differently
+    from one silent node: the first finding, the stop's message, names the others."""
+    sup = supervisor()
+    limit = sup.limits.missing_pdo_cycles
+    for _ in range(limit - 1):
+        assert sup.check(measurement(("end_effector", "joint_1", "joint_2"), False), None, False) == []
+    findings = sup.check(measurement(("end_effector", "joint_1", "joint_2"), False), None, False)
+    assert findings[0].message == f"end_effector: no process data for {limit} cycles (joint_1, joint_2 silent too)"
+    alone = supervisor()
+    for _ in range(limit):
+        findings = alone.check(measurement(("joint_2",), False), None, False)
+    assert [f.message for f in findings] == [f"joint_2: no process data for {limit} cycles"]

@@ -82,3 +82,21 @@ def test_trace_of_a_redundant_pair_names_each_frames_line(kind, tmp_path):
     names = {0x181: f"tr-a-{tag}", 0x182: f"tr-b-{tag}"}
     assert [m.channel for m in logged if m.arbitration_id == 0x182] == [names[0x182]] * 14
     assert all(m.channel == names[m.arbitration_id] for m in logged)
+
+
+def test_the_child_tap_runs_below_the_cycle_once_it_is_on_the_bus(tmp_path):
+    """Started at the daemon's niceness (a niced start-up got the CPU last on a busy machine),
+    then niceness 10, read back from the kernel, so the trace never takes CPU from the cycle."""
+    import os
+
+    from spacearm.controller.recording.can_trace import CHILD_NICENESS
+    hub = LoopbackHub("127.0.0.1", 0).start()
+    trace = CanTrace(f"loopback:nice@127.0.0.1:{hub.port}", tmp_path / "nice.can.log")
+    try:
+        deadline = time.monotonic() + 10.0
+        while os.getpriority(os.PRIO_PROCESS, trace._proc.pid) != os.getpriority(os.PRIO_PROCESS, 0) + CHILD_NICENESS:
+            assert time.monotonic() < deadline, os.getpriority(os.PRIO_PROCESS, trace._proc.pid)
+            time.sleep(0.01)
+    finally:
+        trace.stop()
+        hub.stop()
