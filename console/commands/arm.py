@@ -7,7 +7,7 @@ from pathlib import Path
 
 import typer
 
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.base.config.arm import ArmConfig, load_arm_config
 from spacearm.base.kinematics.arm_import import arm_toml, import_arm
 from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, dump_toml
@@ -49,6 +49,10 @@ def register(app: typer.Typer) -> None:
                 gravity: float = typer.Option(0.0, help="m/s^2 along -z of the base in the plant file "
                                                         "(0 = on orbit, 9.81 = ground test bed).")) -> None:
         """Write an arm file (modified D-H + Hayati, limits, drive limits, inertials) from a URDF chain."""
+        if plant is not None and out is None:       # refused before anything is written
+            raise BadInput("--plant needs --out (the plant file refers to the arm file)")
+        if not math.isfinite(gravity) or abs(gravity) > 100.0:
+            raise BadInput(f"--gravity {gravity}: expected 0..100 m/s^2")
         command = f"spacearm arm import {urdf} --base {base} --tip {tip}"
         data, config = import_arm(urdf, base, tip, out, name)
         text = arm_toml(data, command)
@@ -68,12 +72,8 @@ def register(app: typer.Typer) -> None:
                   "the rigid-body plant")
         if plant is not None:
             if bare:
-                raise CommandFailed(f"--plant: {urdf}: no <inertial> on {', '.join(bare)}; the rigid-body plant "
-                                    "needs one on every moving link")
-            if out is None:
-                raise CommandFailed("--plant needs --out (the plant file refers to the arm file)")
-            if not math.isfinite(gravity) or abs(gravity) > 100.0:
-                raise CommandFailed(f"--gravity {gravity}: expected 0..100 m/s^2")
+                raise BadInput(f"--plant: {urdf}: no <inertial> on {', '.join(bare)}; the rigid-body plant "
+                               "needs one on every moving link")
             # the arm path relative to the plant file, which the loader resolves it against
             arm_path = Path(os.path.relpath(out.resolve(), plant.resolve().parent))
             _write(plant, plant_toml(config, arm_path, (0.0, 0.0, -gravity)))

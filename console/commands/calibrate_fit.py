@@ -10,7 +10,7 @@ from typing import List, Optional
 import numpy as np
 import typer
 
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 
 GROUP_HELP = "joint_angle, joint_length, frame_length, frame_angle, plane"
 
@@ -173,7 +173,7 @@ def register_fit(cal: typer.Typer) -> None:
         targets = [t.strip() for t in target.split(",") if t.strip()]
         unknown = [t for t in targets if t not in wide]
         if unknown:
-            raise CommandFailed(f"--target {', '.join(unknown)}: not identifiable with this instrument "
+            raise BadInput(f"--target {', '.join(unknown)}: not identifiable with this instrument "
                                 f"(identifiable: {', '.join(wide)})")
         nxt = next_postures(CompositeProblem(em, blocks, wide), blocks[0], Qc, count, targets or None)
         chosen = Qc[nxt.indices]

@@ -23,7 +23,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
 from spacearm.controller.recording.csv_export import export_csv
@@ -58,11 +58,11 @@ def register(app: typer.Typer) -> None:
                                                   "own process at SCHED_FIFO 1")) -> None:
         """Main job: boot the simulated arm over CAN, run the ORU changeout, summarise."""
         if job not in ("changeout", "checkout"):
-            raise CommandFailed(f"--job: expected changeout or checkout, got {job!r}")
+            raise BadInput(f"--job: expected changeout or checkout, got {job!r}")
         try:
             stage_list = [int(v) for v in stages.split(",") if v.strip()] or None
         except ValueError:
-            raise CommandFailed(f"--stages: expected numbers like 1,2 got {stages!r}") from None
+            raise BadInput(f"--stages: expected numbers like 1,2 got {stages!r}") from None
         plant = plant or Path(CHANGEOUT_PLANT if job == "changeout" else "configs/plant/oru_testbed_nominal.toml")
         bus_config = bus_config or (CHANGEOUT_BUS if job == "changeout" else DEFAULT_BUS_CONFIG)
         console = Console()

@@ -15,7 +15,7 @@ import typer
 from spacearm.console import daemon_calls
 from spacearm.console.client import ApiClient
 from spacearm.console.commands.operate import API_OPTION, JSON_OPTION, TOKEN_OPTION, WAIT_OPTION, _controlled_call, _emit
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 
 
 def _stages(text: str | None) -> list[int] | None:
@@ -24,7 +24,7 @@ def _stages(text: str | None) -> list[int] | None:
     try:
         return [int(s) for s in text.split(",") if s.strip()]
     except ValueError:
-        raise CommandFailed(f"--stages: expected stage numbers like 1,2 got {text!r}") from None
+        raise BadInput(f"--stages: expected stage numbers like 1,2 got {text!r}") from None
 
 
 describe = daemon_calls.oru_describe
@@ -56,8 +56,8 @@ def register(app: typer.Typer) -> None:
             api: str = API_OPTION, token: str = TOKEN_OPTION, as_json: bool = JSON_OPTION,
             wait: bool = WAIT_OPTION) -> None:
         """Start the changeout from the current pose (the arm must be enabled and still)."""
+        args = {"stages": _stages(stages)} if stages else {}      # a typo is refused before connecting
         with ApiClient(api, token) as client:
-            args = {"stages": _stages(stages)} if stages else {}
             result = _controlled_call(client, "oru.run", **args)
             if not wait:
                 _emit(result, as_json, "ORU changeout started")

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from spacearm.console.errors import EXIT_USAGE, CommandFailed, friendly_errors
+from spacearm.console.errors import EXIT_USAGE, BadInput, CommandFailed, friendly_errors
 from spacearm.base.config.arm import load_arm_config
 from spacearm.offline.diagnosis.direct_sim import on_arm_drives
 from spacearm.offline.diagnosis.record import DEFAULT_ARM, RecordSimError, record_can, record_direct
@@ -38,7 +38,7 @@ def register(app: typer.Typer) -> None:
         try:
             if direct:
                 if out.suffix != ".csv":
-                    raise CommandFailed("--direct writes the wide CSV only")
+                    raise BadInput("--direct writes the wide CSV only")
                 # the arm's drives, as the daemon configures them at bring-up on the CAN path
                 table = record_direct(on_arm_drives(config, arm, bus_config), traj, out, hold_cycles=0)
                 rows = len(table.t)

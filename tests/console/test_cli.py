@@ -69,3 +69,19 @@ def test_bad_input_gives_one_line_and_nonzero_exit(args, message):
     assert result.exit_code != 0
     assert message in result.output
     assert "Traceback" not in result.output
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["oru", "run", "--stages", "one", "--api", "tcp:127.0.0.1:1"], "--stages: expected stage numbers"),
+    (["demo", "--job", "nope"], "--job: expected changeout or checkout"),
+    (["demo", "--stages", "1;2"], "--stages: expected numbers"),
+    (["arm", "import", "x.urdf", "--base", "b", "--tip", "t", "--plant", "p.toml"], "--plant needs --out"),
+    (["arm", "import", "x.urdf", "--base", "b", "--tip", "t", "--gravity", "981"], "--gravity 981.0: expected"),
+])
+def test_a_bad_option_value_is_bad_input_with_its_code(args, message):
+    """Exit 2 and `error[bad_input]` like every other typo (exit 1 is for refused commands),
+    before any connection or set-up is attempted."""
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert f"error[bad_input]: {message}" in result.output
+    assert "Traceback" not in result.output
