@@ -435,8 +435,15 @@ class Simulator:
                 if self.lateness.due(now):
                     self._send(od.TPDO_BASE[0] + self.diag_node_id, self.lateness.report(now))
                 wake = min(wake, self.lateness.next_due())
-            due = max(wake, now + TIMER_MIN_SLEEP)
-            self._stop.wait(due - now)
+            # A pass that costs more than the sleep it was sized for (a machine many times
+            # slower, e.g. the test VM's software emulation) must not turn this SCHED_FIFO thread
+            # into a busy loop that starves every normal-priority process on its core, the
+            # controller among them (measured: a whole vCPU, SDO answers and TPDOs on the bus
+            # for 8 s before the controller ran): it sleeps at least TIMER_DUTY_SLEEP times
+            # as long as its pass ran.
+            spent = time.monotonic() - now
+            due = max(wake, now + TIMER_MIN_SLEEP, now + spent * (1.0 + TIMER_DUTY_SLEEP))
+            self._stop.wait(max(0.0, due - now - spent))
 
     def _heartbeat_due(self, node: SimNode, now: float) -> float:
         """Send the node's heartbeat if due; returns when the next one is due (0: none)."""
@@ -460,6 +467,7 @@ class Simulator:
 TIMER_MAX_SLEEP = 0.010   # s
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
+TIMER_DUTY_SLEEP = 2.0    # sleep >= 2x the pass: the timer takes at most a third of a core
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,

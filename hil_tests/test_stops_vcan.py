@@ -35,9 +35,7 @@ def _slow_machine_bus(path, time_scale: float):
     return path
 
 
-@pytest.mark.skip(reason="not in the vcan VM subset yet (issue 28 open): run there on 2026-11-27 it booted and "
-                  "enabled, then lockstep cycles mid-jog waited the scaled 7.5 s lockstep timeout for TPDOs that did "
-                  "not come and pytest-timeout ended it at 300 s; passes over the loopback hub (29 s)")
+@pytest.mark.vcan_vm
 def test_operator_stop_mid_jog_over_socketcan(bus_spec, launch, tmp_path, time_scale):
     if not bus_spec.startswith("socketcan:"):
         pytest.skip("the SocketCAN stop path; on loopback the separate-process stack covers it")
