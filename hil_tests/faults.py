@@ -53,7 +53,7 @@ from spacearm.console.client import ApiClient
 from spacearm.base.runtime.child_process import module_env
 from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, use_fifo, use_normal
 from spacearm.base.transport.hub import LoopbackHub
-from hil_tests.harness import free_port
+from hil_tests.harness import StealTimeline, free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 # The daemon's cycle. (Tried 50 ms to give an overloaded machine room: full-speed CSP moves
@@ -157,7 +157,8 @@ class Stack:
     client: ApiClient | None = None
     lease: str | None = None
     procs: list = field(default_factory=list)
-    steal: object = None       # a harness.StealTimeline, for tests that judge stops for silence
+    # per-vCPU steal while the stack lives: a stop for silent nodes is judged against it
+    steal: StealTimeline = field(default_factory=StealTimeline)
     _rig: object = None
     _net: object = None
 
@@ -220,8 +221,7 @@ class Stack:
             proc.wait(10)
 
     def close(self) -> None:
-        if self.steal is not None:
-            self.steal.stop()
+        self.steal.stop()
         if self.client is not None:
             try:
                 self.client.close()

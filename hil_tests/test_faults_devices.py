@@ -13,6 +13,7 @@ import pytest
 
 from hil_tests.faults import (PERIOD, READY, FaultyHub, assert_motion_refused, assert_stays_still,
                               recorded_stop_events, start_stack, wait_for, wait_safe)
+from hil_tests.harness import xfail_if_the_host_stalled_a_vcpu
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
 
@@ -53,6 +54,8 @@ def check_stopped(stack, safe, codes: tuple[str, ...], bound_cycles: float, conc
     status = safe.status
     assert status["state"] == "stopped"
     stop = status["stop"]
+    if stop is not None and stop["code"] not in codes:     # silent nodes while the host held a vCPU: xfail
+        xfail_if_the_host_stalled_a_vcpu(status, stack.steal)
     assert stop is not None and stop["code"] in codes, status["stop_reason"]
     if concerns is not None:
         assert concerns in (stop["node"], stop["joint"]), stop
@@ -135,10 +138,10 @@ def test_silent_jogging_console_stops_after_the_keepalive(enabled):
         safe = wait_safe(enabled, t0, "jogging console silent", timeout=5.0)
     finally:
         jogger.close()
+    check_stopped(enabled, safe, ("command_watchdog",), bound_cycles=(JOG_KEEPALIVE + 0.3) / PERIOD)
     assert "no keep-alive" in safe.reason
     # counted from the jog request (a little before t0, which is after its answer)
     assert JOG_KEEPALIVE - 0.1 <= safe.to_stop <= JOG_KEEPALIVE + 10 * PERIOD + 0.1
-    check_stopped(enabled, safe, ("command_watchdog",), bound_cycles=(JOG_KEEPALIVE + 0.3) / PERIOD)
 
 
 def test_waiting_console_keeps_its_jog_alive(enabled):

@@ -31,7 +31,7 @@ import pytest
 
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.faults import NOMINAL_PLANT, RESOLVER_STEP, Stack, wait_for, wait_safe
-from hil_tests.harness import StealTimeline, free_port, xfail_if_the_host_stalled_a_vcpu
+from hil_tests.harness import free_port, xfail_if_the_host_stalled_a_vcpu
 from spacearm.base.canopen import od
 from spacearm.base.canopen.cia402_defs import State, decode_statusword
 from spacearm.base.config.arm import load_arm_config
@@ -70,7 +70,6 @@ def _separate_stack(hub, workdir: Path, period: float, clock: str = "realtime") 
     channel = f"stops-{os.getpid()}-{time.monotonic_ns()}"
     s = Stack(hub.spec(channel), channel, f"tcp:127.0.0.1:{free_port()}", workdir, _plant_at_ready(workdir))
     s.period = period
-    s.steal = StealTimeline()
     bus = ["--bus-config", str(with_sync_period(period, workdir))] if period != 0.02 else []
     try:
         s.sim = s._spawn(["sim", "--plant", str(s.plant), "--control-node", "126", "--rt-priority", "50", *bus],
@@ -114,7 +113,6 @@ def lockstep_stack(loopback_hub, tmp_path_factory):
     channel = f"stops-{os.getpid()}-{time.monotonic_ns()}"
     s = Stack(loopback_hub.spec(channel), channel, f"tcp:127.0.0.1:{free_port()}", workdir, NOMINAL_PLANT)
     s.period = 0.02
-    s.steal = StealTimeline()
     # The lockstep cycle runs at normal priority and its FIFO heartbeat timer still needs the
     # GIL: beside a CPU-bound neighbour (an emulator on both cores) the drives' 300 ms consumer
     # timeout faulted them (8130h) after the stop under test. Not what these tests judge.

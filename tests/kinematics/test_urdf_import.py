@@ -147,5 +147,5 @@ def test_missing_inertials_are_named_and_refused_for_a_plant(tmp_path) -> None:
     out = run()
     assert out.returncode == 0 and "no <inertial> on link 'b' (joint 'j1'), link 'c' (joint 'j2')" in out.stdout
     refused = run("--plant", str(tmp_path / "p.toml"))
-    assert refused.returncode == 1 and refused.stderr.count("\n") == 1 and "link 'b' (joint 'j1')" in refused.stderr
+    assert refused.returncode == 2 and "error[bad_input]" in refused.stderr and refused.stderr.count("\n") == 1 and "link 'b' (joint 'j1')" in refused.stderr
     assert not (tmp_path / "p.toml").exists()
