@@ -403,7 +403,7 @@ class Simulator:
         that really stopped is still caught: every unstarved scheduler pass counts in full."""
         due = time.monotonic()
         while not self._stop.is_set():
-            now = time.monotonic()
+            now, cpu_at_start = time.monotonic(), time.thread_time()
             self.lateness.woke(now - due, now)
             excess = now - due - STARVED_SLACK
             starved = excess > 0
@@ -439,11 +439,13 @@ class Simulator:
             # slower, e.g. the test VM's software emulation) must not turn this SCHED_FIFO thread
             # into a busy loop that starves every normal-priority process on its core, the
             # controller among them (measured: a whole vCPU, SDO answers and TPDOs on the bus
-            # for 8 s before the controller ran): it sleeps at least TIMER_DUTY_SLEEP times
-            # as long as its pass ran.
-            spent = time.monotonic() - now
-            due = max(wake, now + TIMER_MIN_SLEEP, now + spent * (1.0 + TIMER_DUTY_SLEEP))
-            self._stop.wait(max(0.0, due - now - spent))
+            # for 8 s before the controller ran): it sleeps at least TIMER_DUTY_SLEEP times the
+            # CPU its pass used. CPU, not wall time: a pass that waited for the GIL or a held
+            # vCPU used nothing, and sleeping twice that wait would only make its heartbeats late.
+            cpu = time.thread_time() - cpu_at_start
+            end = time.monotonic()
+            due = max(wake, now + TIMER_MIN_SLEEP, end + cpu * TIMER_DUTY_SLEEP)
+            self._stop.wait(max(0.0, due - end))
 
     def _heartbeat_due(self, node: SimNode, now: float) -> float:
         """Send the node's heartbeat if due; returns when the next one is due (0: none)."""
@@ -467,7 +469,7 @@ class Simulator:
 TIMER_MAX_SLEEP = 0.010   # s
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
-TIMER_DUTY_SLEEP = 2.0    # sleep >= 2x the pass: the timer takes at most a third of a core
+TIMER_DUTY_SLEEP = 2.0    # sleep >= 2x the pass's CPU: the timer takes at most a third of a core
 
 
 def start_simulator(bus_spec: str, bus_config: BusConfig | str | Path = DEFAULT_BUS_CONFIG,

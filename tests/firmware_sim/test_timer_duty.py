@@ -5,7 +5,6 @@ before this bound: that thread took a whole vCPU and the lockstep controller, at
 priority, saw SDO answers and TPDOs 8 s after they were on the bus (issue 28)."""
 from __future__ import annotations
 
-import time
 from types import SimpleNamespace
 
 from spacearm.firmware_sim import runner
@@ -13,24 +12,32 @@ from spacearm.firmware_sim.runner import TIMER_DUTY_SLEEP, Simulator
 
 
 class _Clock:
+    """Wall time, and the timer thread's CPU time (which a pass spent waiting does not advance)."""
+
     def __init__(self):
         self.t = 100.0
+        self.cpu = 0.0
 
     def monotonic(self) -> float:
         return self.t
 
+    def thread_time(self) -> float:
+        return self.cpu
+
 
 class _SlowLateness:
-    """Stands in for the lateness meter: each pass's report check costs `cost` s of the clock."""
+    """Stands in for the lateness meter: each pass's report check takes `cost` s of the clock,
+    on the CPU (`busy`) or waiting (for the GIL, or a vCPU the host held)."""
 
-    def __init__(self, clock: _Clock, cost: float):
-        self.clock, self.cost = clock, cost
+    def __init__(self, clock: _Clock, cost: float, busy: bool):
+        self.clock, self.cost, self.busy = clock, cost, busy
 
     def woke(self, late, now):
         pass
 
     def due(self, now) -> bool:
         self.clock.t += self.cost
+        self.clock.cpu += self.cost if self.busy else 0.0
         return False
 
     def next_due(self) -> float:
@@ -52,12 +59,12 @@ class _Stop:
         return self.is_set()
 
 
-def _sleeps(monkeypatch, pass_cost: float) -> list[float]:
+def _sleeps(monkeypatch, pass_cost: float, busy: bool = True) -> list[float]:
     clock = _Clock()
     # the runner's own view of time only (patching time.monotonic would fool every thread)
-    monkeypatch.setattr(runner, "time", SimpleNamespace(monotonic=clock.monotonic, thread_time=time.thread_time))
+    monkeypatch.setattr(runner, "time", SimpleNamespace(monotonic=clock.monotonic, thread_time=clock.thread_time))
     sim = Simulator("virtual:timer-duty", diag_node_id=runner.peer_timing.SIMULATOR_DIAG_NODE)   # not started
-    sim.lateness = _SlowLateness(clock, pass_cost)
+    sim.lateness = _SlowLateness(clock, pass_cost, busy)
     sim._stop = _Stop(clock, 20)
     sim._heartbeat_loop()
     return sim._stop.sleeps
@@ -74,3 +81,10 @@ def test_a_pass_longer_than_the_timer_period_still_sleeps_twice_its_cost(monkeyp
 def test_a_cheap_pass_keeps_the_timer_resolution(monkeypatch):
     sleeps = _sleeps(monkeypatch, 0.0002)
     assert max(sleeps) <= runner.TIMER_MAX_SLEEP + 1e-9, sleeps   # consumer/SDO timeouts still checked every 10 ms
+
+
+def test_a_pass_that_waited_without_the_cpu_catches_up_at_once(monkeypatch):
+    """30 ms of wall time waiting for the GIL or a held vCPU is no CPU used: sleeping twice
+    that would only delay the heartbeats further."""
+    sleeps = _sleeps(monkeypatch, 3 * runner.TIMER_MAX_SLEEP, busy=False)
+    assert max(sleeps) <= runner.TIMER_MAX_SLEEP + 1e-9, sleeps
