@@ -178,11 +178,11 @@ class Stack:
             time.sleep(0.05)
         return proc
 
-    def start_sim(self) -> None:
+    def start_sim(self, *extra: str) -> None:
         # The simulated hardware at real-time priority like the daemon (base/runtime/priority.py), so
         # the reaction times measured are the controller's, not this machine's other load.
-        self.sim = self._spawn(["sim", "--plant", str(self.plant), "--control-node", "126", "--rt-priority", "50"],
-                               "sim", "nodes ready", 60)
+        self.sim = self._spawn(["sim", "--plant", str(self.plant), "--control-node", "126", "--rt-priority", "50",
+                                *extra], "sim", "nodes ready", 60)
 
     def start_daemon(self) -> None:
         self.daemon = self._spawn(["daemon", "--clock", "realtime", "--period", str(PERIOD), "--api", self.api,

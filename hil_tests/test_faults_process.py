@@ -13,7 +13,7 @@ import pytest
 from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.faults import (FaultyHub, assert_motion_refused, assert_stays_still,
                               recorded_stop_events, start_stack, wait_for, wait_safe)
-from hil_tests.harness import StealTimeline, xfail_if_the_host_stalled_a_vcpu
+from hil_tests.harness import xfail_if_the_host_stalled_a_vcpu
 
 pytestmark = [pytest.mark.hil, pytest.mark.multiprocess]
 
@@ -158,17 +158,13 @@ def test_daemon_killed_mid_motion_restarts_disabled_with_brakes_on(stack):
     assert status["state"] == "disabled"
     assert not any(j["enabled"] for j in status["joints"])
 
-    timeline = StealTimeline()
+    stack.enable()
+    motion = stack.move(stack.far_target())["motion"]
     try:
-        stack.enable()
-        motion = stack.move(stack.far_target())["motion"]
-        try:
-            stack.wait_motion(motion)
-        except AssertionError:       # a protective stop: the machine's (a held vCPU) or the stack's
-            xfail_if_the_host_stalled_a_vcpu(stack.status(), timeline)
-            raise
-    finally:
-        timeline.stop()
+        assert stack.wait_motion(motion)["state"] == "enabled"
+    except AssertionError:       # a protective stop: the machine's (a held vCPU) or the stack's
+        xfail_if_the_host_stalled_a_vcpu(stack.status(), stack.steal)
+        raise
 
 
 def test_node_restart_is_an_unexpected_bootup_and_stops(stack):

@@ -72,8 +72,7 @@ def _separate_stack(hub, workdir: Path, period: float, clock: str = "realtime") 
     s.period = period
     bus = ["--bus-config", str(with_sync_period(period, workdir))] if period != 0.02 else []
     try:
-        s.sim = s._spawn(["sim", "--plant", str(s.plant), "--control-node", "126", "--rt-priority", "50", *bus],
-                         "sim", "nodes ready", 60)
+        s.start_sim(*bus)
         s.daemon = s._spawn(["daemon", "--clock", clock, "--period", repr(period), "--api", s.api,
                              "--record-dir", str(workdir / "runs"), *bus], "daemon", "spacearm daemon:", 60)
         s.client = ApiClient(s.api, timeout=10.0)
@@ -118,8 +117,7 @@ def lockstep_stack(loopback_hub, tmp_path_factory):
     # timeout faulted them (8130h) after the stop under test. Not what these tests judge.
     bus = ["--bus-config", str(_bus_with_patient_drives(workdir / "bus.toml"))]
     try:
-        s.sim = s._spawn(["sim", "--plant", str(s.plant), "--control-node", "126", "--rt-priority", "50", *bus],
-                         "sim", "nodes ready", 60)
+        s.start_sim(*bus)
         s.rig
         s.daemon = s._spawn(["daemon", "--clock", "lockstep", "--api", s.api, "--record-dir", str(workdir / "runs"),
                              *bus], "daemon", "spacearm daemon:", 60)

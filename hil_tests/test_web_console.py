@@ -124,7 +124,8 @@ def unexpected_stop(page, stack: dict) -> str:
     """The stop's code and message; a stop for silent nodes while the host held a vCPU is the
     machine's, not the stack's, and is reported as such (xfail naming the measured steal)."""
     from spacearm.console.client import ApiClient
-    xfail_if_the_host_stalled_a_vcpu(ApiClient(stack["api"]).call("status"), stack["steal"])
+    with ApiClient(stack["api"]) as client:
+        xfail_if_the_host_stalled_a_vcpu(client.call("status"), stack["steal"])
     return stop_text(page)
 
 

@@ -174,7 +174,7 @@ def register_fit(cal: typer.Typer) -> None:
         unknown = [t for t in targets if t not in wide]
         if unknown:
             raise BadInput(f"--target {', '.join(unknown)}: not identifiable with this instrument "
-                                f"(identifiable: {', '.join(wide)})")
+                           f"(identifiable: {', '.join(wide)})")
         nxt = next_postures(CompositeProblem(em, blocks, wide), blocks[0], Qc, count, targets or None)
         chosen = Qc[nxt.indices]
         if out is not None:
