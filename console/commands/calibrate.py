@@ -12,7 +12,7 @@ import typer
 
 from spacearm.base.paths import CONFIGS
 from spacearm.console.client import DEFAULT_API
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 
 DEFAULT_BOARD = CONFIGS / "calibration" / "board.toml"
 DEFAULT_MOUNT = CONFIGS / "vision" / "mount.toml"
@@ -39,20 +39,27 @@ def register(app: typer.Typer) -> None:
 
     @cal.command("fr3")
     @friendly_errors
-    def fr3(splits: int = typer.Option(10, help="Random 80/34 splits."),
+    def fr3(splits: int = typer.Option(10, min=1, max=1000, help="Random 80/34 splits."),
             seed: int = typer.Option(0),
             data: Path = typer.Option(None, help="samples.csv (default ../shared/data/fr3_eye_in_hand)."),
             general: bool = typer.Option(False, help="Through the general pipeline of `calibrate fit` instead."),
             method: str = typer.Option("lm", help="With --general: lm | lse | ekf | ekf-paper.")) -> None:
         """Fit the real FR3 eye-in-hand data; held-out error, registration-only vs full."""
         from spacearm.controller.calibration.fr3 import DATA, fr3_study, fr3_trusted_study
+        from spacearm.controller.calibration.datafile import DataFileError
+        from spacearm.controller.calibration.trusted_fit import METHODS
         path = data or DATA
         if not Path(path).exists():
-            raise CommandFailed(f"FR3 data not found: {path}")
-        if general:
-            text, _ = fr3_trusted_study(splits=splits, seed=seed, path=path, method=method)
-        else:
-            text, _ = fr3_study(splits=splits, seed=seed, path=path)
+            raise BadInput(f"FR3 data not found: {path}")
+        if method not in METHODS:
+            raise BadInput(f"unknown method {method!r} ({', '.join(METHODS)})")
+        try:
+            if general:
+                text, _ = fr3_trusted_study(splits=splits, seed=seed, path=path, method=method)
+            else:
+                text, _ = fr3_study(splits=splits, seed=seed, path=path)
+        except DataFileError as exc:
+            raise BadInput(str(exc)) from None
         print(text)
 
     @cal.command("laser")
@@ -86,7 +93,7 @@ def register(app: typer.Typer) -> None:
             session = DaemonArm(client, speed=speed)
             status = session.status()
             if len(status.get("joints", [])) != st.model.kin.nq or status.get("arm") != st.model.kin.name:
-                raise CommandFailed(f"the daemon runs arm {status.get('arm')!r}, not {st.model.kin.name!r} ({arm})")
+                raise BadInput(f"--arm {arm} is {st.model.kin.name!r}, the daemon runs arm {status.get('arm')!r}")
             try:
                 info = ranger.info()
             except RangerError as exc:
@@ -187,7 +194,7 @@ def register(app: typer.Typer) -> None:
                 session = DaemonArm(client, speed=speed)
                 status = session.status()
                 if len(status.get("joints", [])) != st.kin.nq or status.get("arm") != st.kin.name:
-                    raise CommandFailed(f"the daemon runs arm {status.get('arm')!r}, not {st.kin.name!r} ({arm})")
+                    raise BadInput(f"--arm {arm} is {st.kin.name!r}, the daemon runs arm {status.get('arm')!r}")
                 grab = settled_frame_grabber(ring, session, camera_name, frame_timeout)
 
                 def progress(phase: str, step: int, total: int) -> None:

@@ -31,15 +31,15 @@ def _groups(text: str, what: str, cls, prefixes: bool = False):
         try:
             value = float(val)
         except ValueError:
-            raise CommandFailed(f"{what}: {item!r} is not GROUP=VALUE (groups: {GROUP_HELP})") from None
-        if not value > 0:
-            raise CommandFailed(f"{what}: {item!r} must be positive")
+            raise BadInput(f"{what}: {item!r} is not GROUP=VALUE (groups: {GROUP_HELP})") from None
+        if not (value > 0 and np.isfinite(value)):
+            raise BadInput(f"{what}: {item!r} must be positive and finite")
         if key in cls.__dataclass_fields__ and key != "by_prefix":
             values[key] = value
         elif prefixes and key:
             by_prefix.append((key, value))
         else:
-            raise CommandFailed(f"{what}: unknown group {key!r} (groups: {GROUP_HELP})")
+            raise BadInput(f"{what}: unknown group {key!r} (groups: {GROUP_HELP})")
     return cls(**values, by_prefix=tuple(by_prefix)) if prefixes else cls(**values)
 
 
@@ -63,7 +63,7 @@ def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, pl
         if register:
             em = ErrorModel.from_kinematics(kin, world=initial_registration(em, blocks))
     except SetupError as exc:
-        raise CommandFailed(str(exc)) from None
+        raise BadInput(str(exc)) from None
     names = CompositeProblem(em, blocks, []).names
     fixed = [p.strip() for p in fix.split(",") if p.strip()]
     frame_names = em.frame_names("world") + em.frame_names("tool")
@@ -105,19 +105,21 @@ def register_fit(cal: typer.Typer) -> None:
             as_json: bool = typer.Option(False, "--json")) -> None:
         """Identify, validate on held-out postures and judge a calibration from measurement files."""
         from spacearm.controller.calibration.fit_checks import Bounds, Priors
-        from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
+        from spacearm.controller.calibration.trusted_fit import FitInputError, FitOptions, fit_blocks
         try:
             opts = FitOptions(method=method, holdout=holdout, kfold=kfold, seed=seed,
                               priors=_groups(prior, "--prior", Priors, prefixes=True),
                               bounds=_groups(bound, "--bound", Bounds), noise=noise, max_noise_ratio=max_noise_ratio,
                               regularise=regularise)
-        except ValueError as exc:
-            raise CommandFailed(str(exc)) from None
+        except FitInputError as exc:
+            raise BadInput(str(exc)) from None
         kin, em, blocks, cands, vblocks = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
                                                  register, frames, fix, validate)
         try:
             rep = fit_blocks(em, blocks, opts, candidates=cands, validation=vblocks or None)
-        except (ValueError, np.linalg.LinAlgError) as exc:
+        except FitInputError as exc:            # too few postures for what is identifiable
+            raise BadInput(str(exc)) from None
+        except (ValueError, np.linalg.LinAlgError) as exc:     # the numerics failed: a failed fit
             raise CommandFailed(str(exc)) from None
         res, ident = rep.result, rep.identifiability
         if as_json:

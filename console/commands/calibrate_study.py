@@ -16,7 +16,7 @@ from pathlib import Path
 import typer
 
 from spacearm.console.commands.campaign import check_scheduler, run_with_progress
-from spacearm.console.errors import CommandFailed, friendly_errors
+from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
 from spacearm.controller.calibration.studies import MODELS
 from spacearm.offline.campaign.calibration_study import DEFAULT_RUNS, STUDIES, BrokenTrials, run_study
 
@@ -42,7 +42,7 @@ def register_study(cal: typer.Typer) -> None:
         """Reproduce a paper's simulation study (or one measurement model's) on the campaign runner
         and print our tables beside the paper's."""
         if which not in STUDIES:
-            raise CommandFailed(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
+            raise BadInput(f"unknown study {which!r}; choose one of {', '.join(STUDIES)}")
         check_scheduler(scheduler)
         runs = runs or DEFAULT_RUNS.get(which, 20)
         model_size = f"-postures{postures}" if which in MODELS else ""

@@ -34,6 +34,11 @@ class Instruments:
     anchor: tuple[float, ...] | None = None         # ax, ay, az[, l0]
     tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
+    def __post_init__(self) -> None:
+        for what, value in (("--sigma-pos", self.sigma_pos), ("--sigma-rot", self.sigma_rot)):
+            if not (np.isfinite(value) and value > 0):
+                raise SetupError(f"{what} must be a positive noise level (1 sigma, SI), got {value!r}")
+
 
 def parse_vector(text: str, sizes: tuple[int, ...], what: str) -> tuple[float, ...] | None:
     """'1,2,3' -> (1.0, 2.0, 3.0); empty -> None; wrong count or not numbers -> SetupError."""

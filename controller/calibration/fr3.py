@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spacearm.base.paths import SHARED_DATA
+from spacearm.controller.calibration.datafile import DataFileError
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import find_identifiable
 from spacearm.controller.calibration.residuals import Problem
@@ -61,15 +62,28 @@ def load_fr3(path: Path = DATA) -> FR3Data:
     with path.open() as fh:
         rows = list(csv.DictReader(fh))
 
+    def column(name: str) -> Array:
+        try:
+            values = np.array([float(r[name]) for r in rows])
+        except KeyError:
+            raise DataFileError(f"{path}: needs column {name} (q1..q7, board_T_cam_00..23, base_T_flange_00..23)") \
+                from None
+        except (TypeError, ValueError) as exc:
+            raise DataFileError(f"{path}: column {name}: bad number ({exc})") from None
+        if not np.all(np.isfinite(values)):
+            raise DataFileError(f"{path}: column {name}: non-finite values (nan/inf)")
+        return values
+
     def mats(prefix: str) -> Array:
         M = np.zeros((len(rows), 4, 4))
-        for k, r in enumerate(rows):
-            for i in range(3):
-                for j in range(4):
-                    M[k, i, j] = float(r[f"{prefix}_{i}{j}"])
-            M[k, 3, 3] = 1.0
+        for i in range(3):
+            for j in range(4):
+                M[:, i, j] = column(f"{prefix}_{i}{j}")
+        M[:, 3, 3] = 1.0
         return M
-    Q = np.array([[float(r[f"q{i + 1}"]) for i in range(7)] for r in rows])
+    if len(rows) < 10:
+        raise DataFileError(f"{path}: {len(rows)} samples, the FR3 study needs at least 10")
+    Q = np.stack([column(f"q{i + 1}") for i in range(7)], axis=1)
     return FR3Data(Q, mats("board_T_cam"), mats("base_T_flange"))
 
 

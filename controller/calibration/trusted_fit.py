@@ -37,6 +37,11 @@ DEFAULT_PRIORS = Priors(joint_angle=np.radians(0.5), joint_length=5e-3)
 EXTRAPOLATION_MARGIN = 0.01      # rad or m beyond the training range before a posture extrapolates
 
 
+class FitInputError(ValueError):
+    """Options or data that cannot make a fit (unknown method, too few postures): the operator's
+    input, not a fit that failed."""
+
+
 @dataclass(frozen=True)
 class FitOptions:
     method: str = "lm"
@@ -55,13 +60,15 @@ class FitOptions:
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
-            raise ValueError(f"unknown method {self.method!r} ({', '.join(METHODS)})")
+            raise FitInputError(f"unknown method {self.method!r} ({', '.join(METHODS)})")
         if self.method == "lse" and self.priors.any:
-            raise ValueError("priors (regularisation) need --method lm or ekf; lse is plain least squares")
+            raise FitInputError("priors (regularisation) need --method lm or ekf; lse is plain least squares")
         if self.regularise not in ("auto", "off"):
-            raise ValueError(f"regularise must be auto or off, not {self.regularise!r}")
+            raise FitInputError(f"regularise must be auto or off, not {self.regularise!r}")
         if self.noise not in ("residual", "stated"):
-            raise ValueError(f"noise must be residual or stated, not {self.noise!r}")
+            raise FitInputError(f"noise must be residual or stated, not {self.noise!r}")
+        if not (np.isfinite(self.max_noise_ratio) and self.max_noise_ratio > 0):
+            raise FitInputError(f"max noise ratio must be positive, not {self.max_noise_ratio!r}")
 
 
 @dataclass
@@ -226,7 +233,7 @@ def fit_blocks(em: ErrorModel, blocks: list[Block], opts: FitOptions = FitOption
         n_rows = sum(len(r) * b.model.rows for b, r in zip(blocks, rows))
         rep = data_identifiability(tp.with_free(cands), cands, bounds=bounds)
         if n_rows < len(rep.kept) + 1:
-            raise ValueError(f"{n_rows} equations for {len(rep.kept)} identifiable parameters: measure more postures")
+            raise FitInputError(f"{n_rows} equations for {len(rep.kept)} identifiable parameters: measure more postures")
         tp = tp.with_free(rep.kept)
         if priors is None:
             priors = opts.priors

@@ -47,7 +47,7 @@ def test_fit_errors_are_one_line(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("q1,q2\n0,0\n")
     res = runner.invoke(app, ["calibrate", "fit", "--data", str(bad), "--model", str(ARM_FILE)])
-    assert res.exit_code == 1
+    assert res.exit_code == 2 and res.output.startswith("error[bad_input]: ")      # bad input, not a failed fit
     assert "needs columns" in res.output
     res = runner.invoke(app, ["calibrate", "study", "nope"])
-    assert res.exit_code == 1 and "unknown study" in res.output
+    assert res.exit_code == 2 and "unknown study" in res.output

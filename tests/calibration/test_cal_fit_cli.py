@@ -107,21 +107,34 @@ def test_next_proposes_postures_and_bad_input_is_one_line(tmp_path):
     assert res.exit_code == 0, res.output
     assert "unidentifiable" in res.output and "proposed postures" in res.output
     assert len((tmp_path / "next.csv").read_text().splitlines()) == 16
-    res = runner.invoke(app, ["calibrate", "fit", "--data", str(fr), "--model", str(ARM)])
-    assert res.exit_code == 1 and "need --anchor" in res.output
-    res = runner.invoke(app, ["calibrate", "fit", "--data", str(fr), "--model", str(ARM), "--anchor", "1,x,2"])
-    assert res.exit_code == 1 and "--anchor" in res.output
-    res = runner.invoke(app, ["calibrate", "fit", "--data", str(fr), "--model", str(ARM), "--anchor", "1,2,3",
-                              "--bound", "elbow=3"])
-    assert res.exit_code == 1 and "unknown group" in res.output
+    fit = ["calibrate", "fit", "--data", str(fr), "--model", str(ARM)]
+    _bad_input(runner.invoke(app, fit), "need --anchor")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,x,2"]), "--anchor")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--bound", "elbow=3"]), "unknown group")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--prior", "joint_angle=inf"]), "positive and finite")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--sigma-pos", "0"]), "--sigma-pos")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--method", "newton"]), "unknown method")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--register"]), "registration needs point or pose")
     nan = tmp_path / "nan.csv"
     lines = fr.read_text().splitlines()
     nan.write_text("\n".join(lines[:2] + [lines[2].rsplit(",", 1)[0] + ",nan"] + lines[3:]) + "\n")
-    res = runner.invoke(app, ["calibrate", "fit", "--data", str(nan), "--model", str(ARM), "--anchor", "1,2,3"])
-    assert res.exit_code == 1 and "non-finite" in res.output
-    res = runner.invoke(app, ["calibrate", "fit", "--data", str(fr), "--model", str(ARM), "--anchor", "1,2,3",
-                              "--method", "lse", "--prior", "joint_angle=0.01"])
-    assert res.exit_code == 1 and "need --method lm or ekf" in res.output
+    _bad_input(runner.invoke(app, ["calibrate", "fit", "--data", str(nan), "--model", str(ARM), "--anchor", "1,2,3"]),
+               "non-finite")
+    few = tmp_path / "few.csv"
+    few.write_text("\n".join(lines[:4]) + "\n")
+    _bad_input(runner.invoke(app, ["calibrate", "fit", "--data", str(few), "--model", str(ARM), "--anchor", "1,2,3"]),
+               "measure more postures")
+    _bad_input(runner.invoke(app, fit + ["--anchor", "1,2,3", "--method", "lse", "--prior", "joint_angle=0.01"]),
+               "need --method lm or ekf")
+    _bad_input(runner.invoke(app, ["calibrate", "fr3", "--data", str(fr), "--splits", "1"]), "needs column q7")
+    _bad_input(runner.invoke(app, ["calibrate", "fr3", "--general", "--method", "newton"]), "unknown method")
+
+
+def _bad_input(res, words: str) -> None:
+    """The console's contract for bad input: exit 2 and one line `error[bad_input]: ...`."""
+    lines = [ln for ln in res.output.strip().splitlines() if ln.strip()]
+    assert res.exit_code == 2 and len(lines) == 1, res.output
+    assert lines[0].startswith("error[bad_input]: ") and words in lines[0], res.output
 
 
 def test_calibration_table_frame_corrections_are_checked():

@@ -147,7 +147,7 @@ def test_cli_refuses_joints_in_degrees_naming_the_unit(tmp_path):
     d1, _ = _wire_files(tmp_path, case, scale_q=180.0 / np.pi)
     app, runner = _cli()
     res = runner.invoke(app, ["calibrate", "fit", "--data", str(d1), "--model", _arm_path(), "--anchor", "0.5,0,0"])
-    assert res.exit_code != 0
+    assert res.exit_code == 2, res.output                # bad input, not a failed fit
     lines = [ln for ln in res.output.strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and "degrees" in lines[0] and "limits" in lines[0], res.output
     assert "Traceback" not in res.output
@@ -158,7 +158,7 @@ def test_cli_refuses_a_range_column_in_mm_naming_the_unit(tmp_path):
     d1, _ = _wire_files(tmp_path, case, scale_range=1000.0)
     app, runner = _cli()
     res = runner.invoke(app, ["calibrate", "fit", "--data", str(d1), "--model", _arm_path(), "--anchor", "0.5,0,0"])
-    assert res.exit_code != 0
+    assert res.exit_code == 2, res.output                # bad input, not a failed fit
     lines = [ln for ln in res.output.strip().splitlines() if ln.strip()]
     assert len(lines) == 1 and "mm" in lines[0] and "reach" in lines[0], res.output
 

@@ -62,5 +62,5 @@ def test_campaign_run_takes_a_calibration_study_file(tmp_path):
 
 def test_an_unknown_study_is_one_line():
     out = cli("calibrate", "study", "nope")
-    assert out.returncode == 1 and "unknown study" in out.stderr
+    assert out.returncode == 2 and "error[bad_input]: unknown study" in out.stderr
     assert "Traceback" not in out.stderr and len(out.stderr.strip().splitlines()) == 1
