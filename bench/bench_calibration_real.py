@@ -4,7 +4,8 @@
 
   TIAGo mocap   identify on 2021-11-30 (37 postures), validate on 2021-11-26 (62): FIGAROH's
                 geometric calibration (full_params and joint_offset, BaseCalibration on Pinocchio,
-                its own base-parameter QR) and ours (`calibrate fit --register --validate`), in
+                its own base-parameter QR) and ours (`calibrate fit --register --validate`; the
+                target row adds `--select-groups`: D-H groups by k-fold CV on 2021-11-30 only), in
                 this run, on the same files; every figure is the RMS over postures of the norm
                 of marker 1's position error (mm), FIGAROH's published definition.
   FR3           held-out RMS position error, median of 10 random 80/34 splits (dedicated study
@@ -38,6 +39,7 @@ HELD_OUT_SEEDS = 1000            # seeds below are for tests and development; fi
 TIAGO_TARGET_MM = 2.9
 FR3_TARGET_MM = 1.2
 FLOOR_TARGET = 1.10
+TIAGO_ROW = "spacearm full, groups by CV"
 
 
 def conditions(steal: CpuSteal) -> str:
@@ -124,10 +126,11 @@ def figaroh_tiago(level: str) -> dict:
             "seconds": elapsed, "axes": np.sqrt(np.mean(ev ** 2, axis=0))}
 
 
-def ours_tiago(registration_only: bool, elastic: bool = False) -> dict:
+def ours_tiago(registration_only: bool, elastic: bool = False, select: bool = False) -> dict:
     from spacearm.controller.calibration.tiago_mocap import fit_tiago
+    from spacearm.controller.calibration.trusted_fit import FitOptions
     t0 = time.perf_counter()
-    f = fit_tiago(registration_only, elastic=elastic)
+    f = fit_tiago(registration_only, elastic=elastic, opts=FitOptions(select_groups=select))
     rep = f.report
     n_out, rms_out = rep.held_rms_where(True)
     note = rep.verdict.message() + (f"; {n_out} validation postures extrapolate (RMS {rms_out * 1e3:.2f} mm)"
@@ -135,6 +138,8 @@ def ours_tiago(registration_only: bool, elastic: bool = False) -> dict:
     if rep.regularised:
         note += f"; default prior, without it {rep.held_unregularised * 1e3:.2f} mm"
     compliances = {n: v for n, v in rep.estimate.items() if n.startswith("k_")}
+    if rep.selection is not None:
+        note += "; " + rep.selection.summary()
     if elastic:
         note += "; compliances kept: " + (", ".join(f"{n} {v:.3g} rad/(N m)" for n, v in compliances.items()) or "none")
     return {"label": f"spacearm {f.label}", "params": f.parameters, "train": f.train_rms, "valid": f.validation_rms,
@@ -147,7 +152,8 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
           "position error norm, mm")
     print(f"  {'method':<30}{'params':>7}{'train':>8}{'valid':>8}{'max':>8}{'time s':>8}  conditions / verdict")
     rows = []
-    runs = [lambda: ours_tiago(True), lambda: ours_tiago(False), lambda: ours_tiago(False, elastic=True)]
+    runs = [lambda: ours_tiago(True), lambda: ours_tiago(False), lambda: ours_tiago(False, elastic=True),
+            lambda: ours_tiago(False, select=True)]
     if with_figaroh:
         runs = [lambda: figaroh_tiago("full_params"), lambda: figaroh_tiago("joint_offset")] + runs
     for run in runs:
@@ -163,13 +169,14 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
     for r in rows:
         if r.get("axes") is not None:
             print(f"    {r['label']:<28}" + "".join(f"{v * 1e3:>8.3f}" for v in r["axes"]))
-    per_joint(next((r for r in rows if r["label"] == "spacearm full"), None))
-    ours = next((r for r in rows if r["label"] == "spacearm full"), None)
+    # The figure: D-H groups chosen by cross-validation on the identification day alone.
+    ours = next((r for r in rows if r["label"] == TIAGO_ROW), None)
+    per_joint(ours)
     fig = next((r for r in rows if r["label"] == "FIGAROH full_params"), None)
     if ours is not None:
         ok = ours["accepted"] and ours["valid"] <= TIAGO_TARGET_MM * 1e-3 and (fig is None or ours["valid"] <= fig["valid"])
         versus = f", FIGAROH full_params {fig['valid'] * 1e3:.3f} mm in this run" if fig else ""
-        print(f"  target: accepted fit, validation <= {TIAGO_TARGET_MM} mm and not worse than FIGAROH: "
+        print(f"  target ({ours['label']}): accepted fit, validation <= {TIAGO_TARGET_MM} mm and not worse than FIGAROH: "
               f"{ours['valid'] * 1e3:.3f} mm{versus} [{'ok' if ok else 'MISS'}]")
         if not ok:
             rep = ours["report"]
@@ -184,6 +191,12 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
                   f"validate at {rms_in * 1e3:.2f} mm")
             from spacearm.controller.calibration.tiago_mocap import validation_day_registration
             rereg, mean = validation_day_registration(ours["fit"])
+            n_eq, p = 3 * rep.train_postures, ours["params"]
+            sigma = ours["train"] * np.sqrt(n_eq / (n_eq - p))
+            inside = sigma * np.sqrt(1 + p / n_eq)
+            print(f"  floor: the training residual implies {sigma * 1e3:.2f} mm per posture the rigid model leaves (markers "
+                  f"~0.2 mm); a new posture inside the training range then expects ~{inside * 1e3:.2f} mm "
+                  f"(x sqrt(1 + {p}/{n_eq}) for the estimated terms), before the day-to-day frame shift below")
             print(f"  and the motion-capture frame moved between the days: the validation day's mean error is "
                   f"({', '.join(f'{v * 1e3:+.2f}' for v in mean)}) mm; re-registering the frame on that day alone "
                   f"(6 parameters fitted on the validation data: a diagnostic, not a figure) leaves {rereg * 1e3:.2f} mm")
@@ -200,12 +213,12 @@ def per_joint(ours: dict | None) -> None:
         hs = [h.after for h in held if j in h.outside]
         parts.append(f"{j.replace('_joint', '')} {len(hs)}" + (f" ({np.sqrt(np.mean(np.square(hs))) * 1e3:.2f})" if hs else ""))
     n_in, rms_in = ours["report"].held_rms_where(False)
-    print(f"  spacearm full, validation postures outside each joint's training range (their RMS, mm): "
+    print(f"  {ours['label']}, validation postures outside each joint's training range (their RMS, mm): "
           f"{', '.join(parts)}; inside every range: {n_in} ({rms_in * 1e3:.2f})")
 
 
 def bench_fr3(steal: CpuSteal) -> None:
-    from spacearm.controller.calibration.fr3 import fr3_study, fr3_trusted_study
+    from spacearm.controller.calibration.fr3 import fr3_floor, fr3_study, fr3_trusted_study
     t0 = time.perf_counter()
     _, med = fr3_study()
     _, gen = fr3_trusted_study()
@@ -217,6 +230,12 @@ def bench_fr3(steal: CpuSteal) -> None:
     print("  dedicated study, held-out position RMS per board axis (x, y, z), median of the splits: "
           + ", ".join(f"{v * 1e3:.3f}" for v in med["full_pos_axes"]) + " mm")
     if min(pos, gen["full_pos"] * 1e3) > FR3_TARGET_MM:
+        floor = fr3_floor() * 1e3
+        print(f"  floor: a fit of all 114 views (it has seen every held-out view) minimising the position error "
+              f"itself scores {floor:.3f} mm on the same splits' held-out views (median): the checkerboard pose "
+              f"noise plus what a rigid D-H + frames model cannot describe; the target is "
+              f"{'below' if floor > FR3_TARGET_MM else 'above'} it "
+              f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
         print(f"  why: registration only leaves {med['registration_pos'] * 1e3:.2f} mm and the D-H terms take it to the "
               "figure above; two further models were tried on this data (issue 30 report) and did not lower the median: "
               "joint elasticity under the Panda's published inertials (1.50 mm) and the D-H prior chosen by 5-fold "

@@ -105,5 +105,7 @@ def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, f
     rep = fit_blocks(em, [train], opts, candidates=cands, validation=[valid])
     after = np.array([h.after for h in rep.held_out])
     label = "registration only" if registration_only else "full + elasticity" if elastic else "full"
+    if opts.select_groups and not registration_only:
+        label += ", groups by CV"
     return TiagoFit(rep, label, len(rep.result.free),
                     rep.train_position_rms, float(np.sqrt(np.mean(after ** 2))), float(after.max()), em)

@@ -23,6 +23,7 @@ from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.fit_checks import (Bounds, Priors, Verdict, WeakDirection, data_identifiability,
                                                         instrument_bounds, plausibility, weakest_direction)
+from spacearm.controller.calibration.group_selection import GroupSelection, select_groups
 from spacearm.controller.calibration.instrument_start import estimate_starts
 from spacearm.controller.calibration.identifiability import IdentifiabilityReport
 from spacearm.controller.calibration.solvers import CalibrationResult, EKFTuning, ekf, expected_sigma, lm, lse
@@ -57,6 +58,7 @@ class FitOptions:
     worst: int = 5
     starts: bool = True              # anchor / marker / registration start estimated from the data
     regularise: str = "auto"         # auto: DEFAULT_PRIORS on the D-H terms where weakly conditioned; off
+    select_groups: bool = False      # drop D-H groups by leave-one-out error on the training postures
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -98,6 +100,7 @@ class FitReport:
     regularised: bool = False        # the default priors were applied (weakly conditioned)
     held_unregularised: float | None = None   # held-out RMS of the same fit without them, m
     validation_file: bool = False    # held-out postures are a separate file (another day)
+    selection: GroupSelection | None = None   # the final fit's D-H group selection (select_groups)
 
     def held_rms_where(self, extrapolated: bool) -> tuple[int, float | None]:
         """Count and RMS (after the fit) of held-out postures outside (True) / inside the training range."""
@@ -228,10 +231,16 @@ def fit_blocks(em: ErrorModel, blocks: list[Block], opts: FitOptions = FitOption
         final_train = train_sets[0]
         test_blocks = [[b.subset(t) for b, t in zip(blocks, test_sets[0])]]
 
+    selections: dict[int, GroupSelection] = {}
+
     def fit_on(rows: list[Array], priors: Priors | None = None):
         tp = CompositeProblem(em, [b.subset(r) for b, r in zip(blocks, rows)], [], full.x0)
         n_rows = sum(len(r) * b.model.rows for b, r in zip(blocks, rows))
-        rep = data_identifiability(tp.with_free(cands), cands, bounds=bounds)
+        use = cands
+        if opts.select_groups:
+            selections[id(rows)] = _select(em, tp.blocks, opts, cands, full.x0)
+            use = selections[id(rows)].kept
+        rep = data_identifiability(tp.with_free(use), use, bounds=bounds)
         if n_rows < len(rep.kept) + 1:
             raise FitInputError(f"{n_rows} equations for {len(rep.kept)} identifiable parameters: measure more postures")
         tp = tp.with_free(rep.kept)
@@ -261,7 +270,8 @@ def fit_blocks(em: ErrorModel, blocks: list[Block], opts: FitOptions = FitOption
                        float(np.sqrt(np.mean(np.square(held_ratios)))) if held_ratios else None,
                        train_postures=sum(len(r) for r in final_train),
                        train_position_rms=_rms_norm(tp.position_errors(res.x)),
-                       priors=priors, regularised=priors is DEFAULT_PRIORS, validation_file=bool(validation))
+                       priors=priors, regularised=priors is DEFAULT_PRIORS, validation_file=bool(validation),
+                       selection=selections.get(id(final_train)))
     if report.regularised and held and opts.kfold <= 1:
         # The effect of the default priors on the held-out error, reported beside the fit.
         tp_u, _, res_u, _ = fit_on(final_train, Priors())
@@ -273,6 +283,49 @@ def fit_blocks(em: ErrorModel, blocks: list[Block], opts: FitOptions = FitOption
                                   opts.max_noise_ratio)
     report.elapsed = time.perf_counter() - t0
     return report
+
+
+def _select(em: ErrorModel, train: list[Block], opts: FitOptions, cands: list[str], x0: Array) -> GroupSelection:
+    """D-H groups kept by leave-one-posture-out error on these training blocks only (nested: the
+    caller's held-out or validation postures are not among them)."""
+    inner = dataclasses.replace(opts, select_groups=False, kfold=0, holdout=0.0, starts=False)
+
+    def cv_error(names: list[str]) -> float:
+        try:
+            rep = fit_blocks(em, train, inner, candidates=names, x0=x0)
+        except FitInputError:           # fewer equations than parameters
+            return float("inf")
+        return loo_position_rms(CompositeProblem(em, train, rep.result.free, x0), rep.result.x, rep.priors)
+    return select_groups(cands, cv_error)
+
+
+def loo_position_rms(problem: CompositeProblem, x: Array, priors: Priors) -> float:
+    """RMS over (block, posture) of the position error each posture would have were it left out
+    of the fit (m): the fit linearised at `x`, e_i = (I - H_ii)^-1 r_i with H the whitened hat
+    matrix (priors included), then un-whitened. Exact for a linear model; one fit instead of one
+    per posture, so no fold draw decides a close call."""
+    r, A = problem.residual_and_jacobian(x)
+    r, A = r[:, 0], A[:, 0, problem.free_idx]
+    sig = priors.sigmas(problem.free) if priors.any else np.full(len(problem.free), np.inf)
+    M = A.T @ A + np.diag(1.0 / np.square(sig))
+    try:
+        G = A @ np.linalg.pinv(M, rcond=1e-12, hermitian=True)
+    except np.linalg.LinAlgError:
+        return float("inf")
+    sq, row = [], 0
+    for b in problem.blocks:
+        k = b.model.rows
+        W = b.whitening()
+        for i in range(len(b.Q)):
+            g = slice(row + i * k, row + (i + 1) * k)
+            H = G[g] @ A[g].T
+            try:
+                e = np.linalg.solve(W[i], np.linalg.solve(np.eye(k) - H, r[g]))
+            except np.linalg.LinAlgError:   # this posture alone determines a parameter
+                return float("inf")
+            sq.append(float(np.sum(e[:3] ** 2)))
+        row += len(b.Q) * k
+    return float(np.sqrt(np.mean(sq)))
 
 
 def _rms_of(held: list[HeldOut]) -> float | None:
