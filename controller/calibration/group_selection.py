@@ -4,8 +4,8 @@ With few postures per parameter (TIAGo motion capture: 37 postures, 31 terms), a
 data determine poorly (there the common-normal lengths a_i) adds more estimation noise to a new
 posture's prediction than the geometric error it removes. Backward selection: drop the group
 whose removal lowers the leave-one-out error on the training postures most (trusted_fit's
-loo_position_rms), and repeat while that lowers it by more than `MIN_GAIN`. The measurement set-up's unknowns (registration, marker,
-anchor, plane) and the compliances are never dropped. Held-out or validation postures take no
+loo_position_rms), and repeat while that lowers it by more than `MIN_GAIN`. The measurement
+set-up's unknowns (registration, marker, anchor, plane) and the compliances are never dropped. Held-out or validation postures take no
 part in the choice, so their figure stays an honest estimate.
 """
 from __future__ import annotations
