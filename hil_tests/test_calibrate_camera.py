@@ -64,7 +64,7 @@ def test_camera_calibration_on_the_daemon_cuts_held_out_pose_error(loopback_hub,
     assert missing.returncode == 1 and "no camera frame ring" in missing.stderr
     other_arm = calibrate(["--camera", camera, "--arm", str(ROOT / "configs/arm/space_robot_6dof_laser.toml"),
                            "--api", api])
-    assert other_arm.returncode == 1 and "the daemon runs arm 'oru_testbed_6dof'" in other_arm.stderr
+    assert other_arm.returncode == 2 and "the daemon runs arm 'oru_testbed_6dof'" in other_arm.stderr   # --arm is bad input
 
     calibrated = tmp_path / "oru_arm_calibrated.toml"
     run = calibrate(["--camera", camera, "--arm", str(arm), "--configs", "14", "--candidates", "40",
