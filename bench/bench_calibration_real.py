@@ -237,7 +237,8 @@ def bench_fr3(steal: CpuSteal) -> None:
               f"{'below' if floor > FR3_TARGET_MM else 'above'} it "
               f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
         print(f"  why: registration only leaves {med['registration_pos'] * 1e3:.2f} mm and the D-H terms take it to the "
-              "figure above; two further models were tried on this data (issue 30 report) and did not lower the median: "
+              "figure above; two further models were tried on this data in an earlier session (not re-run by this bench; "
+              "figures from that session's issue 30 report) and did not lower the median: "
               "joint elasticity under the Panda's published inertials (1.50 mm) and the D-H prior chosen by 5-fold "
               "cross-validation inside each split's training postures (run on 3 of the splits: it picked the weakest prior, 0.006-0.022 mm lower)")
 
