@@ -396,8 +396,8 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     findings.sort(key=lambda f: -f.heldout_reduction)
     # no nominal sensor to compare with: the recording's own steps and velocity shift
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active, kinds)
-    timings["total_s"] = time.perf_counter() - started
     lag = velocity_lag(t, table.q, table.dq, active)
+    timings["total_s"] = time.perf_counter() - started
     return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong, offset, lag)
 
 
