@@ -79,7 +79,9 @@ def main() -> dict:
     offset = result.time_offset
     print(f"Coulomb friction within 15 % of the published CLS value on {within}/7 joints (target 6/7); torque "
           f"column re-aligned by {1e3 * offset.seconds if offset else 0.0:+.1f} ms"
-          + (f" (p = {offset.p_value:.2g})" if offset else ""))
+          + (f" (p = {offset.p_value:.2g})" if offset else "")
+          + f"; velocity column dq {1e3 * result.velocity_lag.seconds if result.velocity_lag else 0.0:+.1f} ms behind "
+            "the position column q (from dq/dt of q; named, not re-aligned)")
     print(f"held-out torque RMS at or below the published model's on {better}/7 joints (target 7/7); "
           f"Coulomb friction named on {named}/7 joints (published: all 7)")
     rb = [f.text for f in result.findings if f.joint is None]

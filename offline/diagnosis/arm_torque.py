@@ -32,6 +32,7 @@ from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.rigid_body import ArmModel, base_columns, inverse_dynamics, regressor
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.torque_alignment import TimeOffset, shifted, torque_time_offset
+from spacearm.offline.diagnosis.velocity_clock import VelocityLag, velocity_lag
 
 LOWPASS_HZ = 20.0            # q'' from dq: 4th-order Butterworth, zero phase (as Gaz et al. suggest)
 # friction laws tried per joint (features side by side), simplest first
@@ -76,6 +77,7 @@ class ArmDiagnosis:
     sensor_findings: list[SensorFinding] = field(default_factory=list)
     model_wrong: list[str] = field(default_factory=list)     # fits that needed a physically impossible value
     time_offset: TimeOffset | None = None                    # torque vs motion columns, re-aligned before fitting
+    velocity_lag: VelocityLag | None = None                  # dq vs dq/dt(q): named, not re-aligned (velocity_clock)
 
     @property
     def to_excite(self) -> list[int]:
@@ -86,7 +88,8 @@ class ArmDiagnosis:
 
     @property
     def verdict(self) -> str:
-        offset = [self.time_offset.text] if self.time_offset else []
+        offset = ([self.time_offset.text] if self.time_offset else []) + (
+            [self.velocity_lag.text] if self.velocity_lag else [])
         if not self.findings and not self.sensor_findings and not self.model_wrong and not offset:
             return "no significant torque mismatch against the rigid-body model"
         return "; ".join(offset + [s.text for s in self.sensor_findings] + [f.text for f in self.findings]
@@ -393,8 +396,9 @@ def diagnose_arm(table: RecordingTable, arm: ArmModel, heldout_from: float | Non
     findings.sort(key=lambda f: -f.heldout_reduction)
     # no nominal sensor to compare with: the recording's own steps and velocity shift
     sensors = sensor_findings(table.q, table.dq, table.tau, table.dt, None, None, active, kinds)
+    lag = velocity_lag(t, table.q, table.dq, active)
     timings["total_s"] = time.perf_counter() - started
-    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong, offset)
+    return ArmDiagnosis(findings, joints, start, not_reported, timings, sensors, model_wrong, offset, lag)
 
 
 def arm_summary(d: ArmDiagnosis) -> dict:
@@ -404,6 +408,7 @@ def arm_summary(d: ArmDiagnosis) -> dict:
         "model_wrong": d.model_wrong,
         "torque_time_offset_s": d.time_offset.seconds if d.time_offset else 0.0,
         "torque_time_offset_p": d.time_offset.p_value if d.time_offset else None,
+        "velocity_column_lag_s": d.velocity_lag.seconds if d.velocity_lag else 0.0,
         "sensor_findings": [{"effect": f.effect, "channel": f.channel, "joint": f.joint + 1, "parameters": f.params,
                              "text": f.text} for f in d.sensor_findings],
         "findings": [{"rank": i + 1, "effects": list(f.effects), "joint": None if f.joint is None else f.joint + 1,
