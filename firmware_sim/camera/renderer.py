@@ -49,6 +49,8 @@ CIRCLE_SEGMENTS = 128
 MAX_BLUR = 20.0   # px, largest Gaussian sigma of a defocused layer
 BODY_BUDGET = 4_000_000  # supersampled px of the body's box above which it is drawn at 2x
 SS_BIG_BOX = 150 * 150   # px: a measured shape's box above this is supersampled 2x, not SS
+BODY_SHARP_SIGMA = 1.0   # px of defocus from which a large body is drawn without supersampling
+FG_HALF_FROM = 1.5   # px: the foreground's blur from this sigma on is done at half resolution
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
 
 
@@ -108,9 +110,20 @@ def circle_points(centre: np.ndarray, radius: float, n: int = CIRCLE_SEGMENTS) -
                             np.full(n, centre[2])])
 
 
-def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian blur; below 0.1 px a no-op."""
-    return cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
+def _blur(image: np.ndarray, sigma: float, half_from: float = np.inf) -> np.ndarray:
+    """Gaussian blur; below 0.1 px a no-op. From `half_from` px on (an image of even size) it
+    blurs at half resolution, a quarter of the work: 2x2 box down (variance 1/3 px^2), Gaussian,
+    bilinear 2x up (variance 2/3 px^2 averaged over the phases); the middle Gaussian makes the
+    total variance sigma^2. Symmetric and aligned (pixel centres map to pixel centres), so it
+    moves no edge or centroid; its kernel is a little less Gaussian than the direct blur's."""
+    if sigma < 0.1:
+        return image
+    h, w = image.shape[:2]
+    if sigma < max(half_from, 1.05) or h % 2 or w % 2 or min(h, w) < 32:
+        return cv2.GaussianBlur(image, (0, 0), sigma)
+    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
@@ -160,9 +173,10 @@ class Renderer:
         return float(np.hypot(sigma_defocus, sigma_airy))
 
     # ------------------------------------------------------------------ layers
-    def _foreground(self, scene: Scene, cam_T_m: np.ndarray, reach: int):
+    def _foreground(self, scene: Scene, cam_T_m: np.ndarray, sigma: float):
         """Foreground in output pixels: (albedo*shade premultiplied, coverage) planes of the box
-        it covers grown by `reach` px (its blur's), and the box's top-left pixel."""
+        it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
+        reach = int(np.ceil(4 * sigma))
         m = scene.marker
         light = np.asarray(scene.lighting.sun, float)
         light /= np.linalg.norm(light)
@@ -221,16 +235,25 @@ class Renderer:
         y0 = int(np.clip(np.floor(allpts[:, 1].min()) - reach - 2, 0, h))
         x1 = int(np.clip(np.ceil(allpts[:, 0].max()) + reach + 3, 0, w))
         y1 = int(np.clip(np.ceil(allpts[:, 1].max()) + reach + 3, 0, h))
+        x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
+        if x0 < 0 or y0 < 0:
+            x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
+            y0, y1 = (y0, y1) if y0 >= 0 else (0, y1 - (y1 % 2))
         if x1 <= x0 or y1 <= y0:
             return None
         # The body (ORU faces, plate): supersampled SS x SS while its box is small (far away: the
-        # circles are then a few px from the plate's edge), 2x when large (near: tens of px).
-        ss = SS if (y1 - y0) * (x1 - x0) * SS * SS <= BODY_BUDGET else 2
+        # circles are then a few px from the plate's edge), 2x when large (near: tens of px),
+        # and not at all when large and defocused by more than a pixel (its edges' steps are
+        # then far below the blur; the measured shapes keep their own supersampling).
+        if (y1 - y0) * (x1 - x0) * SS * SS <= BODY_BUDGET:
+            ss = SS
+        else:
+            ss = 1 if sigma >= BODY_SHARP_SIGMA else 2
         buf = np.zeros(((y1 - y0) * ss, (x1 - x0) * ss, 2), np.uint16)
         for uv, value in body:
             pts = np.round(((uv - (x0, y0) + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
             cv2.fillPoly(buf, [pts], (int(round(min(value, 1.0) * 65535)), 65535), cv2.LINE_8, SHIFT)
-        planes = cv2.resize(buf, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+        planes = cv2.resize(buf, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA) if ss > 1 else buf
         albedo, alpha = (plane.astype(np.float32) * np.float32(1.0 / 65535.0) for plane in cv2.split(planes))
         for group in groups:      # the circles and the rod: supersampled, laid over the body
             self._lay_over(albedo, alpha, group, (x0, y0))
@@ -243,7 +266,7 @@ class Renderer:
         view the distortion polynomial folds back) and its edges split into pieces of at most
         EDGE_PX ideal px, so that the distorted outline follows the curved image of a straight
         edge. All vertices go through the camera model in two calls."""
-        cv, K = self.canvas, self.camera.K
+        cv = self.canvas
         flat = [(g, verts, value) for g, items in enumerate(groups) for verts, value in items]
         if not flat:
             return [[] for _ in groups]
@@ -270,15 +293,19 @@ class Renderer:
         out: list[list[tuple[np.ndarray, float]]] = [[] for _ in groups]
         if not kept:
             return out
-        uv = np.vstack([p for _, p, _ in kept])
-        xy = np.column_stack([(uv[:, 0] - cv.offset[0] - K[0, 2]) / K[0, 0],
-                              (uv[:, 1] - cv.offset[1] - K[1, 2]) / K[1, 1]])
-        pixels = self.camera.normalized_to_pixels(xy, distort=True)
+        pixels = self._distort_ideal(np.vstack([p for _, p, _ in kept]))
         start = 0
         for g, p, value in kept:
             out[g].append((pixels[start:start + len(p)], value))
             start += len(p)
         return out
+
+    def _distort_ideal(self, uv: np.ndarray) -> np.ndarray:
+        """Ideal-canvas pixels (inside the canvas) -> output pixels, lens distortion included."""
+        cv, K = self.canvas, self.camera.K
+        xy = np.column_stack([(uv[:, 0] - cv.offset[0] - K[0, 2]) / K[0, 0],
+                              (uv[:, 1] - cv.offset[1] - K[1, 2]) / K[1, 1]])
+        return self.camera.normalized_to_pixels(xy, distort=True)
 
     @staticmethod
     def _lay_over(albedo: np.ndarray, alpha: np.ndarray, group, origin: tuple[int, int]) -> None:
@@ -323,12 +350,17 @@ class Renderer:
         return cached
 
     def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> np.ndarray:
-        """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) float32.
-        Its small bright dots are the vision's distractors at a distance: drawn at full
-        resolution, as the detector's contrast ranking of them depends on it."""
+        """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) uint8, 255 =
+        albedo 1 in full light. Its small bright dots are the vision's distractors at a
+        distance: drawn at full resolution, as the detector's contrast ranking of them depends
+        on it. The polygons' vertices are distorted and drawn straight into the output pixels
+        (a full-frame remap cost more than the rest of the frame); their edges are not split:
+        the wall's straight edges bend by well under a pixel over a polygon at this lens's
+        distortion, and its geometry is not measured. The blur of a wall that far behind the
+        focus (sigma >= 1.1 px) is done at half resolution."""
         cv = self.canvas
         shade = self._wall_shade(scene)
-        img = np.full((cv.height, cv.width), int(scene.wall_albedo * 255 * shade), np.uint8)
+        img = np.full((self.camera.height, self.camera.width), int(scene.wall_albedo * 255 * shade), np.uint8)
         vertices, starts, albedos = self._clutter(scene)
         if len(vertices):
             pc = transform(cam_T_m, vertices)
@@ -336,13 +368,27 @@ class Renderer:
             uv = self._ideal(np.where(pc[:, 2:3] >= NEAR, pc, 1.0))
             lo, hi = np.minimum.reduceat(uv, starts), np.maximum.reduceat(uv, starts)
             visible = near & (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= cv.width) & (lo[:, 1] <= cv.height)
+            inside = (lo[:, 0] >= 0) & (lo[:, 1] >= 0) & (hi[:, 0] <= cv.width) & (hi[:, 1] <= cv.height)
             ends = np.append(starts[1:], len(uv))
-            pts_all = np.round(uv * 16).astype(np.int32)
+            box = np.array([[0, 0], [cv.width, 0], [cv.width, cv.height], [0, cv.height]], np.float32)
+            polys: list[np.ndarray] = []
+            values: list[int] = []
             for i in np.flatnonzero(visible):
-                cv2.fillPoly(img, [pts_all[starts[i]:ends[i]].reshape(-1, 1, 2)], int(albedos[i] * 255 * shade),
-                             cv2.LINE_AA, 4)
-        wall = cv2.remap(img, cv.map_x, cv.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return _blur(wall.astype(np.float32) * np.float32(1.0 / 255.0), sigma)
+                poly = uv[starts[i]:ends[i]]
+                if not inside[i]:        # beyond the canvas the distortion polynomial folds back
+                    area, cut = cv2.intersectConvexConvex(np.ascontiguousarray(poly, np.float32), box)
+                    if cut is None or area <= 0:
+                        continue
+                    poly = cut.reshape(-1, 2).astype(np.float64)
+                polys.append(poly)
+                values.append(int(albedos[i] * 255 * shade))
+            if polys:
+                pixels = np.round(self._distort_ideal(np.vstack(polys)) * 16).astype(np.int32)
+                start = 0
+                for poly, value in zip(polys, values):
+                    cv2.fillPoly(img, [pixels[start:start + len(poly)].reshape(-1, 1, 2)], value, cv2.LINE_AA, 4)
+                    start += len(poly)
+        return _blur(img, sigma, half_from=1.05)
 
     @staticmethod
     def _wall_axis_depth(scene: Scene, cam_T_m: np.ndarray) -> float:
@@ -412,22 +458,25 @@ class Renderer:
         # smear anyway.
         sb = min(self.coc_sigma_px(max(wall_depth, 0.01)), MAX_BLUR)
         sf = min(self.coc_sigma_px(max(marker_depth, 0.01)), MAX_BLUR)
-        img = self._background(scene, camera_T_marker, sb)
+        # the lighting multiplies every layer: applied to each as it is laid down, the wall's
+        # 8-bit levels become irradiance in the same full-frame pass
+        light = self._illumination(scene)
+        img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
             sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
             shaded = flat.albedo * self._wall_shade(scene)     # parallel to the wall: lit alike
-            img = _blur(shaded, sl) + (1.0 - _blur(flat.alpha, sl)) * img
+            img = _blur(shaded, sl) * light + (1.0 - _blur(flat.alpha, sl)) * img
         # OpenCV's Gaussian kernel for float images reaches 4 sigma
-        layer = (self._foreground(scene, camera_T_marker, int(np.ceil(4 * sf)))
+        layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
             albedo, alpha, (x0, y0) = layer
-            albedo, alpha = _blur(albedo, sf), _blur(alpha, sf)
-            region = img[y0:y0 + albedo.shape[0], x0:x0 + albedo.shape[1]]
+            albedo, alpha = _blur(albedo, sf, FG_HALF_FROM), _blur(alpha, sf, FG_HALF_FROM)
+            h, w = albedo.shape
+            region = img[y0:y0 + h, x0:x0 + w]
             np.subtract(1.0, alpha, out=alpha)
             region *= alpha
-            region += albedo
-        img *= self._illumination(scene)
+            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w])
         img.flags.writeable = False
         self._last = None if flat_layers else (key, img)
         return img
