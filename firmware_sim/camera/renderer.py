@@ -41,16 +41,17 @@ from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import Optics
 from spacearm.firmware_sim.camera.scene import Scene
 
-SS = 4            # supersampling factor of the foreground
+SS = 4            # supersampling factor of the foreground (a power of 2)
 SHIFT = 8         # fractional bits for cv2 drawing
 ONE = 1 << SHIFT
 NEAR = 1e-3       # m, polygons with a vertex nearer than this are not drawn
 CIRCLE_SEGMENTS = 128
 MAX_BLUR = 20.0   # px, largest Gaussian sigma of a defocused layer
-BODY_BUDGET = 4_000_000  # supersampled px of the body's box above which it is drawn at 2x
+BODY_BUDGET = 1_000_000  # supersampled px of the body's box above which it is drawn at 2x (or 1x)
 SS_BIG_BOX = 150 * 150   # px: a measured shape's box above this is supersampled 2x, not SS
-BODY_SHARP_SIGMA = 1.0   # px of defocus from which a large body is drawn without supersampling
-FG_HALF_FROM = 1.5   # px: the foreground's blur from this sigma on is done at half resolution
+BODY_HUGE_BOX = 500_000  # px: a body box this large and defocused by BODY_SHARP_SIGMA px or more
+BODY_SHARP_SIGMA = 1.0   # is drawn without supersampling
+FG_HALF_FROM = 1.05  # px: the foreground's blur from this sigma on is done at half resolution
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
 
 
@@ -135,6 +136,25 @@ def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
     t = np.concatenate([np.arange(n) / n for n in pieces])
     start = np.repeat(poly, pieces, axis=0)
     return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
+
+
+def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int) -> tuple[np.ndarray, np.ndarray]:
+    """(albedo premultiplied, coverage) float32 planes of `size` (w, h) px from `origin` of
+    polygons in output pixels drawn in order at ss x ss supersampling (16 bit, so that the box
+    average keeps sub-1/255 edge coverage) and box-averaged (pixel integration). Each plane is
+    drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster on one channel than on two."""
+    w, h = size
+    outlines = [np.round(((uv - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
+                for uv, _ in polys]
+    planes = []
+    for levels in ([int(round(min(value, 1.0) * 65535)) for _, value in polys], [65535] * len(polys)):
+        buf = np.zeros((h * ss, w * ss), np.uint16)
+        for pts, level in zip(outlines, levels):
+            cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
+        for _ in range(int(np.log2(ss))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
+            buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
+        planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
+    return planes[0], planes[1]
 
 
 def box_faces(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -242,19 +262,16 @@ class Renderer:
         if x1 <= x0 or y1 <= y0:
             return None
         # The body (ORU faces, plate): supersampled SS x SS while its box is small (far away: the
-        # circles are then a few px from the plate's edge), 2x when large (near: tens of px),
-        # and not at all when large and defocused by more than a pixel (its edges' steps are
-        # then far below the blur; the measured shapes keep their own supersampling).
-        if (y1 - y0) * (x1 - x0) * SS * SS <= BODY_BUDGET:
+        # circles are then a few px from the plate's edge), 2x when large (nearer: tens of px),
+        # and not at all when it fills most of the frame out of focus (nearest: its edges are
+        # then over 50 px from the circles and their steps are smoothed by a blur of more than
+        # a pixel; the measured shapes keep their own supersampling).
+        area = (y1 - y0) * (x1 - x0)
+        if area * SS * SS <= BODY_BUDGET:
             ss = SS
         else:
-            ss = 1 if sigma >= BODY_SHARP_SIGMA else 2
-        buf = np.zeros(((y1 - y0) * ss, (x1 - x0) * ss, 2), np.uint16)
-        for uv, value in body:
-            pts = np.round(((uv - (x0, y0) + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
-            cv2.fillPoly(buf, [pts], (int(round(min(value, 1.0) * 65535)), 65535), cv2.LINE_8, SHIFT)
-        planes = cv2.resize(buf, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA) if ss > 1 else buf
-        albedo, alpha = (plane.astype(np.float32) * np.float32(1.0 / 65535.0) for plane in cv2.split(planes))
+            ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
+        albedo, alpha = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
         for group in groups:      # the circles and the rod: supersampled, laid over the body
             self._lay_over(albedo, alpha, group, (x0, y0))
         return albedo, alpha, (x0, y0)
@@ -309,9 +326,9 @@ class Renderer:
 
     @staticmethod
     def _lay_over(albedo: np.ndarray, alpha: np.ndarray, group, origin: tuple[int, int]) -> None:
-        """Draw `group`'s polygons in their own box at SS x SS supersampling (16 bit, so that
-        the box average keeps sub-1/255 edge coverage), box-average (pixel integration) and
-        composite them over the planes (premultiplied: over = group + (1 - coverage) under)."""
+        """Draw `group`'s polygons in their own box supersampled, box-average (pixel
+        integration) and composite them over the planes (premultiplied: over = group +
+        (1 - coverage) under)."""
         h, w = albedo.shape
         pts_all = np.vstack([uv for uv, _ in group]) - origin
         gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w))
@@ -323,16 +340,8 @@ class Renderer:
         # a shape hundreds of px across integrates its outline's coverage over as many edge
         # pixels: 2x is then as exact for its centre as 4x is for a small one
         ss = SS if (gy1 - gy0) * (gx1 - gx0) <= SS_BIG_BOX else 2
-        buf = np.zeros(((gy1 - gy0) * ss, (gx1 - gx0) * ss, 2), np.uint16)
-        for uv, value in group:
-            # output px u -> supersampled (u + 0.5) * ss - 0.5, relative to the box
-            pts = ((uv - origin - (gx0, gy0) + 0.5) * ss - 0.5) * ONE
-            pts = np.round(pts).astype(np.int32).reshape(-1, 1, 2)
-            cv2.fillPoly(buf, [pts], (int(round(min(value, 1.0) * 65535)), 65535), cv2.LINE_8, SHIFT)
-        shapes = cv2.resize(buf, (gx1 - gx0, gy1 - gy0), interpolation=cv2.INTER_AREA).astype(np.float32)
-        shapes *= np.float32(1.0 / 65535.0)
-        cover = shapes[..., 1]
-        for plane, own in ((albedo, shapes[..., 0]), (alpha, cover)):
+        own_albedo, cover = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
+        for plane, own in ((albedo, own_albedo), (alpha, cover)):
             under = plane[gy0:gy1, gx0:gx1]
             under *= 1.0 - cover
             under += own
@@ -475,8 +484,8 @@ class Renderer:
             h, w = albedo.shape
             region = img[y0:y0 + h, x0:x0 + w]
             np.subtract(1.0, alpha, out=alpha)
-            region *= alpha
-            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w])
+            region *= alpha        # numpy, in place: OpenCV does not write into a view's rows
+            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w], dst=albedo)
         img.flags.writeable = False
         self._last = None if flat_layers else (key, img)
         return img
