@@ -51,7 +51,7 @@ BODY_BUDGET = 1_000_000  # supersampled px of the body's box above which it is d
 SS_BIG_BOX = 150 * 150   # px: a measured shape's box above this is supersampled 2x, not SS
 BODY_HUGE_BOX = 500_000  # px: a body box this large and defocused by BODY_SHARP_SIGMA px or more
 BODY_SHARP_SIGMA = 1.0   # is drawn without supersampling
-FG_HALF_FROM = 1.05  # px: the foreground's blur from this sigma on is done at half resolution
+HALF_RES_SIGMA = 1.05  # px: blurs from this sigma on may be done at half resolution (_blur)
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
 
 
@@ -111,16 +111,16 @@ def circle_points(centre: np.ndarray, radius: float, n: int = CIRCLE_SEGMENTS) -
                             np.full(n, centre[2])])
 
 
-def _blur(image: np.ndarray, sigma: float, half_from: float = np.inf) -> np.ndarray:
-    """Gaussian blur; below 0.1 px a no-op. From `half_from` px on (an image of even size) it
-    blurs at half resolution, a quarter of the work: 2x2 box down (variance 1/3 px^2), Gaussian,
+def _blur(image: np.ndarray, sigma: float, may_halve: bool = False) -> np.ndarray:
+    """Gaussian blur; below 0.1 px a no-op. `may_halve`: from HALF_RES_SIGMA px on (an image of
+    even size) it blurs at half resolution, a quarter of the work: 2x2 box down (variance 1/3 px^2), Gaussian,
     bilinear 2x up (variance 2/3 px^2 averaged over the phases); the middle Gaussian makes the
     total variance sigma^2. Symmetric and aligned (pixel centres map to pixel centres), so it
     moves no edge or centroid; its kernel is a little less Gaussian than the direct blur's."""
     if sigma < 0.1:
         return image
     h, w = image.shape[:2]
-    if sigma < max(half_from, 1.05) or h % 2 or w % 2 or min(h, w) < 32:
+    if not may_halve or sigma < HALF_RES_SIGMA or h % 2 or w % 2 or min(h, w) < 32:
         return cv2.GaussianBlur(image, (0, 0), sigma)
     small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
     small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
@@ -147,6 +147,13 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
     outlines = [np.round(((uv - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
                 for uv, _ in polys]
     planes = []
+    if ss == 1:       # nothing to average: drawn straight into the float planes
+        for levels in ([min(value, 1.0) for _, value in polys], [1.0] * len(polys)):
+            buf = np.zeros((h, w), np.float32)
+            for pts, level in zip(outlines, levels):
+                cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
+            planes.append(buf)
+        return planes[0], planes[1]
     for levels in ([int(round(min(value, 1.0) * 65535)) for _, value in polys], [65535] * len(polys)):
         buf = np.zeros((h * ss, w * ss), np.uint16)
         for pts, level in zip(outlines, levels):
@@ -397,7 +404,7 @@ class Renderer:
                 for poly, value in zip(polys, values):
                     cv2.fillPoly(img, [pixels[start:start + len(poly)].reshape(-1, 1, 2)], value, cv2.LINE_AA, 4)
                     start += len(poly)
-        return _blur(img, sigma, half_from=1.05)
+        return _blur(img, sigma, may_halve=True)
 
     @staticmethod
     def _wall_axis_depth(scene: Scene, cam_T_m: np.ndarray) -> float:
@@ -480,7 +487,7 @@ class Renderer:
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
             albedo, alpha, (x0, y0) = layer
-            albedo, alpha = _blur(albedo, sf, FG_HALF_FROM), _blur(alpha, sf, FG_HALF_FROM)
+            albedo, alpha = _blur(albedo, sf, True), _blur(alpha, sf, True)
             h, w = albedo.shape
             region = img[y0:y0 + h, x0:x0 + w]
             np.subtract(1.0, alpha, out=alpha)
