@@ -9,10 +9,11 @@ Method (why: geometry must be far more accurate than the vision targets):
    so the projected-centre (ellipse) bias of real optics is reproduced.
    The background wall is drawn at 1x with anti-aliased edges (its geometry's accuracy does not
    matter; its dots' contrast does: they are the detector's distractors).
-3. Lens distortion: the wall by cv2.remap from the ideal canvas with a map built by
-   undistorting every output pixel (the forward Brown-Conrady model of the controller's camera
-   file); the foreground's outlines are distorted themselves (edges split into short pieces,
-   each vertex through the same model) and drawn straight into the output pixels.
+3. Lens distortion: every outline is distorted itself (each vertex through the forward
+   Brown-Conrady model of the controller's camera file, polygons cut to the ideal canvas first)
+   and drawn straight into the output pixels; the foreground's edges are split into short
+   pieces first so that they bend as real straight edges do (the wall's are not: they bend by
+   well under a pixel over a wall polygon at this lens's distortion).
 4. Defocus: thin-lens circle of confusion per depth layer (marker/ORU layer at the marker
    depth, wall layer at the wall depth) as a Gaussian of the disc's second moment (sigma =
    c/4) combined with the Airy diffraction blur; layers are composited with premultiplied
@@ -22,11 +23,16 @@ Method (why: geometry must be far more accurate than the vision targets):
    spot) and vignetting.
 
 Cost (why: the render competes with the nodes and the daemon for a 2-core machine; 70 ms a frame
-before): the wall's polygons are projected in one call, and only those in view drawn; the
-circles and the rod are supersampled each in its own small box laid over the rest (ORU faces,
-plate), which drops to 2x supersampling when it is large (near: then the circles are tens of px
-from its edges); the foreground needs no remap (its outlines are distorted) and is blurred only over the pixels it
-reaches; the illumination field and the maps are cached. bench/bench_realtime.py render prints the CPU per frame.
+two versions ago, 30-50 ms of process CPU before this one): the wall's polygons are projected in
+one call, only those in view drawn, and no full-frame remap is done (it cost more than the rest
+of a frame); a blur of more than HALF_RES_SIGMA px (the wall always, the foreground away from
+the focus) is done at half resolution (2x2 box down, Gaussian, bilinear up: symmetric and
+aligned, so no edge or centre moves); the circles and the rod are supersampled each in its own
+small box laid over the rest (ORU faces, plate), which drops to 2x supersampling when large and
+to none when it fills the frame out of focus; supersampled planes are drawn and box-averaged one
+16-bit channel at a time in 2x steps (OpenCV's fast path); the lighting is applied in the
+wall's one float conversion; the illumination field is cached and an unchanged pose gives the
+last image again. bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
 
@@ -66,29 +72,29 @@ class FlatLayer:
 
 @dataclass(frozen=True)
 class IdealCanvas:
-    """Undistorted pinhole canvas: ideal pixel = K * (x/z, y/z) + offset."""
+    """Undistorted pinhole canvas: ideal pixel = K * (x/z, y/z) + offset; it covers the ideal
+    image of every output pixel (outlines are cut to it before they are distorted)."""
     width: int
     height: int
     offset: tuple[int, int]
-    map_x: np.ndarray      # float32 (H, W): for each output pixel, ideal-canvas x
-    map_y: np.ndarray
 
 
 @lru_cache(maxsize=4)
 def _ideal_canvas(camera_key: tuple) -> IdealCanvas:
     camera = _CAMERAS[camera_key]
     w, h = camera.width, camera.height
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    xy = camera.undistort_pixels(np.stack([u.ravel(), v.ravel()], 1))
-    ideal = camera.normalized_to_pixels(xy, distort=False)
+    # the output's border is enough: the distortion maps the image's inside to the inside of
+    # its border's image (it is one to one over the field of view)
+    u, v = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
+    border = np.vstack([np.c_[u, np.zeros(w)], np.c_[u, np.full(w, h - 1.0)],
+                        np.c_[np.zeros(h), v], np.c_[np.full(h, w - 1.0), v]])
+    ideal = camera.normalized_to_pixels(camera.undistort_pixels(border), distort=False)
     margin = 8
     ox = int(np.ceil(max(0.0, -ideal[:, 0].min()))) + margin
     oy = int(np.ceil(max(0.0, -ideal[:, 1].min()))) + margin
     W = int(np.ceil(ideal[:, 0].max())) + ox + margin
     H = int(np.ceil(ideal[:, 1].max())) + oy + margin
-    mx = (ideal[:, 0] + ox).reshape(h, w).astype(np.float32)
-    my = (ideal[:, 1] + oy).reshape(h, w).astype(np.float32)
-    return IdealCanvas(W, H, (ox, oy), mx, my)
+    return IdealCanvas(W, H, (ox, oy))
 
 
 _CAMERAS: dict[tuple, CameraModel] = {}
@@ -480,8 +486,10 @@ class Renderer:
         img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
             sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-            shaded = flat.albedo * self._wall_shade(scene)     # parallel to the wall: lit alike
-            img = _blur(shaded, sl) * light + (1.0 - _blur(flat.alpha, sl)) * img
+            # parallel to the wall: lit alike; over the layers behind it in place
+            lit = cv2.multiply(_blur(flat.albedo, sl), light, scale=self._wall_shade(scene))
+            img *= cv2.subtract(1.0, _blur(flat.alpha, sl))
+            img += lit
         # OpenCV's Gaussian kernel for float images reaches 4 sigma
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
