@@ -110,11 +110,15 @@ def transform(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ T[:3, :3].T + T[:3, 3]
 
 
+@lru_cache(maxsize=8)
+def _unit_circle(n: int) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([np.cos(t), np.sin(t), np.zeros(n)])
+
+
 def circle_points(centre: np.ndarray, radius: float, n: int = CIRCLE_SEGMENTS) -> np.ndarray:
     """Boundary of a circle in a z = const plane of the marker frame."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return np.column_stack([centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t),
-                            np.full(n, centre[2])])
+    return _unit_circle(n) * (radius, radius, 0.0) + centre
 
 
 def _blur(image: np.ndarray, sigma: float, may_halve: bool = False) -> np.ndarray:
@@ -139,7 +143,8 @@ def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
     pieces = np.maximum(np.ceil(np.hypot(*(nxt - poly).T) / longest), 1).astype(int)
     if (pieces == 1).all():
         return poly
-    t = np.concatenate([np.arange(n) / n for n in pieces])
+    first = np.repeat(np.cumsum(pieces) - pieces, pieces)       # each piece's edge's first piece
+    t = (np.arange(pieces.sum()) - first) / np.repeat(pieces, pieces)
     start = np.repeat(poly, pieces, axis=0)
     return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
 
@@ -150,8 +155,8 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
     average keeps sub-1/255 edge coverage) and box-averaged (pixel integration). Each plane is
     drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster on one channel than on two."""
     w, h = size
-    outlines = [np.round(((uv - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
-                for uv, _ in polys]
+    allpts = np.round(((np.vstack([uv for uv, _ in polys]) - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32)
+    outlines = np.split(allpts.reshape(-1, 1, 2), np.cumsum([len(uv) for uv, _ in polys[:-1]]))
     planes = []
     if ss == 1:       # nothing to average: drawn straight into the float planes
         for levels in ([min(value, 1.0) for _, value in polys], [1.0] * len(polys)):
