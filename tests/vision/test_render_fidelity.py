@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacearm.firmware_sim.camera.noise import SensorModel
 from spacearm.base.vision.config import load_camera
+from spacearm.firmware_sim.camera.noise import SensorModel
 from tests.vision.test_marker_accuracy import CASES
 from tests.vision.views import pose_error, view
 
