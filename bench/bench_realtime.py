@@ -1,12 +1,12 @@
 """Real time on a busy machine: what delays a SCHED_FIFO loop, and the stack beside other work.
 
     .venv/bin/python bench/bench_realtime.py gil [--seconds 20]         # what delays a FIFO 50 thread
-    .venv/bin/python bench/bench_realtime.py render [--frames 30]       # simulated camera CPU per frame
+    .venv/bin/python bench/bench_realtime.py render [--frames 20]       # simulated camera CPU per frame
     .venv/bin/python bench/bench_realtime.py changeout [--runs 5]       # separate processes, stage 1, real time
     .venv/bin/python bench/bench_realtime.py mainjob                    # `spacearm demo`, real time, camera
 
-Every section runs beside two CPU-bound processes (hil_tests/cpu_load.py, nice 0) and prints the
-load average and the CPU steal of its own interval beside each figure.
+Every section runs beside two CPU-bound processes (hil_tests/cpu_load.py, nice 0; `render` also
+alone first) and prints the load average and the CPU steal of its own interval beside each figure.
 
 The finding (section `gil`, 15 s per row beside two CPU-bound processes, load 11.6-14.5, steal
 0.6-1.8 %, switch interval 0.5 ms): a thread at SCHED_FIFO 50 waking every 20 ms, as the cycle
@@ -224,44 +224,74 @@ def gil(seconds: float, steal: CpuSteal) -> list[str]:
 
 
 def render(frames: int, steal: CpuSteal) -> list[str]:
-    """CPU per simulated camera frame (render + sensor), by distance band, beside two CPU-bound
-    processes; beside it the CPU of one full-frame float32 cv2.remap timed in the same run (the
-    old renderer did three per frame): a reference for how fast this machine is right now."""
+    """CPU per simulated camera frame (render + sensor, 1360x1024), by distance band of the
+    marker/ORU (tilted 0-30 deg, random azimuth), a still arm, and the calibration board in
+    view; alone, then beside two CPU-bound processes (which slow the frame's memory-bound work
+    more than the reference loop's). CPU is the process's (time.process_time: OpenCV's
+    worker threads included), so a frame is charged all the work it causes. Beside each: the
+    ratio to the reference loop (bench/reference_work.py) timed in the same run and process,
+    the machine-independent figure (a ~3x slower machine takes ~3x as long for both)."""
     import cv2
+    from bench.reference_work import reference_loop_seconds
+    from spacearm.base.config.board import load_board
+    from spacearm.firmware_sim.calibration_board import board_layer
+    from spacearm.firmware_sim.camera.render_process import RENDER_OPENCV_THREADS
+    from spacearm.firmware_sim.camera.renderer import FlatLayer
     from spacearm.firmware_sim.camera.simulator import CameraSimulator
     from tests.vision.views import view
+    cv2.setNumThreads(RENDER_OPENCV_THREADS)            # as the render process runs it
     cam = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
     rng = np.random.default_rng(11)
-    image = np.random.default_rng(0).random((cam.camera.height, cam.camera.width), dtype=np.float32)
-    mx, my = cam.renderer.canvas.map_x, cam.renderer.canvas.map_y
-    rows = []
-    with CpuLoad(2):
+    board = load_board()
+    centre = np.array([(board.inner[0] - 1) * board.square / 2, (board.inner[1] - 1) * board.square / 2])
+
+    def board_frame(distance: float) -> None:
+        camera_T_board = np.eye(4)                      # board facing the camera, centred, `distance` away
+        camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
+        c = cam.camera
+        albedo, alpha = board_layer(camera_T_board, board, c.K, c.dist, (c.width, c.height))
+        irradiance = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance)])
+        cam.sensor.expose(irradiance, cam.rng)
+
+    def row(name: str, cpu: list[float], ref: float) -> str:
+        c = np.array(cpu) * 1e3
+        return (f"  {name:70s} | CPU median {np.median(c):5.1f} ms, p90 {np.percentile(c, 90):5.1f} ms | "
+                f"{np.median(c) / (ref * 1e3):.3f} ref, p90 {np.percentile(c, 90) / (ref * 1e3):.3f} ref | "
+                f"<= 15 ms | {'met' if np.median(c) <= 15 else 'MISSED'} | reference loop {ref * 1e3:.0f} ms CPU | "
+                f"{conditions(steal)}")
+
+    def timed(work, n: int) -> list[float]:
+        out = []
+        for _ in range(n):
+            t0 = time.process_time()
+            work()
+            out.append(time.process_time() - t0)
+        return out
+
+    def measure(beside: str) -> list[str]:
         steal.fraction()
-        cam.render(view(0.3, 0.1, 0.2))                 # lazy set-up (maps, lighting, noise field) not counted
+        ref = reference_loop_seconds(3)[1]
+        out = []
         for band in ((0.15, 0.25), (0.25, 0.5), (0.5, 1.5)):
-            cpu, ref = [], []
-            for _ in range(frames):
-                truth = view(rng.uniform(*band), np.radians(rng.uniform(0, 30)), rng.uniform(0, 2 * np.pi))
-                t0 = time.thread_time()
-                cam.render(truth)
-                cpu.append(time.thread_time() - t0)
-                t0 = time.thread_time()
-                cv2.remap(image, mx, my, cv2.INTER_LINEAR)
-                ref.append(time.thread_time() - t0)
-            c, r = np.array(cpu) * 1e3, np.array(ref) * 1e3
-            rows.append(f"  camera frame 1360x1024, marker {band[0]:.2f}-{band[1]:.2f} m | CPU median {np.median(c):5.1f} ms, "
-                        f"p90 {np.percentile(c, 90):5.1f} ms | <= 15 ms | {'met' if np.median(c) <= 15 else 'MISSED'} | "
-                        f"reference remap {np.median(r):.1f} ms (frame = {np.median(c) / np.median(r):.1f} remaps) | "
-                        f"{conditions(steal)}")
+            truths = iter([view(rng.uniform(*band), np.radians(rng.uniform(0, 30)), rng.uniform(0, 2 * np.pi))
+                           for _ in range(frames)])
+            out.append(row(f"camera frame 1360x1024, marker {band[0]:.2f}-{band[1]:.2f} m, {beside}",
+                           timed(lambda: cam.render(next(truths)), frames), ref))
         still = view(0.3, 0.1, 0.2)
         cam.render(still)
-        t0 = time.thread_time()
-        for _ in range(frames):
-            cam.render(still)
-        c = (time.thread_time() - t0) / frames * 1e3
-        rows.append(f"  camera frame, arm at rest (same pose: noise only) | CPU {c:5.1f} ms | <= 15 ms | "
-                    f"{'met' if c <= 15 else 'MISSED'} | | {conditions(steal)}")
-    return ["  figure | measured | target | status | reference | conditions"] + rows
+        out.append(row(f"camera frame, arm at rest (noise only), {beside}", timed(lambda: cam.render(still), frames), ref))
+        out.append(row(f"camera frame, calibration board at 0.40 m, {beside}",
+                       timed(lambda: board_frame(0.40), max(frames // 2, 1)), ref))
+        ref_after = reference_loop_seconds(3)[1]
+        out.append(f"  reference loop CPU before / after the frames {beside}: {ref * 1e3:.0f} / {ref_after * 1e3:.0f} ms "
+                   f"(a drift: the machine's speed changed during the run) | {conditions(steal)}")
+        return out
+
+    cam.render(view(0.3, 0.1, 0.2))                     # lazy set-up (maps, lighting, noise field) not counted
+    rows = measure("alone")                             # the renderer's own cost, the machine as it is
+    with CpuLoad(2):                                    # and beside two CPU-bound processes (cache, memory)
+        rows += measure("beside 2 CPU-bound")
+    return ["  figure | measured | ratio to the reference loop | target | status | reference | conditions"] + rows
 
 
 def _spawn(args: list[str], ready: str, log: Path) -> subprocess.Popen:

@@ -41,13 +41,15 @@ class SensorModel:
                noise: bool = True) -> np.ndarray:
         """Relative irradiance (H, W) -> 8-bit frame. rng None or noise False: noiseless."""
         s = self.sensor
-        electrons = cv2.multiply(irradiance.astype(np.float32, copy=False), self._electrons_per_unit)
-        electrons += np.float32(s.dark_offset)
+        # the dark offset is not added to the frame (one full-frame pass less): it is in the
+        # shot noise's variance and in the ADC's offset below
+        signal = cv2.multiply(irradiance.astype(np.float32, copy=False), self._electrons_per_unit)
         if noise and rng is not None:
-            sd = cv2.sqrt(electrons + np.float32(s.read_noise ** 2))     # Poisson shot ~ Gaussian here
-            electrons += cv2.multiply(sd, self._noise_window(rng))
+            sd = cv2.sqrt(cv2.add(signal, s.dark_offset + s.read_noise ** 2))   # Poisson shot ~ Gaussian here
+            cv2.accumulateProduct(sd, self._noise_window(rng), signal)              # in place: signal += sd * n
         # 12-bit ADC (round, clip at 0 and full scale), then the top 8 bits: floor(rint(e / gain) / 2^k)
         # equals round(e / (gain 2^k) - (2^k - 1) / 2^(k+1)), in one saturating conversion
         # (electrons never go below 0 here: the black level is 10 read-noise sigmas above it)
         k = 2 ** (s.adc_bits - s.output_bits)
-        return cv2.convertScaleAbs(electrons, alpha=1.0 / (self.gain * k), beta=-(k - 1) / (2.0 * k))
+        scale = 1.0 / (self.gain * k)
+        return cv2.convertScaleAbs(signal, alpha=scale, beta=s.dark_offset * scale - (k - 1) / (2.0 * k))

@@ -31,6 +31,7 @@ import threading
 
 RENDER_PRIORITY = 1     # SCHED_FIFO beside nodes at SCHED_FIFO
 RENDER_NICE = 10        # while the child starts up beside nodes at normal priority
+RENDER_OPENCV_THREADS = 1
 
 
 class RenderProcess:
@@ -97,9 +98,14 @@ class RenderProcess:
 
 def _serve(conn, ring_name: str, scene, frame_rate: float, scene_seed: int, noise_seed: int | None,
            render_noise: bool, priority: int) -> None:
+    import cv2
     from spacearm.base.vision.frames import ShmFrameRing
     from spacearm.firmware_sim.camera.service import CameraService
 
+    # one OpenCV thread: a frame then costs the least CPU (its worker threads cost more than they
+    # save on this 2-core machine, bench_realtime.py render), and the cores are shared with the
+    # nodes and the controller
+    cv2.setNumThreads(RENDER_OPENCV_THREADS)
     ring = ShmFrameRing.attach(ring_name, shared_tracker=True)
     service = CameraService.from_files(None, ring, scene, frame_rate, scene_seed, noise_seed)
     service.render_noise = render_noise

@@ -9,10 +9,11 @@ Method (why: geometry must be far more accurate than the vision targets):
    so the projected-centre (ellipse) bias of real optics is reproduced.
    The background wall is drawn at 1x with anti-aliased edges (its geometry's accuracy does not
    matter; its dots' contrast does: they are the detector's distractors).
-3. Lens distortion: the wall by cv2.remap from the ideal canvas with a map built by
-   undistorting every output pixel (the forward Brown-Conrady model of the controller's camera
-   file); the foreground's outlines are distorted themselves (edges split into short pieces,
-   each vertex through the same model) and drawn straight into the output pixels.
+3. Lens distortion: every outline is distorted itself (each vertex through the forward
+   Brown-Conrady model of the controller's camera file, polygons cut to the ideal canvas first)
+   and drawn straight into the output pixels; the foreground's edges are split into short
+   pieces first so that they bend as real straight edges do (the wall's are not: they bend by
+   well under a pixel over a wall polygon at this lens's distortion).
 4. Defocus: thin-lens circle of confusion per depth layer (marker/ORU layer at the marker
    depth, wall layer at the wall depth) as a Gaussian of the disc's second moment (sigma =
    c/4) combined with the Airy diffraction blur; layers are composited with premultiplied
@@ -22,11 +23,16 @@ Method (why: geometry must be far more accurate than the vision targets):
    spot) and vignetting.
 
 Cost (why: the render competes with the nodes and the daemon for a 2-core machine; 70 ms a frame
-before): the wall's polygons are projected in one call, and only those in view drawn; the
-circles and the rod are supersampled each in its own small box laid over the rest (ORU faces,
-plate), which drops to 2x supersampling when it is large (near: then the circles are tens of px
-from its edges); the foreground needs no remap (its outlines are distorted) and is blurred only over the pixels it
-reaches; the illumination field and the maps are cached. bench/bench_realtime.py render prints the CPU per frame.
+two versions ago, 30-50 ms of process CPU before this one): the wall's polygons are projected in
+one call, only those in view drawn, and no full-frame remap is done (it cost more than the rest
+of a frame); a blur of more than HALF_RES_SIGMA px (the wall always, the foreground away from
+the focus) is done at half resolution (2x2 box down, Gaussian, bilinear up: symmetric and
+aligned, so no edge or centre moves); the circles and the rod are supersampled each in its own
+small box laid over the rest (ORU faces, plate), which drops to 2x supersampling when large and
+to none when it fills the frame out of focus; supersampled planes are drawn and box-averaged one
+16-bit channel at a time in 2x steps (OpenCV's fast path); the lighting is applied in the
+wall's one float conversion; the illumination field is cached and an unchanged pose gives the
+last image again. bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
 
@@ -41,14 +47,17 @@ from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import Optics
 from spacearm.firmware_sim.camera.scene import Scene
 
-SS = 4            # supersampling factor of the foreground
+SS = 4            # supersampling factor of the foreground (a power of 2)
 SHIFT = 8         # fractional bits for cv2 drawing
 ONE = 1 << SHIFT
 NEAR = 1e-3       # m, polygons with a vertex nearer than this are not drawn
 CIRCLE_SEGMENTS = 128
 MAX_BLUR = 20.0   # px, largest Gaussian sigma of a defocused layer
-BODY_BUDGET = 4_000_000  # supersampled px of the body's box above which it is drawn at 2x
+BODY_BUDGET = 1_000_000  # supersampled px of the body's box above which it is drawn at 2x (or 1x)
 SS_BIG_BOX = 150 * 150   # px: a measured shape's box above this is supersampled 2x, not SS
+BODY_HUGE_BOX = 500_000  # px: a body box this large and defocused by BODY_SHARP_SIGMA px or more
+BODY_SHARP_SIGMA = 1.0   # is drawn without supersampling
+HALF_RES_SIGMA = 1.05  # px: blurs from this sigma on may be done at half resolution (_blur)
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
 
 
@@ -63,29 +72,29 @@ class FlatLayer:
 
 @dataclass(frozen=True)
 class IdealCanvas:
-    """Undistorted pinhole canvas: ideal pixel = K * (x/z, y/z) + offset."""
+    """Undistorted pinhole canvas: ideal pixel = K * (x/z, y/z) + offset; it covers the ideal
+    image of every output pixel (outlines are cut to it before they are distorted)."""
     width: int
     height: int
     offset: tuple[int, int]
-    map_x: np.ndarray      # float32 (H, W): for each output pixel, ideal-canvas x
-    map_y: np.ndarray
 
 
 @lru_cache(maxsize=4)
 def _ideal_canvas(camera_key: tuple) -> IdealCanvas:
     camera = _CAMERAS[camera_key]
     w, h = camera.width, camera.height
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    xy = camera.undistort_pixels(np.stack([u.ravel(), v.ravel()], 1))
-    ideal = camera.normalized_to_pixels(xy, distort=False)
+    # the output's border is enough: the distortion maps the image's inside to the inside of
+    # its border's image (it is one to one over the field of view)
+    u, v = np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64)
+    border = np.vstack([np.c_[u, np.zeros(w)], np.c_[u, np.full(w, h - 1.0)],
+                        np.c_[np.zeros(h), v], np.c_[np.full(h, w - 1.0), v]])
+    ideal = camera.normalized_to_pixels(camera.undistort_pixels(border), distort=False)
     margin = 8
     ox = int(np.ceil(max(0.0, -ideal[:, 0].min()))) + margin
     oy = int(np.ceil(max(0.0, -ideal[:, 1].min()))) + margin
     W = int(np.ceil(ideal[:, 0].max())) + ox + margin
     H = int(np.ceil(ideal[:, 1].max())) + oy + margin
-    mx = (ideal[:, 0] + ox).reshape(h, w).astype(np.float32)
-    my = (ideal[:, 1] + oy).reshape(h, w).astype(np.float32)
-    return IdealCanvas(W, H, (ox, oy), mx, my)
+    return IdealCanvas(W, H, (ox, oy))
 
 
 _CAMERAS: dict[tuple, CameraModel] = {}
@@ -101,16 +110,31 @@ def transform(T: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ T[:3, :3].T + T[:3, 3]
 
 
+@lru_cache(maxsize=8)
+def _unit_circle(n: int) -> np.ndarray:
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([np.cos(t), np.sin(t), np.zeros(n)])
+
+
 def circle_points(centre: np.ndarray, radius: float, n: int = CIRCLE_SEGMENTS) -> np.ndarray:
     """Boundary of a circle in a z = const plane of the marker frame."""
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return np.column_stack([centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t),
-                            np.full(n, centre[2])])
+    return _unit_circle(n) * (radius, radius, 0.0) + centre
 
 
-def _blur(image: np.ndarray, sigma: float) -> np.ndarray:
-    """Gaussian blur; below 0.1 px a no-op."""
-    return cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
+def _blur(image: np.ndarray, sigma: float, may_halve: bool = False) -> np.ndarray:
+    """Gaussian blur; below 0.1 px a no-op. `may_halve`: from HALF_RES_SIGMA px on (an image of
+    even size) it blurs at half resolution, a quarter of the work: 2x2 box down (variance 1/3 px^2), Gaussian,
+    bilinear 2x up (variance 2/3 px^2 averaged over the phases); the middle Gaussian makes the
+    total variance sigma^2. Symmetric and aligned (pixel centres map to pixel centres), so it
+    moves no edge or centroid; its kernel is a little less Gaussian than the direct blur's."""
+    if sigma < 0.1:
+        return image
+    h, w = image.shape[:2]
+    if not may_halve or sigma < HALF_RES_SIGMA or h % 2 or w % 2 or min(h, w) < 32:
+        return cv2.GaussianBlur(image, (0, 0), sigma)
+    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
@@ -119,9 +143,36 @@ def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
     pieces = np.maximum(np.ceil(np.hypot(*(nxt - poly).T) / longest), 1).astype(int)
     if (pieces == 1).all():
         return poly
-    t = np.concatenate([np.arange(n) / n for n in pieces])
+    first = np.repeat(np.cumsum(pieces) - pieces, pieces)       # each piece's edge's first piece
+    t = (np.arange(pieces.sum()) - first) / np.repeat(pieces, pieces)
     start = np.repeat(poly, pieces, axis=0)
     return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
+
+
+def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int) -> tuple[np.ndarray, np.ndarray]:
+    """(albedo premultiplied, coverage) float32 planes of `size` (w, h) px from `origin` of
+    polygons in output pixels drawn in order at ss x ss supersampling (16 bit, so that the box
+    average keeps sub-1/255 edge coverage) and box-averaged (pixel integration). Each plane is
+    drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster on one channel than on two."""
+    w, h = size
+    allpts = np.round(((np.vstack([uv for uv, _ in polys]) - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32)
+    outlines = np.split(allpts.reshape(-1, 1, 2), np.cumsum([len(uv) for uv, _ in polys[:-1]]))
+    planes = []
+    if ss == 1:       # nothing to average: drawn straight into the float planes
+        for levels in ([min(value, 1.0) for _, value in polys], [1.0] * len(polys)):
+            buf = np.zeros((h, w), np.float32)
+            for pts, level in zip(outlines, levels):
+                cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
+            planes.append(buf)
+        return planes[0], planes[1]
+    for levels in ([int(round(min(value, 1.0) * 65535)) for _, value in polys], [65535] * len(polys)):
+        buf = np.zeros((h * ss, w * ss), np.uint16)
+        for pts, level in zip(outlines, levels):
+            cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
+        for _ in range(int(np.log2(ss))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
+            buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
+        planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
+    return planes[0], planes[1]
 
 
 def box_faces(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -160,9 +211,10 @@ class Renderer:
         return float(np.hypot(sigma_defocus, sigma_airy))
 
     # ------------------------------------------------------------------ layers
-    def _foreground(self, scene: Scene, cam_T_m: np.ndarray, reach: int):
+    def _foreground(self, scene: Scene, cam_T_m: np.ndarray, sigma: float):
         """Foreground in output pixels: (albedo*shade premultiplied, coverage) planes of the box
-        it covers grown by `reach` px (its blur's), and the box's top-left pixel."""
+        it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
+        reach = int(np.ceil(4 * sigma))
         m = scene.marker
         light = np.asarray(scene.lighting.sun, float)
         light /= np.linalg.norm(light)
@@ -221,17 +273,23 @@ class Renderer:
         y0 = int(np.clip(np.floor(allpts[:, 1].min()) - reach - 2, 0, h))
         x1 = int(np.clip(np.ceil(allpts[:, 0].max()) + reach + 3, 0, w))
         y1 = int(np.clip(np.ceil(allpts[:, 1].max()) + reach + 3, 0, h))
+        x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
+        if x0 < 0 or y0 < 0:
+            x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
+            y0, y1 = (y0, y1) if y0 >= 0 else (0, y1 - (y1 % 2))
         if x1 <= x0 or y1 <= y0:
             return None
         # The body (ORU faces, plate): supersampled SS x SS while its box is small (far away: the
-        # circles are then a few px from the plate's edge), 2x when large (near: tens of px).
-        ss = SS if (y1 - y0) * (x1 - x0) * SS * SS <= BODY_BUDGET else 2
-        buf = np.zeros(((y1 - y0) * ss, (x1 - x0) * ss, 2), np.uint16)
-        for uv, value in body:
-            pts = np.round(((uv - (x0, y0) + 0.5) * ss - 0.5) * ONE).astype(np.int32).reshape(-1, 1, 2)
-            cv2.fillPoly(buf, [pts], (int(round(min(value, 1.0) * 65535)), 65535), cv2.LINE_8, SHIFT)
-        planes = cv2.resize(buf, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
-        albedo, alpha = (plane.astype(np.float32) * np.float32(1.0 / 65535.0) for plane in cv2.split(planes))
+        # circles are then a few px from the plate's edge), 2x when large (nearer: tens of px),
+        # and not at all when it fills most of the frame out of focus (nearest: its edges are
+        # then over 50 px from the circles and their steps are smoothed by a blur of more than
+        # a pixel; the measured shapes keep their own supersampling).
+        area = (y1 - y0) * (x1 - x0)
+        if area * SS * SS <= BODY_BUDGET:
+            ss = SS
+        else:
+            ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
+        albedo, alpha = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
         for group in groups:      # the circles and the rod: supersampled, laid over the body
             self._lay_over(albedo, alpha, group, (x0, y0))
         return albedo, alpha, (x0, y0)
@@ -243,7 +301,7 @@ class Renderer:
         view the distortion polynomial folds back) and its edges split into pieces of at most
         EDGE_PX ideal px, so that the distorted outline follows the curved image of a straight
         edge. All vertices go through the camera model in two calls."""
-        cv, K = self.canvas, self.camera.K
+        cv = self.canvas
         flat = [(g, verts, value) for g, items in enumerate(groups) for verts, value in items]
         if not flat:
             return [[] for _ in groups]
@@ -270,21 +328,25 @@ class Renderer:
         out: list[list[tuple[np.ndarray, float]]] = [[] for _ in groups]
         if not kept:
             return out
-        uv = np.vstack([p for _, p, _ in kept])
-        xy = np.column_stack([(uv[:, 0] - cv.offset[0] - K[0, 2]) / K[0, 0],
-                              (uv[:, 1] - cv.offset[1] - K[1, 2]) / K[1, 1]])
-        pixels = self.camera.normalized_to_pixels(xy, distort=True)
+        pixels = self._distort_ideal(np.vstack([p for _, p, _ in kept]))
         start = 0
         for g, p, value in kept:
             out[g].append((pixels[start:start + len(p)], value))
             start += len(p)
         return out
 
+    def _distort_ideal(self, uv: np.ndarray) -> np.ndarray:
+        """Ideal-canvas pixels (inside the canvas) -> output pixels, lens distortion included."""
+        cv, K = self.canvas, self.camera.K
+        xy = np.column_stack([(uv[:, 0] - cv.offset[0] - K[0, 2]) / K[0, 0],
+                              (uv[:, 1] - cv.offset[1] - K[1, 2]) / K[1, 1]])
+        return self.camera.normalized_to_pixels(xy, distort=True)
+
     @staticmethod
     def _lay_over(albedo: np.ndarray, alpha: np.ndarray, group, origin: tuple[int, int]) -> None:
-        """Draw `group`'s polygons in their own box at SS x SS supersampling (16 bit, so that
-        the box average keeps sub-1/255 edge coverage), box-average (pixel integration) and
-        composite them over the planes (premultiplied: over = group + (1 - coverage) under)."""
+        """Draw `group`'s polygons in their own box supersampled, box-average (pixel
+        integration) and composite them over the planes (premultiplied: over = group +
+        (1 - coverage) under)."""
         h, w = albedo.shape
         pts_all = np.vstack([uv for uv, _ in group]) - origin
         gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w))
@@ -296,16 +358,8 @@ class Renderer:
         # a shape hundreds of px across integrates its outline's coverage over as many edge
         # pixels: 2x is then as exact for its centre as 4x is for a small one
         ss = SS if (gy1 - gy0) * (gx1 - gx0) <= SS_BIG_BOX else 2
-        buf = np.zeros(((gy1 - gy0) * ss, (gx1 - gx0) * ss, 2), np.uint16)
-        for uv, value in group:
-            # output px u -> supersampled (u + 0.5) * ss - 0.5, relative to the box
-            pts = ((uv - origin - (gx0, gy0) + 0.5) * ss - 0.5) * ONE
-            pts = np.round(pts).astype(np.int32).reshape(-1, 1, 2)
-            cv2.fillPoly(buf, [pts], (int(round(min(value, 1.0) * 65535)), 65535), cv2.LINE_8, SHIFT)
-        shapes = cv2.resize(buf, (gx1 - gx0, gy1 - gy0), interpolation=cv2.INTER_AREA).astype(np.float32)
-        shapes *= np.float32(1.0 / 65535.0)
-        cover = shapes[..., 1]
-        for plane, own in ((albedo, shapes[..., 0]), (alpha, cover)):
+        own_albedo, cover = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
+        for plane, own in ((albedo, own_albedo), (alpha, cover)):
             under = plane[gy0:gy1, gx0:gx1]
             under *= 1.0 - cover
             under += own
@@ -323,12 +377,17 @@ class Renderer:
         return cached
 
     def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> np.ndarray:
-        """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) float32.
-        Its small bright dots are the vision's distractors at a distance: drawn at full
-        resolution, as the detector's contrast ranking of them depends on it."""
+        """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) uint8, 255 =
+        albedo 1 in full light. Its small bright dots are the vision's distractors at a
+        distance: drawn at full resolution, as the detector's contrast ranking of them depends
+        on it. The polygons' vertices are distorted and drawn straight into the output pixels
+        (a full-frame remap cost more than the rest of the frame); their edges are not split:
+        the wall's straight edges bend by well under a pixel over a polygon at this lens's
+        distortion, and its geometry is not measured. The blur of a wall that far behind the
+        focus (sigma >= 1.1 px) is done at half resolution."""
         cv = self.canvas
         shade = self._wall_shade(scene)
-        img = np.full((cv.height, cv.width), int(scene.wall_albedo * 255 * shade), np.uint8)
+        img = np.full((self.camera.height, self.camera.width), int(scene.wall_albedo * 255 * shade), np.uint8)
         vertices, starts, albedos = self._clutter(scene)
         if len(vertices):
             pc = transform(cam_T_m, vertices)
@@ -336,13 +395,27 @@ class Renderer:
             uv = self._ideal(np.where(pc[:, 2:3] >= NEAR, pc, 1.0))
             lo, hi = np.minimum.reduceat(uv, starts), np.maximum.reduceat(uv, starts)
             visible = near & (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] <= cv.width) & (lo[:, 1] <= cv.height)
+            inside = (lo[:, 0] >= 0) & (lo[:, 1] >= 0) & (hi[:, 0] <= cv.width) & (hi[:, 1] <= cv.height)
             ends = np.append(starts[1:], len(uv))
-            pts_all = np.round(uv * 16).astype(np.int32)
+            box = np.array([[0, 0], [cv.width, 0], [cv.width, cv.height], [0, cv.height]], np.float32)
+            polys: list[np.ndarray] = []
+            values: list[int] = []
             for i in np.flatnonzero(visible):
-                cv2.fillPoly(img, [pts_all[starts[i]:ends[i]].reshape(-1, 1, 2)], int(albedos[i] * 255 * shade),
-                             cv2.LINE_AA, 4)
-        wall = cv2.remap(img, cv.map_x, cv.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return _blur(wall.astype(np.float32) * np.float32(1.0 / 255.0), sigma)
+                poly = uv[starts[i]:ends[i]]
+                if not inside[i]:        # beyond the canvas the distortion polynomial folds back
+                    area, cut = cv2.intersectConvexConvex(np.ascontiguousarray(poly, np.float32), box)
+                    if cut is None or area <= 0:
+                        continue
+                    poly = cut.reshape(-1, 2).astype(np.float64)
+                polys.append(poly)
+                values.append(int(albedos[i] * 255 * shade))
+            if polys:
+                pixels = np.round(self._distort_ideal(np.vstack(polys)) * 16).astype(np.int32)
+                start = 0
+                for poly, value in zip(polys, values):
+                    cv2.fillPoly(img, [pixels[start:start + len(poly)].reshape(-1, 1, 2)], value, cv2.LINE_AA, 4)
+                    start += len(poly)
+        return _blur(img, sigma, may_halve=True)
 
     @staticmethod
     def _wall_axis_depth(scene: Scene, cam_T_m: np.ndarray) -> float:
@@ -412,22 +485,27 @@ class Renderer:
         # smear anyway.
         sb = min(self.coc_sigma_px(max(wall_depth, 0.01)), MAX_BLUR)
         sf = min(self.coc_sigma_px(max(marker_depth, 0.01)), MAX_BLUR)
-        img = self._background(scene, camera_T_marker, sb)
+        # the lighting multiplies every layer: applied to each as it is laid down, the wall's
+        # 8-bit levels become irradiance in the same full-frame pass
+        light = self._illumination(scene)
+        img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
             sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-            shaded = flat.albedo * self._wall_shade(scene)     # parallel to the wall: lit alike
-            img = _blur(shaded, sl) + (1.0 - _blur(flat.alpha, sl)) * img
+            # parallel to the wall: lit alike; over the layers behind it in place
+            lit = cv2.multiply(_blur(flat.albedo, sl), light, scale=self._wall_shade(scene))
+            img *= cv2.subtract(1.0, _blur(flat.alpha, sl))
+            img += lit
         # OpenCV's Gaussian kernel for float images reaches 4 sigma
-        layer = (self._foreground(scene, camera_T_marker, int(np.ceil(4 * sf)))
+        layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
             albedo, alpha, (x0, y0) = layer
-            albedo, alpha = _blur(albedo, sf), _blur(alpha, sf)
-            region = img[y0:y0 + albedo.shape[0], x0:x0 + albedo.shape[1]]
+            albedo, alpha = _blur(albedo, sf, True), _blur(alpha, sf, True)
+            h, w = albedo.shape
+            region = img[y0:y0 + h, x0:x0 + w]
             np.subtract(1.0, alpha, out=alpha)
-            region *= alpha
-            region += albedo
-        img *= self._illumination(scene)
+            region *= alpha        # numpy, in place: OpenCV does not write into a view's rows
+            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w], dst=albedo)
         img.flags.writeable = False
         self._last = None if flat_layers else (key, img)
         return img
