@@ -130,6 +130,13 @@ class CanTrace:
             self._proc.wait()
             raise RuntimeError(f"CAN trace did not start: {line or 'no answer'}")
 
+    @property
+    def pid(self) -> int | None:
+        """The child process formatting the trace (for CPU accounting), None once stopped."""
+        if self._proc is not None:
+            return self._proc.pid if self._proc.poll() is None else None
+        return self._in_process[2].pid if self._in_process is not None else None
+
     def stop(self, timeout: float = 5.0) -> None:
         if self._in_process is not None:
             _close_tap(*self._in_process)

@@ -12,7 +12,9 @@ Record = FRAME (payload length, kind) + payload:
     LABELS    JSON [end_effector, state, mode, missing]: the /cycle strings, sent only when
               they change (a cycle record carries numbers only)
     CYCLE     CYCLE_HEAD (joints n, wrench w, t, sync, cycle, period_error, execution, io_wait)
-              then 5n + w doubles: q_cmd, dq_cmd, q, dq, tau, wrench
+              then 5n + w doubles: q_cmd, dq_cmd, q, dq, tau, wrench (packed by the daemon,
+              controller/daemon/recorder_process.py; this module stays free of numpy so the
+              writer process starts fast)
     MESSAGE   MESSAGE_HEAD (time, topic length), topic, JSON: any other message (/events, /stats)
     CLOSE     clean end: the writer adds the MCAP summary; a stream ending without it (the
               daemon died) leaves the file readable up to the last record, without a footer
@@ -22,9 +24,6 @@ from __future__ import annotations
 import json
 import struct
 from typing import Any, Iterator
-
-import numpy as np
-
 FRAME = struct.Struct("<IB")
 CYCLE_HEAD = struct.Struct("<HHdqqddd")
 MESSAGE_HEAD = struct.Struct("<dH")
@@ -44,15 +43,6 @@ def setup_record(metadata: dict[str, str], time_origin_ns: int, flush_interval: 
 
 def labels_record(end_effector: str, state: str, mode: str, missing: tuple[str, ...]) -> bytes:
     return _frame(LABELS, json.dumps([end_effector, state, mode, list(missing)], separators=_COMPACT).encode())
-
-
-def cycle_record(t: float, sync: int, cycle: int, period_error: float, execution: float, io_wait: float,
-                 q_cmd: np.ndarray, dq_cmd: list[float], q: np.ndarray, dq: np.ndarray, tau: np.ndarray,
-                 wrench: np.ndarray) -> bytes:
-    """One cycle's numbers, fixed size for a given arm (~400 bytes for 6 joints)."""
-    values = np.concatenate((q_cmd, dq_cmd, q, dq, tau, wrench), dtype=np.float64)
-    head = CYCLE_HEAD.pack(len(q), len(wrench), t, sync, cycle, period_error, execution, io_wait)
-    return FRAME.pack(len(head) + 8 * len(values), CYCLE) + head + values.tobytes()
 
 
 def message_record(topic: str, time_s: float, message: dict[str, Any]) -> bytes:

@@ -53,6 +53,10 @@ class StreamTap(can.Listener):
         self._thread = threading.Thread(target=self._run, name="can-trace-stream", daemon=True)
         self._thread.start()
 
+    @property
+    def pid(self) -> int:
+        return self._child.pid
+
     # hot path: the sender's thread (list.append is atomic under the GIL)
     def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
         self._frames.append((timestamp, can_id, data, rx_state.line if self.line_channels else None))
