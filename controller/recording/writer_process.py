@@ -13,6 +13,7 @@ readable, saying the writer did not close it.
 from __future__ import annotations
 
 import os
+import select
 import signal
 import sys
 import time
@@ -33,8 +34,10 @@ def run(path: str, stream_fd: int) -> int:
     written_at_flush, flushed_at = 0, time.monotonic()
     closed = False
     while not closed:
-        data = os.read(stream_fd, READ_SIZE)
-        if not data:
+        # wait at most FLUSH_WALL for records: a paused run's last records still reach the disk
+        if not select.select([stream_fd], [], [], FLUSH_WALL)[0]:
+            data = b""
+        elif not (data := os.read(stream_fd, READ_SIZE)):
             break                      # the daemon is gone without CLOSE
         for kind, topic, time_s, message in decoder.feed(data):
             if kind == SETUP:
@@ -50,7 +53,7 @@ def run(path: str, stream_fd: int) -> int:
                 and time.monotonic() - flushed_at >= FLUSH_WALL:
             recorder.flush()
             written_at_flush, flushed_at = recorder.messages_written, time.monotonic()
-        if not closed:
+        if data and not closed:
             time.sleep(BATCH_PERIOD)
     if recorder is not None:
         if closed:
