@@ -56,8 +56,9 @@ class DaemonOptions:
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
     can_trace_limit: TraceLimit = field(default_factory=TraceLimit)   # raw CAN trace: size per file, files kept
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
-    # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
-    # (base/runtime/priority.py); None leaves the interpreter's setting alone.
+    # The cycle shares the GIL with the CANopen receive thread, the API and the CAN trace's
+    # batching thread (base/runtime/priority.py; the recording is serialised in its own
+    # process, recorder_process.py); None leaves the interpreter's setting alone.
     gil_switch_interval: float | None = GIL_SWITCH_INTERVAL
     # SCHED_FIFO priority of the daemon's threads with the real-time clock (base/runtime/priority.py);
     # 0: normal scheduling. `spacearm daemon` asks for 50.
@@ -147,7 +148,7 @@ class Daemon:
             sys.setswitchinterval(self.options.gil_switch_interval)
         problem = None
         if self.options.clock == "realtime" and self.options.rt_priority:
-            # Before any thread starts, so the receive, API and recorder threads inherit it and
+            # Before any thread starts, so the receive, API and CAN trace threads inherit it and
             # never hold the GIL at a lower priority than the waiting cycle.
             problem = use_fifo(self.options.rt_priority)
         self.scheduling = problem or describe()

@@ -56,7 +56,8 @@ class RecorderProcess:
         self._labels: tuple | None = None
         self._writer = subprocess.Popen(
             [sys.executable, "-m", "spacearm.controller.recording.writer_process", str(self.path)],
-            stdin=subprocess.PIPE, env=module_env(), preexec_fn=use_normal)
+            # its own session: a kill of the daemon's process group leaves it to drain the pipe
+            stdin=subprocess.PIPE, env=module_env(), preexec_fn=use_normal, start_new_session=True)
         self._fd: int | None = self._writer.stdin.fileno()
         try:
             fcntl.fcntl(self._fd, F_SETPIPE_SZ, PIPE_SIZE)

@@ -49,7 +49,7 @@ class StreamTap(can.Listener):
         self._child = subprocess.Popen(
             [sys.executable, "-m", "spacearm.controller.recording.trace_stream", str(path), str(max_bytes),
              str(keep), channel, *(line_channels or ())],
-            stdin=subprocess.PIPE, env=module_env(), preexec_fn=use_normal)
+            stdin=subprocess.PIPE, env=module_env(), preexec_fn=use_normal, start_new_session=True)
         self._thread = threading.Thread(target=self._run, name="can-trace-stream", daemon=True)
         self._thread.start()
 
