@@ -43,7 +43,12 @@ class StreamTap(can.Listener):
     def __init__(self, path: Path, max_bytes: int, keep: int, channel: str,
                  line_channels: tuple[str, str] | None = None):
         self.line_channels = line_channels
-        self._frames: list = []
+        self._frames: list = []          # one list for the tap's life: the hot path binds its append
+        append = self._frames.append
+        if line_channels is None:
+            self.on_frame = lambda can_id, data, timestamp: append((timestamp, can_id, data))
+        else:
+            self.on_frame = lambda can_id, data, timestamp: append((timestamp, can_id, data, rx_state.line))
         self._stop = threading.Event()
         self._send_lock = threading.Lock()
         self._child = subprocess.Popen(
@@ -57,9 +62,8 @@ class StreamTap(can.Listener):
     def pid(self) -> int:
         return self._child.pid
 
-    # hot path: the sender's thread (list.append is atomic under the GIL)
-    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        self._frames.append((timestamp, can_id, data, rx_state.line if self.line_channels else None))
+    # hot path: on_frame (bound in __init__) runs in the sender's thread, one list append
+    # (atomic under the GIL): (timestamp, can_id, data[, line])
 
     def on_message_received(self, msg: can.Message) -> None:
         line = getattr(rx_state, "line", None) if self.line_channels else None
@@ -72,7 +76,8 @@ class StreamTap(can.Listener):
 
     def _send(self) -> None:
         with self._send_lock:
-            frames, self._frames = self._frames, []
+            frames = self._frames[:]       # frames appended meanwhile stay for the next batch
+            del self._frames[:len(frames)]
             if not frames or self._child.stdin.closed:
                 return
             batch = marshal.dumps(frames)
@@ -104,8 +109,8 @@ class StreamTap(can.Listener):
 def _deliver(buffered, frames: list) -> None:
     """Feed a batch to the child's BufferedTap as the bus would have: each frame on its line."""
     for frame in frames:
-        rx_state.line = frame[3]
-        if len(frame) == 4:
+        rx_state.line = frame[3] if len(frame) > 3 else None
+        if len(frame) <= 4:
             buffered.on_frame(frame[1], frame[2], frame[0])
         else:
             timestamp, can_id, data, _, dlc, channel, flags = frame
