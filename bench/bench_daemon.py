@@ -6,7 +6,8 @@ lockstep speed-up over real time, CPU per cycle, and the daemon's memory over th
     .venv/bin/python bench/bench_daemon.py --lockstep-only      # the cost of one cycle (~1 min)
 
 The simulator runs as its own process (loopback) or in-process (virtual); the daemon runs
-in this process, recording every cycle (MCAP and raw CAN trace, as `spacearm daemon` does);
+in this process, recording every cycle (MCAP and raw CAN trace, as `spacearm daemon` does,
+serialised by helper processes whose CPU is shown beside the share);
 the polling console is a separate process using the real command API. Percentiles cover
 every cycle of the run. --cpu-load N runs N CPU-bound processes beside the real-time runs
 (hil_tests/cpu_load.py). Every row names the machine load and the host's CPU steal of its run:
@@ -15,7 +16,7 @@ on 2 shared cores wall-clock figures follow the load, CPU per cycle much less so
 CPU per cycle (lockstep, in-process bus, where both sides share one thread): "simulator" is
 the thread CPU of handling one SYNC (device code, plant step, TPDOs out and decoded by the
 master); "daemon" is the rest of the cycle's thread CPU (supervision, modes, RPDOs, recording
-hand-off). Threads beside the cycle (recorder, CAN trace, timers) are in the process figure.
+hand-off). Threads beside the cycle (CAN trace batching, timers) are in the process figure.
 
 Lockstep cycle costs are judged in reference units (bench/reference_work.py, timed in this
 run): process CPU per cycle as a share of a pure-Python loop's CPU, and as a multiple of the
@@ -36,6 +37,16 @@ time grouped by part, `bench/profile_lockstep.py --record`; 2026-11-27, load 11.
 | controller: daemon cycle, modes, planning, supervision | 6 % |
 | simulator: SYNC routing | 4 % |
 | controller: recording hand-off (the recorder thread's serialisation is off this thread) | 0.1 % |
+
+Recording (issue 35): the cycle packs one fixed-size record and writes it to a pipe; MCAP is
+serialised by a writer process, the in-process bus's CAN trace is formatted by another
+(controller/daemon/recorder_process.py, controller/recording/trace_stream.py). Before that the
+recorder and trace threads cost 0.20 + 0.14 ms of this process's CPU per cycle and ~25 % of
+the cycle (2026-11-27, load 2.6). What stays in this process, by cProfile (2026-11-27, load 8.2,
+`profile_lockstep.py --record`): the hand-off and the trace tap's per-frame append 1.3 % of the
+cycle's thread CPU, plus the bus delivering each frame to one more receiver (in "bus").
+The on/off share is the median of alternating pairs of runs: on 2 shared cores a single pair
+swings by +-15 %.
 
 Both halves are per-frame and per-object Python: no single part is the floor, which is why the
 cycle costs ~160x its PDO floor.
