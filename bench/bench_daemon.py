@@ -3,7 +3,7 @@ lockstep speed-up over real time, CPU per cycle, and the daemon's memory over th
 
     .venv/bin/python bench/bench_daemon.py [--duration 600] [--duration-4ms 120]
                                            [--transport loopback|virtual] [--cpu-load 2]
-    .venv/bin/python bench/bench_daemon.py --lockstep-only      # the cost of one cycle (~1 min)
+    .venv/bin/python bench/bench_daemon.py --lockstep-only      # the cost of one cycle (~3 min)
 
 The simulator runs as its own process (loopback) or in-process (virtual); the daemon runs
 in this process, recording every cycle (MCAP and raw CAN trace, as `spacearm daemon` does,
