@@ -44,9 +44,11 @@ serialised by a writer process, the in-process bus's CAN trace is formatted by a
 recorder and trace threads cost 0.20 + 0.14 ms of this process's CPU per cycle and ~25 % of
 the cycle (2026-11-27, load 2.6). What stays in this process, by cProfile (2026-11-27, load 8.2,
 `profile_lockstep.py --record`): the hand-off and the trace tap's per-frame append 1.3 % of the
-cycle's thread CPU, plus the bus delivering each frame to one more receiver (in "bus").
-The on/off share is the median of alternating pairs of runs: on 2 shared cores a single pair
-swings by +-15 %.
+cycle's thread CPU, plus the bus delivering each frame to one more receiver (in "bus"; +1.1 us
+per frame on its own, ~40 frames a cycle: ~2 %) and the trace's batching thread (0.02 ms per
+cycle): ~4 % in all. The on/off share is the median of alternating pairs of runs; on 2 cores
+shared with other work a single pair swings by -20..+38 % (2026-11-27, load 3-11: medians of
+6.5, 10.6, 11.7 and 18.2 % in four runs), more than what is measured.
 
 Both halves are per-frame and per-object Python: no single part is the floor, which is why the
 cycle costs ~160x its PDO floor.
@@ -235,11 +237,11 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
                 cycle_cpu.append(time.thread_time() - started)
                 return snapshot
             daemon.cycle_once = timed_cycle
+        helpers = daemon.recorder.helper_pids() if daemon.recorder is not None else []
+        settle(helpers)       # before the clocks start: its sleeps are nobody's cycle
         wall = time.monotonic()
         own_cpu = time.process_time()
         sim_process_cpu = process_cpu(sim_pid) if sim is None else 0.0
-        helpers = daemon.recorder.helper_pids() if daemon.recorder is not None else []
-        settle(helpers)
         helper_cpu = helpers_cpu(helpers)
         timer_cpu = threads_cpu(WALL_CLOCK_THREADS)
         trace_thread_cpu = threads_cpu(RECORDING_THREADS)
