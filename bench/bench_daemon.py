@@ -47,8 +47,9 @@ the cycle (2026-11-27, load 2.6). What stays in this process, by cProfile (2026-
 cycle's thread CPU, plus the bus delivering each frame to one more receiver (in "bus"; +1.1 us
 per frame on its own, ~40 frames a cycle: ~2 %) and the trace's batching thread (0.02 ms per
 cycle): ~4 % in all. The on/off share is the median of alternating pairs of runs; on 2 cores
-shared with other work a single pair swings by -20..+38 % (2026-11-27, load 3-11: medians of
-6.5, 10.6, 11.7 and 18.2 % in four runs), more than what is measured.
+shared with other work a single pair swings by -20..+38 %, more than what is measured
+(2026-11-27, load 3.0-3.8: median 10.6 %, pairs 1, 8, 24, 13 %; the helper processes meanwhile
+use ~0.28 ms of CPU per cycle on the other core).
 
 Both halves are per-frame and per-object Python: no single part is the floor, which is why the
 cycle costs ~160x its PDO floor.
