@@ -27,7 +27,7 @@ from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limi
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.daemon.node_timing import NodeTiming
 from spacearm.controller.cycle import Mode
-from spacearm.controller.daemon.recorder_thread import RecorderThread
+from spacearm.controller.daemon.recorder_process import RecorderProcess
 from spacearm.controller.recording.can_trace import TraceLimit
 from spacearm.controller.cycle import Command, Finding, FindingCode, MachineState, Measurement
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
@@ -56,8 +56,9 @@ class DaemonOptions:
     camera: str | None = None                    # shared-memory frame ring of the camera (spacearm sim --camera)
     can_trace_limit: TraceLimit = field(default_factory=TraceLimit)   # raw CAN trace: size per file, files kept
     thresholds: CycleThresholds = field(default_factory=CycleThresholds)
-    # The cycle shares the GIL with the CANopen receive thread, the API and the recorder
-    # (base/runtime/priority.py); None leaves the interpreter's setting alone.
+    # The cycle shares the GIL with the CANopen receive thread, the API and the CAN trace's
+    # batching thread (base/runtime/priority.py; the recording is serialised in its own
+    # process, recorder_process.py); None leaves the interpreter's setting alone.
     gil_switch_interval: float | None = GIL_SWITCH_INTERVAL
     # SCHED_FIFO priority of the daemon's threads with the real-time clock (base/runtime/priority.py);
     # 0: normal scheduling. `spacearm daemon` asks for 50.
@@ -120,7 +121,7 @@ class Daemon:
         # flow) build their sub-modes through the same registry.
         self.mode_factories: dict[str, Callable[..., Mode]] = {}
         self.vision = None                           # VisionWorker once a camera is attached
-        self.recorder: RecorderThread | None = None
+        self.recorder: RecorderProcess | None = None
         self.snapshot: Snapshot | None = None
         self.event_log: list[dict[str, Any]] = []    # last events, for status
         self.scheduling = "normal"   # the cycle's policy, or why the one asked for was refused
@@ -147,7 +148,7 @@ class Daemon:
             sys.setswitchinterval(self.options.gil_switch_interval)
         problem = None
         if self.options.clock == "realtime" and self.options.rt_priority:
-            # Before any thread starts, so the receive, API and recorder threads inherit it and
+            # Before any thread starts, so the receive, API and CAN trace threads inherit it and
             # never hold the GIL at a lower priority than the waiting cycle.
             problem = use_fifo(self.options.rt_priority)
         self.scheduling = problem or describe()
@@ -271,14 +272,9 @@ class Daemon:
         if recorder is None:
             return
         m = s.measurement
-        recorder.put("/cycle", s.tick.time, {
-            "t": s.tick.time, "sync": m.sync_counter, "cycle": s.tick.cycle,
-            "q_cmd": s.command.q.tolist(), "dq_cmd": self._velocity_offsets_sent(),
-            "q": m.q.tolist(), "dq": m.dq.tolist(), "tau": m.tau.tolist(),
-            "wrench": m.wrench.tolist(), "end_effector": m.end_effector, "state": s.state,
-            "mode": s.mode or "", "period_error": s.tick.period_error, "execution": execution,
-            "io_wait": self.hardware.last_io_wait,
-            **({"missing": list(m.missing)} if m.missing else {})})
+        recorder.put_cycle(s.tick.time, m.sync_counter, s.tick.cycle, s.command.q, self._velocity_offsets_sent(),
+                           m.q, m.dq, m.tau, m.wrench, m.end_effector, s.state, s.mode or "",
+                           s.tick.period_error, execution, self.hardware.last_io_wait, m.missing)
         for event in events:
             recorder.put("/events", event.time, event.as_dict())
         if s.tick.time - self._last_stats_time >= 1.0:
@@ -300,7 +296,7 @@ class Daemon:
         if path is None:
             stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%SZ")
             path = str(Path(self.options.record_dir or "runs") / f"{stamp}.mcap")
-        new = RecorderThread(Path(path), {
+        new = RecorderProcess(Path(path), {
             "arm": str(self.options.arm), "bus": self.options.bus, "clock": self.options.clock,
             "period": repr(self.options.period), "joints": ",".join(self.model.joint_names)},
             bus_spec=self.options.bus, time_origin_ns=self._time_origin_ns(),

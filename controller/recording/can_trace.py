@@ -5,7 +5,8 @@ Receiving and formatting ~1000 frames/s in Python inside the daemon's process ta
 from the control cycle (measured on 2 cores: worst cycle write 16 ms with the tap in the
 daemon, 6 ms without), so on a bus another process can open (loopback hub, SocketCAN) the
 tap runs as a child process, lowered to niceness 10 once it is on the bus. python-can's virtual bus exists
-only inside one process, so there the tap stays a thread. On a redundant pair the tap hears
+only inside one process, so there the tap is an inline listener that only collects frames; a
+child formats them in batches (trace_stream.py). On a redundant pair the tap hears
 both lines and each frame's channel column is its line's name (`arm-a`, `vcan1`;
 base/transport/redundant.py `line_channel`), as `candump -l any` writes it.
 
@@ -32,6 +33,7 @@ import can
 from spacearm.base.runtime.child_process import module_env, readline_within
 from spacearm.base.runtime.priority import use_normal
 from spacearm.base.transport import open_bus, parse_bus_spec
+from spacearm.controller.recording.trace_stream import StreamTap
 
 READY = "can_trace: ready"
 FLUSH_INTERVAL = 1.0   # s
@@ -114,7 +116,7 @@ class CanTrace:
         self._proc: subprocess.Popen | None = None
         self._in_process: tuple[can.BusABC, can.Notifier, RotatingTraceWriter] | None = None
         if parse_bus_spec(bus_spec)[0] == "virtual":
-            self._in_process = _open_tap(bus_spec, self.path, limit)
+            self._in_process = _open_stream_tap(bus_spec, self.path, limit)
             return
         self._proc = subprocess.Popen(
             [sys.executable, "-m", "spacearm.controller.recording.can_trace", bus_spec, str(self.path),
@@ -127,6 +129,13 @@ class CanTrace:
             self._proc.kill()
             self._proc.wait()
             raise RuntimeError(f"CAN trace did not start: {line or 'no answer'}")
+
+    @property
+    def pid(self) -> int | None:
+        """The child process formatting the trace (for CPU accounting), None once stopped."""
+        if self._proc is not None:
+            return self._proc.pid if self._proc.poll() is None else None
+        return self._in_process[2].pid if self._in_process is not None else None
 
     def stop(self, timeout: float = 5.0) -> None:
         if self._in_process is not None:
@@ -152,6 +161,14 @@ def _open_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC,
         tap.add_inline_listener(buffered)
         return tap, can.Notifier(tap, [buffered], timeout=0.1), buffered
     return tap, can.Notifier(tap, [writer], timeout=0.1), writer
+
+
+def _open_stream_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.BusABC, can.Notifier, StreamTap]:
+    """The in-process bus's tap: frames collected here, formatted by a child (trace_stream.py)."""
+    tap = open_bus(bus_spec)
+    stream = StreamTap(path, limit.max_bytes, limit.keep, str(tap.channel_id), getattr(tap, "line_channels", None))
+    tap.add_inline_listener(stream)
+    return tap, can.Notifier(tap, [stream], timeout=0.1), stream
 
 
 def _close_tap(tap: can.BusABC, notifier: can.Notifier, writer: RotatingTraceWriter) -> None:

@@ -100,3 +100,17 @@ def test_the_child_tap_runs_below_the_cycle_once_it_is_on_the_bus(tmp_path):
     finally:
         trace.stop()
         hub.stop()
+
+
+def test_in_process_bus_trace_is_formatted_in_another_process(tmp_path, monkeypatch):
+    """The virtual bus's tap only collects frames here (issue 35): no candump line is formatted
+    in this process, and the child's trace still has every frame in order."""
+    from spacearm.base.transport import tap as tap_module
+
+    def not_here(*args, **kwargs):
+        raise AssertionError("CAN trace formatted in the daemon's process")
+    monkeypatch.setattr(tap_module.BufferedTap, "flush", not_here)
+    monkeypatch.setattr(can.CanutilsLogWriter, "on_message_received", not_here)
+    logged = _send_and_trace(f"virtual:trace-{time.monotonic_ns()}", tmp_path / "run.can.log")
+    assert [(m.arbitration_id, bytes(m.data)) for m in logged] == [(m.arbitration_id, bytes(m.data))
+                                                                   for m in _frames(200)]
