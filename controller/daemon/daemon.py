@@ -300,7 +300,7 @@ class Daemon:
             "arm": str(self.options.arm), "bus": self.options.bus, "clock": self.options.clock,
             "period": repr(self.options.period), "joints": ",".join(self.model.joint_names)},
             bus_spec=self.options.bus, time_origin_ns=self._time_origin_ns(),
-            can_trace_limit=self.options.can_trace_limit)
+            can_trace_limit=self.options.can_trace_limit, lossless=self.options.clock == "lockstep")
         old, self.recorder = self.recorder, new
         if old is not None:
             old.close(grace=2 * self.options.period)

@@ -30,6 +30,7 @@ from spacearm.controller.recording.can_trace import CanTrace, TraceLimit
 PIPE_SIZE = 1 << 20          # bytes the pipe buffers while the writer is busy (Linux F_SETPIPE_SZ)
 F_SETPIPE_SZ = 1031
 LARGE_RECORD_WAIT = 1.0      # s a record above PIPE_BUF (a huge event) may wait for room
+LOSSLESS_WAIT = 30.0         # s a lockstep cycle waits for room before the writer counts as stuck
 CLOSE_WAIT = 30.0            # s for the writer to finish the file
 
 
@@ -44,9 +45,13 @@ class RecordingInfo:
 class RecorderProcess:
     def __init__(self, path: Path, metadata: dict[str, str], bus_spec: str | None,
                  time_origin_ns: int = 0, can_trace_limit: TraceLimit = TraceLimit(),
-                 flush_interval: float = 1.0):
+                 flush_interval: float = 1.0, lossless: bool = False):
         """`time_origin_ns`: UTC wall clock of controller time 0 (the MCAP log times);
-        `can_trace_limit`: size per raw CAN trace file and how many rotated files to keep."""
+        `can_trace_limit`: size per raw CAN trace file and how many rotated files to keep;
+        `lossless`: a full pipe makes the cycle wait instead of dropping the record (lockstep:
+        nobody waits for the cycle's wall time, and a niced writer starved by a busy machine
+        must not leave gaps that depend on the load)."""
+        self._lossless = lossless
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.can_log = self.path.with_suffix(".can.log")
@@ -106,26 +111,29 @@ class RecorderProcess:
             if self._fd is None:
                 return False
             try:
+                if self._lossless:
+                    return self._write_all(record, LOSSLESS_WAIT)
                 if len(record) <= select.PIPE_BUF and not wait:
                     return os.write(self._fd, record) == len(record)   # atomic: all or nothing
-                return self._write_all(record)
+                return self._write_all(record, LARGE_RECORD_WAIT)
             except BlockingIOError:
                 return False
             except OSError as exc:
                 if exc.errno == errno.EPIPE:      # the writer died: the file ends at its last flush
+                    self._lossless = False         # or is stuck: the cycle stops waiting for it
                     return False
                 raise
 
-    def _write_all(self, record: bytes) -> bool:
-        """A record larger than the pipe's atomic size: written in parts, waiting for room a
-        bounded time (under the lock, so no other record interleaves)."""
-        view, deadline = memoryview(record), time.monotonic() + LARGE_RECORD_WAIT
+    def _write_all(self, record: bytes, wait: float) -> bool:
+        """A record written whole, in parts if the pipe has less room, waiting for room at
+        most `wait` s (under the lock, so no other record interleaves)."""
+        view, deadline = memoryview(record), time.monotonic() + wait
         while view:
             try:
                 view = view[os.write(self._fd, view):]
             except BlockingIOError:
                 if time.monotonic() > deadline:
-                    raise OSError(errno.EPIPE, "recording writer too slow for a large record") from None
+                    raise OSError(errno.EPIPE, "recording writer too slow to take a record") from None
                 time.sleep(0.001)
         return True
 

@@ -135,3 +135,33 @@ def test_killed_daemon_leaves_every_cycle_it_handed_over(tmp_path):
     assert not recording.complete and recording.problem
     cycles = [m.data["cycle"] for m in recording.topic("/cycle")]
     assert cycles == list(range(len(cycles))) and len(cycles) > last_reported
+
+
+def test_a_lockstep_recording_waits_for_a_starved_writer_instead_of_dropping(tmp_path):
+    """Lockstep (lossless): a writer that gets no CPU (SIGSTOP stands in for a busy machine and
+    its niceness) fills the pipe; the cycle then waits for room, and every record reaches the
+    file once the writer runs again. A real-time recorder drops and counts instead."""
+    import threading
+    path = tmp_path / "lockstep.mcap"
+    recorder = RecorderProcess(path, {}, bus_spec=None, lossless=True)
+    writer = recorder.helper_pids()[0]
+    os.kill(writer, signal.SIGSTOP)
+    n = 4000                      # ~1.6 MB of records: more than the 1 MiB pipe holds
+    done = threading.Event()
+
+    def cycles():
+        for k in range(n):
+            _put(recorder, _cycle(k))
+        done.set()
+    feeder = threading.Thread(target=cycles, daemon=True)
+    feeder.start()
+    try:
+        assert not done.wait(1.5), "the cycle did not wait for the stopped writer"
+    finally:
+        os.kill(writer, signal.SIGCONT)
+    assert done.wait(60)
+    info = recorder.close()
+    assert (info.cycles, info.dropped) == (n, 0)
+    recording = read_recording(path)
+    assert recording.complete, recording.problem
+    assert [m.data["cycle"] for m in recording.topic("/cycle")] == list(range(n))
