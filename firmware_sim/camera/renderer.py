@@ -435,11 +435,16 @@ class Renderer:
         sun /= np.linalg.norm(sun)
         return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, sun[2])
 
-    def _illumination(self, scene: Scene) -> np.ndarray:
-        key = id(scene.lighting)
+    def _illumination(self, scene: Scene, gain: np.ndarray | None = None) -> np.ndarray:
+        """The lighting field, times `gain` (the sensor's electrons per unit irradiance) if given."""
+        key = (id(scene.lighting), None if gain is None else id(gain))
         cached = self._lighting_cache.get(key)
         if cached is not None:
             return cached
+        if gain is not None:
+            field = cv2.multiply(self._illumination(scene), gain)
+            self._lighting_cache[key] = field
+            return field
         L = scene.lighting
         w, h = self.camera.width, self.camera.height
         u = (np.arange(w, dtype=np.float32) / w)[None, :]
@@ -453,7 +458,7 @@ class Renderer:
         r2 = (uu ** 2 + vv ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
         field = field * (1 - self.optics.vignetting * r2)
         field = (L.level * field / field.max()).astype(np.float32)
-        self._lighting_cache = {key: field}
+        self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
@@ -469,14 +474,21 @@ class Renderer:
 
     # ------------------------------------------------------------------ public
     def render(self, scene: Scene, camera_T_marker: np.ndarray,
-               flat_layers: Sequence[FlatLayer] = ()) -> np.ndarray:
-        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose, read-only.
+               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None) -> np.ndarray:
+        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose.
+        `gain` (H, W): a per-pixel factor (the sensor's electrons per unit irradiance) applied in
+        the lighting's pass, which every layer gets anyway: the sensor's own full-frame multiply
+        is then saved (SensorModel.expose_electrons).
         `flat_layers` (e.g. a calibration board) lie in front of the wall and behind the
-        marker/ORU; none (the default) renders the marker scene alone. The same pose and scene
-        as the last call (an arm at rest) give the last image again: only the noise moves."""
+        marker/ORU; none (the default) renders the marker scene alone. A new pose's image is the
+        caller's to overwrite (the sensor adds its noise in place); the same pose and scene as
+        the last call (an arm at rest) render once more and from then on give that image again,
+        read-only: only the noise moves."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
-               id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo)
-        if not flat_layers and self._last is not None and self._last[0] == key:
+               id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
+               None if gain is None else id(gain))
+        again = not flat_layers and self._last is not None and self._last[0] == key
+        if again and self._last[1] is not None:
             return self._last[1]
         marker_depth = float(camera_T_marker[2, 3])
         wall_depth = self._wall_axis_depth(scene, camera_T_marker)
@@ -487,7 +499,7 @@ class Renderer:
         sf = min(self.coc_sigma_px(max(marker_depth, 0.01)), MAX_BLUR)
         # the lighting multiplies every layer: applied to each as it is laid down, the wall's
         # 8-bit levels become irradiance in the same full-frame pass
-        light = self._illumination(scene)
+        light = self._illumination(scene, gain)
         img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
             sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
@@ -506,6 +518,7 @@ class Renderer:
             np.subtract(1.0, alpha, out=alpha)
             region *= alpha        # numpy, in place: OpenCV does not write into a view's rows
             region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w], dst=albedo)
-        img.flags.writeable = False
-        self._last = None if flat_layers else (key, img)
+        if again:             # at rest: kept, read-only, from the second frame of the pose on
+            img.flags.writeable = False
+        self._last = None if flat_layers else (key, img if again else None)
         return img
