@@ -58,7 +58,8 @@ class SensorModel:
         if noise and rng is not None:
             if not signal.flags.writeable:
                 signal = signal.copy()
-            sd = cv2.sqrt(cv2.add(signal, s.dark_offset + s.read_noise ** 2))   # Poisson shot ~ Gaussian here
+            # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
+            sd = cv2.sqrt(np.add(signal, np.float32(s.dark_offset + s.read_noise ** 2), dtype=np.float32))
             cv2.accumulateProduct(sd, self._noise_window(rng), signal)              # in place: signal += sd * n
         # 12-bit ADC (round, clip at 0 and full scale), then the top 8 bits: floor(rint(e / gain) / 2^k)
         # equals round(e / (gain 2^k) - (2^k - 1) / 2^(k+1)), in one saturating conversion

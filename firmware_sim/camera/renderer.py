@@ -150,23 +150,25 @@ def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
 
 
 def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int) -> tuple[np.ndarray, np.ndarray]:
-    """(albedo premultiplied, coverage) float32 planes of `size` (w, h) px from `origin` of
-    polygons in output pixels drawn in order at ss x ss supersampling (16 bit, so that the box
-    average keeps sub-1/255 edge coverage) and box-averaged (pixel integration). Each plane is
-    drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster on one channel than on two."""
+    """(albedo premultiplied, transparency = 1 - coverage) float32 planes of `size` (w, h) px
+    from `origin` of polygons in output pixels drawn in order at ss x ss supersampling (16 bit,
+    so that the box average keeps sub-1/255 edge coverage) and box-averaged (pixel
+    integration). Each plane is drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster
+    on one channel than on two. Transparency, not coverage: compositing multiplies by it
+    (no 1 - coverage pass), and blurring it is blurring the coverage (the kernel sums to 1)."""
     w, h = size
     allpts = np.round(((np.vstack([uv for uv, _ in polys]) - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32)
     outlines = np.split(allpts.reshape(-1, 1, 2), np.cumsum([len(uv) for uv, _ in polys[:-1]]))
     planes = []
     if ss == 1:       # nothing to average: drawn straight into the float planes
-        for levels in ([min(value, 1.0) for _, value in polys], [1.0] * len(polys)):
-            buf = np.zeros((h, w), np.float32)
+        for levels, clear in (([min(value, 1.0) for _, value in polys], 0.0), ([0.0] * len(polys), 1.0)):
+            buf = np.zeros((h, w), np.float32) if clear == 0.0 else np.ones((h, w), np.float32)
             for pts, level in zip(outlines, levels):
                 cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
             planes.append(buf)
         return planes[0], planes[1]
-    for levels in ([int(round(min(value, 1.0) * 65535)) for _, value in polys], [65535] * len(polys)):
-        buf = np.zeros((h * ss, w * ss), np.uint16)
+    for levels, clear in (([int(round(min(value, 1.0) * 65535)) for _, value in polys], 0), ([0] * len(polys), 65535)):
+        buf = np.zeros((h * ss, w * ss), np.uint16) if clear == 0 else np.full((h * ss, w * ss), clear, np.uint16)
         for pts, level in zip(outlines, levels):
             cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
         for _ in range(int(np.log2(ss))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
@@ -212,7 +214,7 @@ class Renderer:
 
     # ------------------------------------------------------------------ layers
     def _foreground(self, scene: Scene, cam_T_m: np.ndarray, sigma: float):
-        """Foreground in output pixels: (albedo*shade premultiplied, coverage) planes of the box
+        """Foreground in output pixels: (albedo*shade premultiplied, transparency) planes of the box
         it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
         reach = int(np.ceil(4 * sigma))
         m = scene.marker
@@ -289,10 +291,10 @@ class Renderer:
             ss = SS
         else:
             ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
-        albedo, alpha = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
+        albedo, clear = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
         for group in groups:      # the circles and the rod: supersampled, laid over the body
-            self._lay_over(albedo, alpha, group, (x0, y0))
-        return albedo, alpha, (x0, y0)
+            self._lay_over(albedo, clear, group, (x0, y0))
+        return albedo, clear, (x0, y0)
 
     def _project(self, groups, cam_T_m: np.ndarray) -> list[list[tuple[np.ndarray, float]]]:
         """Groups of marker-frame polygons (all convex) -> the same groups of output-pixel
@@ -343,10 +345,10 @@ class Renderer:
         return self.camera.normalized_to_pixels(xy, distort=True)
 
     @staticmethod
-    def _lay_over(albedo: np.ndarray, alpha: np.ndarray, group, origin: tuple[int, int]) -> None:
+    def _lay_over(albedo: np.ndarray, clear: np.ndarray, group, origin: tuple[int, int]) -> None:
         """Draw `group`'s polygons in their own box supersampled, box-average (pixel
         integration) and composite them over the planes (premultiplied: over = group +
-        (1 - coverage) under)."""
+        transparency under; transparencies multiply)."""
         h, w = albedo.shape
         pts_all = np.vstack([uv for uv, _ in group]) - origin
         gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w))
@@ -358,11 +360,11 @@ class Renderer:
         # a shape hundreds of px across integrates its outline's coverage over as many edge
         # pixels: 2x is then as exact for its centre as 4x is for a small one
         ss = SS if (gy1 - gy0) * (gx1 - gx0) <= SS_BIG_BOX else 2
-        own_albedo, cover = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
-        for plane, own in ((albedo, own_albedo), (alpha, cover)):
-            under = plane[gy0:gy1, gx0:gx1]
-            under *= 1.0 - cover
-            under += own
+        own_albedo, own_clear = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
+        under = albedo[gy0:gy1, gx0:gx1]
+        under *= own_clear
+        under += own_albedo
+        clear[gy0:gy1, gx0:gx1] *= own_clear
 
     def _clutter(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The wall's polygons as one vertex array, each polygon's first vertex, albedos."""
@@ -511,13 +513,12 @@ class Renderer:
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
-            albedo, alpha, (x0, y0) = layer
-            albedo, alpha = _blur(albedo, sf, True), _blur(alpha, sf, True)
+            albedo, clear, (x0, y0) = layer
+            albedo, clear = _blur(albedo, sf, True), _blur(clear, sf, True)
             h, w = albedo.shape
             region = img[y0:y0 + h, x0:x0 + w]
-            np.subtract(1.0, alpha, out=alpha)
-            region *= alpha        # numpy, in place: OpenCV does not write into a view's rows
-            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w], dst=albedo)
+            cv2.multiply(region, clear, dst=region)        # OpenCV writes into the view, in place
+            cv2.accumulateProduct(albedo, light[y0:y0 + h, x0:x0 + w], region)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
         self._last = None if flat_layers else (key, img if again else None)
