@@ -130,11 +130,20 @@ def _blur(image: np.ndarray, sigma: float, may_halve: bool = False) -> np.ndarra
     if sigma < 0.1:
         return image
     h, w = image.shape[:2]
-    if not may_halve or sigma < HALF_RES_SIGMA or h % 2 or w % 2 or min(h, w) < 32:
+    if not may_halve or not _may_halve(sigma, (w, h)):
         return cv2.GaussianBlur(image, (0, 0), sigma)
-    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    return _blur_halved(cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA), sigma)
+
+
+def _may_halve(sigma: float, size: tuple[int, int]) -> bool:
+    """Whether _blur blurs an image of `size` (w, h) by `sigma` px at half resolution."""
+    return sigma >= HALF_RES_SIGMA and size[0] % 2 == 0 and size[1] % 2 == 0 and min(size) >= 32
+
+
+def _blur_halved(small: np.ndarray, sigma: float) -> np.ndarray:
+    """The rest of _blur's half-resolution blur from the 2x2 box average `small` on."""
     small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
-    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
 def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
@@ -149,18 +158,21 @@ def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
     return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
 
 
-def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int) -> tuple[np.ndarray, np.ndarray]:
+def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int,
+                  down: int = 1) -> tuple[np.ndarray, np.ndarray]:
     """(albedo premultiplied, transparency = 1 - coverage) float32 planes of `size` (w, h) px
     from `origin` of polygons in output pixels drawn in order at ss x ss supersampling (16 bit,
     so that the box average keeps sub-1/255 edge coverage) and box-averaged (pixel
     integration). Each plane is drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster
     on one channel than on two. Transparency, not coverage: compositing multiplies by it
-    (no 1 - coverage pass), and blurring it is blurring the coverage (the kernel sums to 1)."""
+    (no 1 - coverage pass), and blurring it is blurring the coverage (the kernel sums to 1).
+    `down` 2: the planes are box-averaged once more, to half resolution ((h/2, w/2), `size`
+    even), in the 16-bit steps: what _blur would do first to them, for a quarter of the float work."""
     w, h = size
     allpts = np.round(((np.vstack([uv for uv, _ in polys]) - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32)
     outlines = np.split(allpts.reshape(-1, 1, 2), np.cumsum([len(uv) for uv, _ in polys[:-1]]))
     planes = []
-    if ss == 1:       # nothing to average: drawn straight into the float planes
+    if ss == 1 and down == 1:       # nothing to average: drawn straight into the float planes
         for levels, clear in (([min(value, 1.0) for _, value in polys], 0.0), ([0.0] * len(polys), 1.0)):
             buf = np.zeros((h, w), np.float32) if clear == 0.0 else np.ones((h, w), np.float32)
             for pts, level in zip(outlines, levels):
@@ -171,7 +183,7 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
         buf = np.zeros((h * ss, w * ss), np.uint16) if clear == 0 else np.full((h * ss, w * ss), clear, np.uint16)
         for pts, level in zip(outlines, levels):
             cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
-        for _ in range(int(np.log2(ss))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
+        for _ in range(int(np.log2(ss * down))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
             buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
         planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
     return planes[0], planes[1]
@@ -291,10 +303,12 @@ class Renderer:
             ss = SS
         else:
             ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
-        albedo, clear = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
+        # blurred at half resolution anyway (_blur): drawn and laid over straight at it
+        down = 2 if _may_halve(sigma, (x1 - x0, y1 - y0)) else 1
+        albedo, clear = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss, down)
         for group in groups:      # the circles and the rod: supersampled, laid over the body
-            self._lay_over(albedo, clear, group, (x0, y0))
-        return albedo, clear, (x0, y0)
+            self._lay_over(albedo, clear, group, (x0, y0), down)
+        return albedo, clear, (x0, y0), down
 
     def _project(self, groups, cam_T_m: np.ndarray) -> list[list[tuple[np.ndarray, float]]]:
         """Groups of marker-frame polygons (all convex) -> the same groups of output-pixel
@@ -345,26 +359,29 @@ class Renderer:
         return self.camera.normalized_to_pixels(xy, distort=True)
 
     @staticmethod
-    def _lay_over(albedo: np.ndarray, clear: np.ndarray, group, origin: tuple[int, int]) -> None:
+    def _lay_over(albedo: np.ndarray, clear: np.ndarray, group, origin: tuple[int, int], down: int = 1) -> None:
         """Draw `group`'s polygons in their own box supersampled, box-average (pixel
         integration) and composite them over the planes (premultiplied: over = group +
-        transparency under; transparencies multiply)."""
-        h, w = albedo.shape
+        transparency under; transparencies multiply). `down` 2: the planes are at half
+        resolution (the group's box is then on even output pixels)."""
+        h, w = albedo.shape[0] * down, albedo.shape[1] * down
         pts_all = np.vstack([uv for uv, _ in group]) - origin
-        gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w))
-        gy0 = int(np.clip(np.floor(pts_all[:, 1].min()) - 2, 0, h))
-        gx1 = int(np.clip(np.ceil(pts_all[:, 0].max()) + 3, 0, w))
-        gy1 = int(np.clip(np.ceil(pts_all[:, 1].max()) + 3, 0, h))
+        gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w)) // down * down
+        gy0 = int(np.clip(np.floor(pts_all[:, 1].min()) - 2, 0, h)) // down * down
+        gx1 = -(-int(np.clip(np.ceil(pts_all[:, 0].max()) + 3, 0, w)) // down) * down
+        gy1 = -(-int(np.clip(np.ceil(pts_all[:, 1].max()) + 3, 0, h)) // down) * down
         if gx1 <= gx0 or gy1 <= gy0:
             return
         # a shape hundreds of px across integrates its outline's coverage over as many edge
         # pixels: 2x is then as exact for its centre as 4x is for a small one
         ss = SS if (gy1 - gy0) * (gx1 - gx0) <= SS_BIG_BOX else 2
-        own_albedo, own_clear = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
-        under = albedo[gy0:gy1, gx0:gx1]
+        own_albedo, own_clear = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0),
+                                              ss, down)
+        box = np.s_[gy0 // down:gy1 // down, gx0 // down:gx1 // down]
+        under = albedo[box]
         under *= own_clear
         under += own_albedo
-        clear[gy0:gy1, gx0:gx1] *= own_clear
+        clear[box] *= own_clear
 
     def _clutter(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The wall's polygons as one vertex array, each polygon's first vertex, albedos."""
@@ -463,6 +480,24 @@ class Renderer:
         self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
 
+    def _lay_flat(self, img: np.ndarray, flat: FlatLayer, light: np.ndarray, shade: float) -> None:
+        """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
+        over the box its coverage reaches grown by its blur's reach (OpenCV's Gaussian kernel
+        for float images reaches 4 sigma; beyond the coverage the planes are 0, so the box's
+        border reflects zeros as the whole frame's blur would see them)."""
+        sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
+        x, y, w, h = cv2.boundingRect((flat.alpha > 0).view(np.uint8))
+        if w == 0 or h == 0:
+            return
+        reach = int(np.ceil(4 * sigma)) + 2
+        H, W = img.shape
+        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+        box = np.s_[y0:y1, x0:x1]
+        lit = cv2.multiply(_blur(flat.albedo[box], sigma), light[box], scale=shade)
+        region = img[box]
+        cv2.multiply(region, cv2.subtract(1.0, _blur(flat.alpha[box], sigma)), dst=region)
+        cv2.add(region, lit, dst=region)
+
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
         or behind the camera: a grazing marker would cover the whole 4x canvas for nothing."""
@@ -504,17 +539,14 @@ class Renderer:
         light = self._illumination(scene, gain)
         img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
-            sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-            # parallel to the wall: lit alike; over the layers behind it in place
-            lit = cv2.multiply(_blur(flat.albedo, sl), light, scale=self._wall_shade(scene))
-            img *= cv2.subtract(1.0, _blur(flat.alpha, sl))
-            img += lit
+            self._lay_flat(img, flat, light, self._wall_shade(scene))
         # OpenCV's Gaussian kernel for float images reaches 4 sigma
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
-            albedo, clear, (x0, y0) = layer
-            albedo, clear = _blur(albedo, sf, True), _blur(clear, sf, True)
+            albedo, clear, (x0, y0), down = layer
+            albedo, clear = ((_blur_halved(albedo, sf), _blur_halved(clear, sf)) if down == 2
+                             else (_blur(albedo, sf), _blur(clear, sf)))
             h, w = albedo.shape
             region = img[y0:y0 + h, x0:x0 + w]
             cv2.multiply(region, clear, dst=region)        # OpenCV writes into the view, in place
