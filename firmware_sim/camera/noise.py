@@ -59,7 +59,8 @@ class SensorModel:
             if not signal.flags.writeable:
                 signal = signal.copy()
             # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
-            sd = cv2.sqrt(np.add(signal, np.float32(s.dark_offset + s.read_noise ** 2), dtype=np.float32))
+            sd = np.add(signal, np.float32(s.dark_offset + s.read_noise ** 2), dtype=np.float32)
+            cv2.sqrt(sd, dst=sd)                                                    # in place: no new array
             cv2.accumulateProduct(sd, self._noise_window(rng), signal)              # in place: signal += sd * n
         # 12-bit ADC (round, clip at 0 and full scale), then the top 8 bits: floor(rint(e / gain) / 2^k)
         # equals round(e / (gain 2^k) - (2^k - 1) / 2^(k+1)), in one saturating conversion
