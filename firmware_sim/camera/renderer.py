@@ -146,16 +146,24 @@ def _blur_halved(small: np.ndarray, sigma: float) -> np.ndarray:
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
-    """The closed polygon with every edge cut into pieces no longer than `longest`."""
-    nxt = np.roll(poly, -1, axis=0)
+def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
+    """The closed polygons with every edge cut into pieces no longer than `longest`: all their
+    vertices in one array and each polygon's vertex count (one NumPy pass for all of them:
+    per polygon, the calls' overhead was most of the time)."""
+    sizes = np.array([len(p) for p in polys])
+    poly = np.vstack(polys)
+    ends = np.cumsum(sizes)
+    nxt_index = np.arange(len(poly)) + 1
+    nxt_index[ends - 1] = ends - sizes                           # each polygon's last vertex -> its first
+    nxt = poly[nxt_index]
     pieces = np.maximum(np.ceil(np.hypot(*(nxt - poly).T) / longest), 1).astype(int)
     if (pieces == 1).all():
-        return poly
+        return poly, sizes
     first = np.repeat(np.cumsum(pieces) - pieces, pieces)       # each piece's edge's first piece
     t = (np.arange(pieces.sum()) - first) / np.repeat(pieces, pieces)
     start = np.repeat(poly, pieces, axis=0)
-    return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
+    owner = np.repeat(np.arange(len(polys)), sizes)
+    return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None], np.bincount(owner, pieces, len(polys)).astype(int)
 
 
 def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int,
@@ -340,15 +348,16 @@ class Renderer:
                 if cut is None or area <= 0:
                     continue
                 uv = cut.reshape(-1, 2).astype(np.float64)
-            kept.append((g, _split_edges(uv, EDGE_PX), value))
+            kept.append((g, uv, value))
         out: list[list[tuple[np.ndarray, float]]] = [[] for _ in groups]
         if not kept:
             return out
-        pixels = self._distort_ideal(np.vstack([p for _, p, _ in kept]))
+        split, sizes = _split_edges([uv for _, uv, _ in kept], EDGE_PX)
+        pixels = self._distort_ideal(split)
         start = 0
-        for g, p, value in kept:
-            out[g].append((pixels[start:start + len(p)], value))
-            start += len(p)
+        for (g, _, value), n in zip(kept, sizes.tolist()):
+            out[g].append((pixels[start:start + n], value))
+            start += n
         return out
 
     def _distort_ideal(self, uv: np.ndarray) -> np.ndarray:
