@@ -197,6 +197,15 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
     return planes[0], planes[1]
 
 
+def _pixel_box(points: np.ndarray, margin: int, size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1): the pixels `points` (N, 2) touch grown by `margin` px (and one more
+    on the far side), within an image of `size` (w, h)."""
+    (lx, ly), (hx, hy) = np.floor(points.min(0)).tolist(), np.ceil(points.max(0)).tolist()
+    w, h = size
+    return (int(min(max(lx - margin, 0), w)), int(min(max(ly - margin, 0), h)),
+            int(min(max(hx + margin + 1, 0), w)), int(min(max(hy + margin + 1, 0), h)))
+
+
 def box_faces(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
     """Six (4x3 vertices, outward normal) faces of an axis-aligned box in the marker frame."""
     x0, y0, z0 = lo
@@ -250,7 +259,7 @@ class Renderer:
 
         def add_box(lo, hi, albedo):
             for verts, n in box_faces(np.asarray(lo), np.asarray(hi)):
-                if (verts.mean(0) - cam_pos_m) @ n < 0:            # front-facing
+                if (verts[0] - cam_pos_m) @ n < 0:     # front-facing (any vertex of the face tells)
                     items.append((verts, albedo * shade(n)))
 
         if scene.oru is not None:
@@ -266,7 +275,7 @@ class Renderer:
                 for verts, n in box_faces(lo, hi):
                     verts_m = verts @ R.T + c
                     n_m = R @ n
-                    if (verts_m.mean(0) - cam_pos_m) @ n_m < 0:
+                    if (verts_m[0] - cam_pos_m) @ n_m < 0:
                         items.append((verts_m, m.oru_albedo * shade(n_m)))
         up = np.array([0.0, 0.0, 1.0])
         px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
@@ -291,10 +300,7 @@ class Renderer:
             return None
         allpts = np.vstack([uv for group in [body, *groups] for uv, _ in group])
         w, h = self.camera.width, self.camera.height
-        x0 = int(np.clip(np.floor(allpts[:, 0].min()) - reach - 2, 0, w))
-        y0 = int(np.clip(np.floor(allpts[:, 1].min()) - reach - 2, 0, h))
-        x1 = int(np.clip(np.ceil(allpts[:, 0].max()) + reach + 3, 0, w))
-        y1 = int(np.clip(np.ceil(allpts[:, 1].max()) + reach + 3, 0, h))
+        x0, y0, x1, y1 = _pixel_box(allpts, reach + 2, (w, h))
         x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
         if x0 < 0 or y0 < 0:
             x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
@@ -375,10 +381,8 @@ class Renderer:
         resolution (the group's box is then on even output pixels)."""
         h, w = albedo.shape[0] * down, albedo.shape[1] * down
         pts_all = np.vstack([uv for uv, _ in group]) - origin
-        gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w)) // down * down
-        gy0 = int(np.clip(np.floor(pts_all[:, 1].min()) - 2, 0, h)) // down * down
-        gx1 = -(-int(np.clip(np.ceil(pts_all[:, 0].max()) + 3, 0, w)) // down) * down
-        gy1 = -(-int(np.clip(np.ceil(pts_all[:, 1].max()) + 3, 0, h)) // down) * down
+        gx0, gy0, gx1, gy1 = _pixel_box(pts_all, 2, (w, h))
+        gx0, gy0, gx1, gy1 = gx0 // down * down, gy0 // down * down, -(-gx1 // down) * down, -(-gy1 // down) * down
         if gx1 <= gx0 or gy1 <= gy0:
             return
         # a shape hundreds of px across integrates its outline's coverage over as many edge
