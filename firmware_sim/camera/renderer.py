@@ -32,7 +32,11 @@ small box laid over the rest (ORU faces, plate), which drops to 2x supersampling
 to none when it fills the frame out of focus; supersampled planes are drawn and box-averaged one
 16-bit channel at a time in 2x steps (OpenCV's fast path); the lighting is applied in the
 wall's one float conversion; the illumination field is cached and an unchanged pose gives the
-last image again. bench/bench_realtime.py render prints the CPU per frame.
+last image again. Since: the sensor's electrons-per-unit field rides in the lighting's pass
+(render(gain=...)), the foreground is transparency planes composited in place, drawn straight
+at half resolution when its blur halves it, a flat layer (the board) is blurred only over its
+box, and the measured shapes' small groups share one supersampled box.
+bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
 
