@@ -250,8 +250,9 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
         albedo, alpha = board_layer(camera_T_board, board, c.K, c.dist, (c.width, c.height))
-        irradiance = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance)])
-        cam.sensor.expose(irradiance, cam.rng)
+        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance)],
+                                        gain=cam.sensor.electrons_per_unit)      # as the camera service does
+        cam.sensor.expose_electrons(electrons, cam.rng)
 
     def row(name: str, cpu: list[float], ref: float) -> str:
         c = np.array(cpu) * 1e3

@@ -32,7 +32,11 @@ small box laid over the rest (ORU faces, plate), which drops to 2x supersampling
 to none when it fills the frame out of focus; supersampled planes are drawn and box-averaged one
 16-bit channel at a time in 2x steps (OpenCV's fast path); the lighting is applied in the
 wall's one float conversion; the illumination field is cached and an unchanged pose gives the
-last image again. bench/bench_realtime.py render prints the CPU per frame.
+last image again. Since: the sensor's electrons-per-unit field rides in the lighting's pass
+(render(gain=...)), the foreground is transparency planes composited in place, drawn straight
+at half resolution when its blur halves it, a flat layer (the board) is blurred only over its
+box, and the measured shapes' small groups share one supersampled box.
+bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
 
@@ -130,49 +134,101 @@ def _blur(image: np.ndarray, sigma: float, may_halve: bool = False) -> np.ndarra
     if sigma < 0.1:
         return image
     h, w = image.shape[:2]
-    if not may_halve or sigma < HALF_RES_SIGMA or h % 2 or w % 2 or min(h, w) < 32:
+    if not may_halve or not _may_halve(sigma, (w, h)):
         return cv2.GaussianBlur(image, (0, 0), sigma)
-    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA)
+    return _blur_halved(cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA), sigma)
+
+
+def _may_halve(sigma: float, size: tuple[int, int]) -> bool:
+    """Whether _blur blurs an image of `size` (w, h) by `sigma` px at half resolution."""
+    return sigma >= HALF_RES_SIGMA and size[0] % 2 == 0 and size[1] % 2 == 0 and min(size) >= 32
+
+
+def _blur_halved(small: np.ndarray, sigma: float) -> np.ndarray:
+    """The rest of _blur's half-resolution blur from the 2x2 box average `small` on."""
     small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
-    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+    return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _split_edges(poly: np.ndarray, longest: float) -> np.ndarray:
-    """The closed polygon with every edge cut into pieces no longer than `longest`."""
-    nxt = np.roll(poly, -1, axis=0)
+def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
+    """The closed polygons with every edge cut into pieces no longer than `longest`: all their
+    vertices in one array and each polygon's vertex count (one NumPy pass for all of them:
+    per polygon, the calls' overhead was most of the time)."""
+    sizes = np.array([len(p) for p in polys])
+    poly = np.vstack(polys)
+    ends = np.cumsum(sizes)
+    nxt_index = np.arange(len(poly)) + 1
+    nxt_index[ends - 1] = ends - sizes                           # each polygon's last vertex -> its first
+    nxt = poly[nxt_index]
     pieces = np.maximum(np.ceil(np.hypot(*(nxt - poly).T) / longest), 1).astype(int)
     if (pieces == 1).all():
-        return poly
+        return poly, sizes
     first = np.repeat(np.cumsum(pieces) - pieces, pieces)       # each piece's edge's first piece
     t = (np.arange(pieces.sum()) - first) / np.repeat(pieces, pieces)
     start = np.repeat(poly, pieces, axis=0)
-    return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None]
+    owner = np.repeat(np.arange(len(polys)), sizes)
+    return start + (np.repeat(nxt, pieces, axis=0) - start) * t[:, None], np.bincount(owner, pieces, len(polys)).astype(int)
 
 
-def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int) -> tuple[np.ndarray, np.ndarray]:
-    """(albedo premultiplied, coverage) float32 planes of `size` (w, h) px from `origin` of
-    polygons in output pixels drawn in order at ss x ss supersampling (16 bit, so that the box
-    average keeps sub-1/255 edge coverage) and box-averaged (pixel integration). Each plane is
-    drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster on one channel than on two."""
+def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int,
+                  down: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(albedo premultiplied, transparency = 1 - coverage) float32 planes of `size` (w, h) px
+    from `origin` of polygons in output pixels drawn in order at ss x ss supersampling (16 bit,
+    so that the box average keeps sub-1/255 edge coverage) and box-averaged (pixel
+    integration). Each plane is drawn and averaged alone: OpenCV's INTER_AREA is ~10x faster
+    on one channel than on two. Transparency, not coverage: compositing multiplies by it
+    (no 1 - coverage pass), and blurring it is blurring the coverage (the kernel sums to 1).
+    `down` 2: the planes are box-averaged once more, to half resolution ((h/2, w/2), `size`
+    even), in the 16-bit steps: what _blur would do first to them, for a quarter of the float work."""
     w, h = size
     allpts = np.round(((np.vstack([uv for uv, _ in polys]) - origin + 0.5) * ss - 0.5) * ONE).astype(np.int32)
     outlines = np.split(allpts.reshape(-1, 1, 2), np.cumsum([len(uv) for uv, _ in polys[:-1]]))
     planes = []
-    if ss == 1:       # nothing to average: drawn straight into the float planes
-        for levels in ([min(value, 1.0) for _, value in polys], [1.0] * len(polys)):
-            buf = np.zeros((h, w), np.float32)
+    if ss == 1 and down == 1:       # nothing to average: drawn straight into the float planes
+        for levels, clear in (([min(value, 1.0) for _, value in polys], 0.0), ([0.0] * len(polys), 1.0)):
+            buf = np.zeros((h, w), np.float32) if clear == 0.0 else np.ones((h, w), np.float32)
             for pts, level in zip(outlines, levels):
                 cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
             planes.append(buf)
         return planes[0], planes[1]
-    for levels in ([int(round(min(value, 1.0) * 65535)) for _, value in polys], [65535] * len(polys)):
-        buf = np.zeros((h * ss, w * ss), np.uint16)
+    for levels, clear in (([int(round(min(value, 1.0) * 65535)) for _, value in polys], 0), ([0] * len(polys), 65535)):
+        buf = np.zeros((h * ss, w * ss), np.uint16) if clear == 0 else np.full((h * ss, w * ss), clear, np.uint16)
         for pts, level in zip(outlines, levels):
             cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
-        for _ in range(int(np.log2(ss))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
+        for _ in range(int(np.log2(ss * down))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
             buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
         planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
     return planes[0], planes[1]
+
+
+def _pixel_box(points: np.ndarray, margin: int, size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1): the pixels `points` (N, 2) touch grown by `margin` px (and one more
+    on the far side), within an image of `size` (w, h)."""
+    (lx, ly), (hx, hy) = np.floor(points.min(0)).tolist(), np.ceil(points.max(0)).tolist()
+    w, h = size
+    return (int(min(max(lx - margin, 0), w)), int(min(max(ly - margin, 0), h)),
+            int(min(max(hx + margin + 1, 0), w)), int(min(max(hy + margin + 1, 0), h)))
+
+
+def _merged(groups: list[list]) -> list[list]:
+    """The measured shapes' groups, neighbours joined while their joint box stays within
+    SS_BIG_BOX (so they keep SS x SS supersampling): far away the four small boxes cost more
+    in per-call overhead than their pixels. Joining changes nothing drawn: the shapes do not
+    overlap one another, so one layer over the body is each laid over it in turn."""
+    out: list[list] = []
+    box = None
+    for group in groups:
+        pts = np.vstack([uv for uv, _ in group])
+        lo, hi = pts.min(0) - 3, pts.max(0) + 3
+        if box is not None:
+            jlo, jhi = np.minimum(box[0], lo), np.maximum(box[1], hi)
+            if np.prod(jhi - jlo) <= SS_BIG_BOX:
+                out[-1] = out[-1] + group
+                box = (jlo, jhi)
+                continue
+        out.append(list(group))
+        box = (lo, hi)
+    return out
 
 
 def box_faces(lo: np.ndarray, hi: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -212,7 +268,7 @@ class Renderer:
 
     # ------------------------------------------------------------------ layers
     def _foreground(self, scene: Scene, cam_T_m: np.ndarray, sigma: float):
-        """Foreground in output pixels: (albedo*shade premultiplied, coverage) planes of the box
+        """Foreground in output pixels: (albedo*shade premultiplied, transparency) planes of the box
         it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
         reach = int(np.ceil(4 * sigma))
         m = scene.marker
@@ -228,7 +284,7 @@ class Renderer:
 
         def add_box(lo, hi, albedo):
             for verts, n in box_faces(np.asarray(lo), np.asarray(hi)):
-                if (verts.mean(0) - cam_pos_m) @ n < 0:            # front-facing
+                if (verts[0] - cam_pos_m) @ n < 0:     # front-facing (any vertex of the face tells)
                     items.append((verts, albedo * shade(n)))
 
         if scene.oru is not None:
@@ -244,7 +300,7 @@ class Renderer:
                 for verts, n in box_faces(lo, hi):
                     verts_m = verts @ R.T + c
                     n_m = R @ n
-                    if (verts_m.mean(0) - cam_pos_m) @ n_m < 0:
+                    if (verts_m[0] - cam_pos_m) @ n_m < 0:
                         items.append((verts_m, m.oru_albedo * shade(n_m)))
         up = np.array([0.0, 0.0, 1.0])
         px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
@@ -269,10 +325,7 @@ class Renderer:
             return None
         allpts = np.vstack([uv for group in [body, *groups] for uv, _ in group])
         w, h = self.camera.width, self.camera.height
-        x0 = int(np.clip(np.floor(allpts[:, 0].min()) - reach - 2, 0, w))
-        y0 = int(np.clip(np.floor(allpts[:, 1].min()) - reach - 2, 0, h))
-        x1 = int(np.clip(np.ceil(allpts[:, 0].max()) + reach + 3, 0, w))
-        y1 = int(np.clip(np.ceil(allpts[:, 1].max()) + reach + 3, 0, h))
+        x0, y0, x1, y1 = _pixel_box(allpts, reach + 2, (w, h))
         x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
         if x0 < 0 or y0 < 0:
             x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
@@ -289,10 +342,12 @@ class Renderer:
             ss = SS
         else:
             ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
-        albedo, alpha = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss)
-        for group in groups:      # the circles and the rod: supersampled, laid over the body
-            self._lay_over(albedo, alpha, group, (x0, y0))
-        return albedo, alpha, (x0, y0)
+        # blurred at half resolution anyway (_blur): drawn and laid over straight at it
+        down = 2 if _may_halve(sigma, (x1 - x0, y1 - y0)) else 1
+        albedo, clear = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss, down)
+        for group in _merged(groups):      # the circles and the rod: supersampled, laid over the body
+            self._lay_over(albedo, clear, group, (x0, y0), down)
+        return albedo, clear, (x0, y0), down
 
     def _project(self, groups, cam_T_m: np.ndarray) -> list[list[tuple[np.ndarray, float]]]:
         """Groups of marker-frame polygons (all convex) -> the same groups of output-pixel
@@ -324,15 +379,16 @@ class Renderer:
                 if cut is None or area <= 0:
                     continue
                 uv = cut.reshape(-1, 2).astype(np.float64)
-            kept.append((g, _split_edges(uv, EDGE_PX), value))
+            kept.append((g, uv, value))
         out: list[list[tuple[np.ndarray, float]]] = [[] for _ in groups]
         if not kept:
             return out
-        pixels = self._distort_ideal(np.vstack([p for _, p, _ in kept]))
+        split, sizes = _split_edges([uv for _, uv, _ in kept], EDGE_PX)
+        pixels = self._distort_ideal(split)
         start = 0
-        for g, p, value in kept:
-            out[g].append((pixels[start:start + len(p)], value))
-            start += len(p)
+        for (g, _, value), n in zip(kept, sizes.tolist()):
+            out[g].append((pixels[start:start + n], value))
+            start += n
         return out
 
     def _distort_ideal(self, uv: np.ndarray) -> np.ndarray:
@@ -343,26 +399,27 @@ class Renderer:
         return self.camera.normalized_to_pixels(xy, distort=True)
 
     @staticmethod
-    def _lay_over(albedo: np.ndarray, alpha: np.ndarray, group, origin: tuple[int, int]) -> None:
+    def _lay_over(albedo: np.ndarray, clear: np.ndarray, group, origin: tuple[int, int], down: int = 1) -> None:
         """Draw `group`'s polygons in their own box supersampled, box-average (pixel
         integration) and composite them over the planes (premultiplied: over = group +
-        (1 - coverage) under)."""
-        h, w = albedo.shape
+        transparency under; transparencies multiply). `down` 2: the planes are at half
+        resolution (the group's box is then on even output pixels)."""
+        h, w = albedo.shape[0] * down, albedo.shape[1] * down
         pts_all = np.vstack([uv for uv, _ in group]) - origin
-        gx0 = int(np.clip(np.floor(pts_all[:, 0].min()) - 2, 0, w))
-        gy0 = int(np.clip(np.floor(pts_all[:, 1].min()) - 2, 0, h))
-        gx1 = int(np.clip(np.ceil(pts_all[:, 0].max()) + 3, 0, w))
-        gy1 = int(np.clip(np.ceil(pts_all[:, 1].max()) + 3, 0, h))
+        gx0, gy0, gx1, gy1 = _pixel_box(pts_all, 2, (w, h))
+        gx0, gy0, gx1, gy1 = gx0 // down * down, gy0 // down * down, -(-gx1 // down) * down, -(-gy1 // down) * down
         if gx1 <= gx0 or gy1 <= gy0:
             return
         # a shape hundreds of px across integrates its outline's coverage over as many edge
         # pixels: 2x is then as exact for its centre as 4x is for a small one
         ss = SS if (gy1 - gy0) * (gx1 - gx0) <= SS_BIG_BOX else 2
-        own_albedo, cover = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0), ss)
-        for plane, own in ((albedo, own_albedo), (alpha, cover)):
-            under = plane[gy0:gy1, gx0:gx1]
-            under *= 1.0 - cover
-            under += own
+        own_albedo, own_clear = _supersampled(group, (origin[0] + gx0, origin[1] + gy0), (gx1 - gx0, gy1 - gy0),
+                                              ss, down)
+        box = np.s_[gy0 // down:gy1 // down, gx0 // down:gx1 // down]
+        under = albedo[box]
+        under *= own_clear
+        under += own_albedo
+        clear[box] *= own_clear
 
     def _clutter(self, scene: Scene) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The wall's polygons as one vertex array, each polygon's first vertex, albedos."""
@@ -435,11 +492,16 @@ class Renderer:
         sun /= np.linalg.norm(sun)
         return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, sun[2])
 
-    def _illumination(self, scene: Scene) -> np.ndarray:
-        key = id(scene.lighting)
+    def _illumination(self, scene: Scene, gain: np.ndarray | None = None) -> np.ndarray:
+        """The lighting field, times `gain` (the sensor's electrons per unit irradiance) if given."""
+        key = (id(scene.lighting), None if gain is None else id(gain))
         cached = self._lighting_cache.get(key)
         if cached is not None:
             return cached
+        if gain is not None:
+            field = cv2.multiply(self._illumination(scene), gain)
+            self._lighting_cache[key] = field
+            return field
         L = scene.lighting
         w, h = self.camera.width, self.camera.height
         u = (np.arange(w, dtype=np.float32) / w)[None, :]
@@ -453,8 +515,26 @@ class Renderer:
         r2 = (uu ** 2 + vv ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
         field = field * (1 - self.optics.vignetting * r2)
         field = (L.level * field / field.max()).astype(np.float32)
-        self._lighting_cache = {key: field}
+        self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
+
+    def _lay_flat(self, img: np.ndarray, flat: FlatLayer, light: np.ndarray, shade: float) -> None:
+        """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
+        over the box its coverage reaches grown by its blur's reach (OpenCV's Gaussian kernel
+        for float images reaches 4 sigma; beyond the coverage the planes are 0, so the box's
+        border reflects zeros as the whole frame's blur would see them)."""
+        sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
+        x, y, w, h = cv2.boundingRect((flat.alpha > 0).view(np.uint8))
+        if w == 0 or h == 0:
+            return
+        reach = int(np.ceil(4 * sigma)) + 2
+        H, W = img.shape
+        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+        box = np.s_[y0:y1, x0:x1]
+        lit = cv2.multiply(_blur(flat.albedo[box], sigma), light[box], scale=shade)
+        region = img[box]
+        cv2.multiply(region, cv2.subtract(1.0, _blur(flat.alpha[box], sigma)), dst=region)
+        cv2.add(region, lit, dst=region)
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -469,14 +549,21 @@ class Renderer:
 
     # ------------------------------------------------------------------ public
     def render(self, scene: Scene, camera_T_marker: np.ndarray,
-               flat_layers: Sequence[FlatLayer] = ()) -> np.ndarray:
-        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose, read-only.
+               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None) -> np.ndarray:
+        """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose.
+        `gain` (H, W): a per-pixel factor (the sensor's electrons per unit irradiance) applied in
+        the lighting's pass, which every layer gets anyway: the sensor's own full-frame multiply
+        is then saved (SensorModel.expose_electrons).
         `flat_layers` (e.g. a calibration board) lie in front of the wall and behind the
-        marker/ORU; none (the default) renders the marker scene alone. The same pose and scene
-        as the last call (an arm at rest) give the last image again: only the noise moves."""
+        marker/ORU; none (the default) renders the marker scene alone. A new pose's image is the
+        caller's to overwrite (the sensor adds its noise in place); the same pose and scene as
+        the last call (an arm at rest) render once more and from then on give that image again,
+        read-only: only the noise moves."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
-               id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo)
-        if not flat_layers and self._last is not None and self._last[0] == key:
+               id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
+               None if gain is None else id(gain))
+        again = not flat_layers and self._last is not None and self._last[0] == key
+        if again and self._last[1] is not None:
             return self._last[1]
         marker_depth = float(camera_T_marker[2, 3])
         wall_depth = self._wall_axis_depth(scene, camera_T_marker)
@@ -487,25 +574,22 @@ class Renderer:
         sf = min(self.coc_sigma_px(max(marker_depth, 0.01)), MAX_BLUR)
         # the lighting multiplies every layer: applied to each as it is laid down, the wall's
         # 8-bit levels become irradiance in the same full-frame pass
-        light = self._illumination(scene)
+        light = self._illumination(scene, gain)
         img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
         for flat in flat_layers:
-            sl = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-            # parallel to the wall: lit alike; over the layers behind it in place
-            lit = cv2.multiply(_blur(flat.albedo, sl), light, scale=self._wall_shade(scene))
-            img *= cv2.subtract(1.0, _blur(flat.alpha, sl))
-            img += lit
+            self._lay_flat(img, flat, light, self._wall_shade(scene))
         # OpenCV's Gaussian kernel for float images reaches 4 sigma
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
-            albedo, alpha, (x0, y0) = layer
-            albedo, alpha = _blur(albedo, sf, True), _blur(alpha, sf, True)
+            albedo, clear, (x0, y0), down = layer
+            albedo, clear = ((_blur_halved(albedo, sf), _blur_halved(clear, sf)) if down == 2
+                             else (_blur(albedo, sf), _blur(clear, sf)))
             h, w = albedo.shape
             region = img[y0:y0 + h, x0:x0 + w]
-            np.subtract(1.0, alpha, out=alpha)
-            region *= alpha        # numpy, in place: OpenCV does not write into a view's rows
-            region += cv2.multiply(albedo, light[y0:y0 + h, x0:x0 + w], dst=albedo)
-        img.flags.writeable = False
-        self._last = None if flat_layers else (key, img)
+            cv2.multiply(region, clear, dst=region)        # OpenCV writes into the view, in place
+            cv2.accumulateProduct(albedo, light[y0:y0 + h, x0:x0 + w], region)
+        if again:             # at rest: kept, read-only, from the second frame of the pose on
+            img.flags.writeable = False
+        self._last = None if flat_layers else (key, img if again else None)
         return img

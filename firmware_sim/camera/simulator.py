@@ -39,8 +39,8 @@ class CameraSimulator:
 
     def render(self, camera_T_marker: np.ndarray, timestamp: float = 0.0, noise: bool = True) -> Frame:
         """A frame seen from the given true camera_T_marker (4x4)."""
-        irradiance = self.renderer.render(self.scene, camera_T_marker)
-        image = self.sensor.expose(irradiance, self.rng, noise)
+        electrons = self.renderer.render(self.scene, camera_T_marker, gain=self.sensor.electrons_per_unit)
+        image = self.sensor.expose_electrons(electrons, self.rng, noise)
         self.seq += 1
         return Frame(timestamp=timestamp, seq=self.seq, image=image,
                      true_camera_T_marker=np.asarray(camera_T_marker, float).copy())
