@@ -139,6 +139,9 @@ class HealthMonitor:
         while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
             now = time.monotonic()
             excess = now - due - STARVED_SLACK
+            redundancy = getattr(self, "line_redundancy", None)
+            if redundancy is not None:
+                redundancy.timer_pass(now - due)     # its timer is this one: no thread of its own
             due = now + MONITOR_PERIOD
             if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
                 next_hb = max(next_hb + period, now)

@@ -75,6 +75,8 @@ class NetworkStats:
 class _Listener(can.Listener):
     """Replaces canopen's MessageListener: filters and counts, never raises."""
 
+    needs_rx_line = False     # a redundant pair need not tag frames with their line for it
+
     def __init__(self, arm: "ArmNetwork"):
         self.arm = arm
 

@@ -25,15 +25,15 @@ Every toggle is a LineEvent in `events` (`spacearm sim` prints them).
 """
 from __future__ import annotations
 
-import threading
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen import redundancy_object as rdn
 from spacearm.base.transport.redundant import LINE_NAMES, rx_line, rx_state
 
-TICK = 0.002   # s: the toggle timer's resolution
+TICK = 0.002   # s: the toggle timer's resolution while a node searches (the simulator's timer runs it)
 
 
 @dataclass(frozen=True)
@@ -52,20 +52,22 @@ class NodeLineRule:
 
     def __init__(self, node):
         self.node = node
+        # SimNode.param: cached until a write reaches the object (read for every master heartbeat)
+        self._read = getattr(node, "param", None) or node.get
         self.line = self._get(rdn.BDEFAULT) & 1
         self.toggle_at: float | None = None
         self.searching = False
 
     def _get(self, sub: int) -> int:
         try:
-            return int(self.node.get(rdn.REDUNDANCY, sub))
+            return int(self._read(rdn.REDUNDANCY, sub))
         except Exception:
             return rdn.DEFAULTS[sub]
 
     def master(self) -> tuple[int, float] | None:
         """(node ID, consumer time s) of the redundancy master (1016h:1), None if unset."""
         try:
-            value = self.node.get(od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB)
+            value = self._read(od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB)
         except Exception:
             return None
         producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
@@ -129,8 +131,8 @@ class LineSelection:
                 self.rules[node.node_id] = NodeLineRule(node)
             self._gate(node)
         self.bus.tx_router = self.tx_line
-        self._thread = threading.Thread(target=self._run, name="sim-line-selection", daemon=True)
-        self._thread.start()
+        # no thread of its own: the simulator's timer runs timer_pass() (a thread more would cost
+        # every pass of peer_timing's per-thread scan, and a wake-up every TICK)
 
     # ------------------------------------------------------------------ lines
     def line_of(self, node) -> int:
@@ -211,26 +213,31 @@ class LineSelection:
         lockstep controller (Simulator time_base 'sync'), else the monotonic clock."""
         return self.sim.plant.time if getattr(self.sim, "sync_time_base", False) else time.monotonic()
 
-    def _run(self) -> None:
-        while not self.sim._stop.wait(TICK):
-            now = self.clock()
-            for node_id, rule in self.rules.items():
-                node = self.sim.nodes[node_id]
-                if not rule.due(now) or not node.powered or node.faults.silent:
-                    continue
-                master = rule.master()
-                if master is None:
-                    rule.toggle_at = None
-                    continue
-                with self.sim._sync_lock:
-                    kind = rule.toggle(now, master[1])
-                    self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
-                    node.next_heartbeat = 0.0     # the producer restarts on the new line
-                    node.send_heartbeat()
-                    if kind == "no_master":
-                        self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
-                        node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
-                        node.on_heartbeat_lost(master[0])
+    def searching(self) -> bool:
+        """Is a node due to toggle (the timer then runs every TICK)?"""
+        return any(rule.toggle_at is not None for rule in self.rules.values())
+
+    def timer_pass(self, locked: bool = False) -> None:
+        """Toggle the nodes that are due: from the simulator's timer thread, and on the SYNC time
+        base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock)."""
+        now = self.clock()
+        for node_id, rule in self.rules.items():
+            node = self.sim.nodes[node_id]
+            if not rule.due(now) or not node.powered or node.faults.silent:
+                continue
+            master = rule.master()
+            if master is None:
+                rule.toggle_at = None
+                continue
+            with nullcontext() if locked else self.sim._sync_lock:
+                kind = rule.toggle(now, master[1])
+                self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
+                node.next_heartbeat = 0.0     # the producer restarts on the new line
+                node.send_heartbeat()
+                if kind == "no_master":
+                    self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
+                    node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
+                    node.on_heartbeat_lost(master[0])
 
 
 def attach(sim) -> LineSelection | None:

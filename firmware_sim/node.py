@@ -414,12 +414,13 @@ class SimNode:
 
     # ------------------------------------------------------------------ heartbeat consumer
     def consumer_entries(self) -> dict[int, float]:
-        """1016h: producer node ID -> timeout (s), for the active entries."""
+        """1016h: producer node ID -> timeout (s), for the active entries (read through param():
+        every consumed heartbeat and every timer pass asks, a write is rare)."""
         out = {}
         if od.CONSUMER_HEARTBEAT not in self.od:     # a device without a heartbeat consumer
             return out
-        for sub in range(1, self.get(od.CONSUMER_HEARTBEAT, 0) + 1):
-            value = self.get(od.CONSUMER_HEARTBEAT, sub)
+        for sub in range(1, self.param(od.CONSUMER_HEARTBEAT, 0) + 1):
+            value = self.param(od.CONSUMER_HEARTBEAT, sub)
             producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
             if producer and ms:
                 out[producer] = ms / 1000.0

@@ -10,7 +10,12 @@ The pair models ECSS-E-ST-50-15C's two bus access architectures in one class:
 * parallel access (the master): frames of both lines are received, each tagged with its
   line (`rx_line()` in the receiving thread, `rx_observers(line, can_id, data, t)`), and
   every frame is sent on the active line (`active`), which the master's redundancy manager
-  moves (drivers/line_redundancy.py);
+  moves (drivers/line_redundancy.py); `standby_passes(can_id)`, when set, names the frames of
+  the line that is not active that still reach the application (the master: heartbeats and
+  EMCY only; the standard's master watches the standby line for the nodes' life, it does not
+  run process data off it), while the observers still see all of them;
+  `tx_watch[can_id]` are callbacks(line, can_id) for the few COB-IDs someone counts (SYNC),
+  looked up by COB-ID so the other frames cost nothing;
 * selective access (each simulated node): `tx_router(can_id) -> line` sends a frame on the
   line its sender listens on (None: on both, for frames of no node), and the simulator
   delivers a received frame only to the nodes listening on its line
@@ -20,6 +25,11 @@ Faults of one line (line_faults.py: cut, babble, stuck_dominant, error_passive,
 intermittent) are applied where a frame enters the line, so every receiver loses the same
 frame, and again on receipt for the deterministic ones (a cut line also cuts frames of a
 plain bus attached to it).
+
+Cost: a second line must not make a cycle dearer (issue 34: <= 10 %). On the in-process pair a
+frame costs one fault check and the observers on top of one line; the thread-local is set only
+for listeners that read it (`needs_rx_line`, default True; the master's listener says False);
+a burst of the master goes to the active line in one call, with no per-frame routing.
 
 Why a thread-local for the receive line: python-can's Listener API has no place for it,
 and the pair delivers each frame in the thread that reads it (the sender's thread on the
@@ -77,16 +87,23 @@ class _LineListener(can.Listener):
     def __init__(self, pair: "RedundantBus", line: int, target: can.Listener):
         self.pair, self.line, self.target = pair, line, target
         self._on_frame = getattr(target, "on_frame", None)
+        self._tags = getattr(target, "needs_rx_line", True)
         self._fault = pair.faults[line]
 
     def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
         # the hot path of every frame on the in-process bus: no fault, no method call
-        if self._fault.mode != "ok" and self.pair._rx_blocked(self.line):
+        pair, line = self.pair, self.line
+        if self._fault.mode != "ok" and pair._rx_blocked(line):
             return
-        for observer in self.pair.rx_observers:
-            observer(self.line, can_id, data, timestamp)
+        for observer in pair.rx_observers:
+            observer(line, can_id, data, timestamp)
+        if line != pair.active and pair.standby_passes is not None and not pair.standby_passes(can_id):
+            return
+        if not self._tags and self._on_frame is not None:
+            self._on_frame(can_id, data, timestamp)
+            return
         previous = getattr(_rx, "line", None)
-        _rx.line = self.line
+        _rx.line = line
         try:
             if self._on_frame is not None:
                 self._on_frame(can_id, data, timestamp)
@@ -100,6 +117,8 @@ class _LineListener(can.Listener):
         if self.pair._rx_blocked(self.line):
             return
         self.pair._observe(self.line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        if not self.pair._reaches_application(self.line, msg):
+            return
         previous, _rx.line = rx_line(), self.line
         try:
             self.target.on_message_received(msg)
@@ -130,7 +149,8 @@ class RedundantBus(can.BusABC):
         self.active = 0
         self.tx_router: Callable[[int], int | None] | None = None
         self.rx_observers: list[Callable[[int, int, bytes, float], None]] = []
-        self.tx_observers: list[Callable[[int, int], None]] = []
+        self.standby_passes: Callable[[int], bool] | None = None
+        self.tx_watch: dict[int, list[Callable[[int, int], None]]] = {}
         self.sent = [0, 0]
         self._senders = tuple(frame_sender(line) for line in self.lines)
         self._batch_senders = tuple(frames_sender(line) for line in self.lines)
@@ -151,6 +171,11 @@ class RedundantBus(can.BusABC):
         for observer in self.rx_observers:
             observer(line, can_id, data, timestamp)
 
+    def _reaches_application(self, line: int, msg: can.Message) -> bool:
+        """A frame of the standby line reaches the application only if `standby_passes` says so."""
+        passes = self.standby_passes
+        return line == self.active or passes is None or msg.is_error_frame or passes(msg.arbitration_id)
+
     def _read(self, line: int) -> None:
         bus = self.lines[line]
         while not self._closing.is_set():
@@ -165,7 +190,8 @@ class RedundantBus(can.BusABC):
                 # on a loaded machine, and the master's rule judges a line by when its frames came
                 if not (self._rx_blocked(line) and not msg.is_error_frame):
                     self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
-                self._queue.put((line, msg))
+                if self._reaches_application(line, msg):
+                    self._queue.put((line, msg))
 
     def _recv_internal(self, timeout):
         try:
@@ -189,8 +215,10 @@ class RedundantBus(can.BusABC):
     def _admit(self, line: int, can_id: int, data: bytes) -> bool:
         """The frame enters the line unless the line's fault keeps it off (then what
         receivers see instead is sent)."""
-        for observer in self.tx_observers:
-            observer(line, can_id)
+        watchers = self.tx_watch.get(can_id)
+        if watchers:
+            for watcher in watchers:
+                watcher(line, can_id)
         fault = self.faults[line]
         if fault.mode == "ok" or fault.passes():
             self.sent[line] += 1
@@ -213,17 +241,44 @@ class RedundantBus(can.BusABC):
                 self.lines[line].send(msg, timeout)
 
     def send_frame(self, can_id: int, data: bytes) -> None:
+        if self.tx_router is None:      # the master: the active line only
+            line = self.active
+            if self._admit(line, can_id, data):
+                self._senders[line](can_id, data)
+            return
         for line in self._tx_lines(can_id):
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
 
     def send_frames(self, frames) -> None:
         """A burst of (can_id, data): each line's share in one write, order kept per line."""
-        per_line: tuple[list, list] = ([], [])
-        for can_id, data in frames:
-            for line in self._tx_lines(can_id):
-                if self._admit(line, can_id, data):
-                    per_line[line].append((can_id, data))
+        router, watch, faults = self.tx_router, self.tx_watch, self.faults
+        if not isinstance(frames, list):
+            frames = list(frames)
+        if faults[0].mode == "ok" and faults[1].mode == "ok" and not (
+                watch and any(frame[0] in watch for frame in frames)):
+            # the common case, without a call per frame: no fault to apply, nothing watched
+            if router is None:
+                self.sent[self.active] += len(frames)
+                if frames:
+                    self._batch_senders[self.active](frames)
+                return
+            per_line: tuple[list, list] = ([], [])
+            for frame in frames:
+                line = router(frame[0])
+                if line is None:
+                    per_line[0].append(frame)
+                    per_line[1].append(frame)
+                else:
+                    per_line[line].append(frame)
+            self.sent[0] += len(per_line[0])
+            self.sent[1] += len(per_line[1])
+        else:
+            per_line = ([], [])
+            for can_id, data in frames:
+                for line in self._tx_lines(can_id):
+                    if self._admit(line, can_id, data):
+                        per_line[line].append((can_id, data))
         for line in (0, 1):
             if per_line[line]:
                 self._batch_senders[line](per_line[line])
