@@ -161,7 +161,8 @@ class LineRedundancyMaster:
             return
         now = self.clock()
         with self._lock:
-            events = self._absorb(now)
+            # a heartbeat of the active line needs no absorbing first: the next SYNC or pass does it
+            events = self._absorb(now) if line != self.bus.active else []
             if can_id == od.HEARTBEAT_BASE + node and len(data) == 1:
                 if data[0] & 0x7F == od.NMT_STATE_OPERATIONAL:
                     self.operational.add(node)
@@ -187,7 +188,8 @@ class LineRedundancyMaster:
         return self._decide(now)
 
     def _absorb(self, now: float) -> list[LineEvent]:
-        """Under the lock: the node frames the hot path only noted, as heard now."""
+        """Under the lock: the node frames the hot path only noted, as heard now (once per
+        node and line, however many PDOs it sent)."""
         events = []
         for line in (0, 1):
             seen = self._seen[line]
@@ -195,10 +197,23 @@ class LineRedundancyMaster:
                 continue
             ids = set(seen)
             seen.difference_update(ids)    # not clear(): a frame noted meanwhile stays for the next pass
-            for can_id in ids:
-                node = self.node_of(can_id)
-                if node is not None:
-                    events += self._heard(line, node, now)
+            nodes = set(map(self.node_of, ids))
+            nodes.discard(None)
+            if not nodes:
+                continue
+            heard = self.heard[line]
+            for node in nodes:
+                heard[node] = now
+            self.line_last[line] = now
+            self.unanswered[line] = 0
+            self.left_silent_at[line] = float("-inf")
+            self.lost = False
+            if line != self.bus.active:
+                events += self._decide(now)
+            elif self.pending and not self.pending.isdisjoint(nodes):
+                self.pending -= nodes
+                if not self.pending:
+                    events.append(self._complete(now))
         return events
 
     def on_tx(self, line: int, can_id: int) -> None:
@@ -219,9 +234,15 @@ class LineRedundancyMaster:
         last = self.line_last[active]
         if last is None and self.line_last[other] is None:
             return []                               # nothing heard yet: not armed
-        moved = [n for n in self.node_ids
-                 if self.heard[other].get(n, float("-inf")) > max(self.heard[active].get(n, float("-inf")),
-                                                                  self.switched_at)]
+        moved = []
+        other_last, heard_active = self.line_last[other], self.heard[active]
+        # the nodes heard on the other line later than on this one: only looked for when the other
+        # line's last frame is newer than the switch and than some node's last frame here
+        if other_last is not None and other_last > self.switched_at and (
+                len(heard_active) < len(self.node_ids) or other_last > min(heard_active.values())):
+            moved = [n for n in self.node_ids
+                     if self.heard[other].get(n, float("-inf")) > max(heard_active.get(n, float("-inf")),
+                                                                      self.switched_at)]
         # right after a switch of its own the master waits for the nodes: frames they still send
         # on the old line until they toggle are not a reason to go back
         if 2 * len(moved) > len(self.node_ids) and now - self.switched_at >= self.hold_off:

@@ -175,17 +175,20 @@ class LineSelection:
         on_heartbeat = node.on_heartbeat
         check_consumers = node.check_consumers
 
+        rule = self.rules.get(node.node_id)
+        own_line = rule if rule is not None else _ON_LINE_A
+        rx = rx_state
+
         def heartbeat(producer: int, now: float) -> None:
-            if not self.hears(node):
+            line = getattr(rx, "line", None)      # hears(node), inlined: every node, every master heartbeat
+            if line is not None and line != own_line.line:
                 return
-            rule = self.rules.get(node.node_id)
             master = rule.master() if rule is not None else None
             if master is not None and producer == master[0] and rule.master_heard():
                 self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
         def consumers(now: float) -> None:
-            rule = self.rules.get(node.node_id)
             master = rule.master() if rule is not None else None
             if master is not None:
                 last = node.consumer_last.get(master[0])
