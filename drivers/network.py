@@ -176,6 +176,8 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.controller_period: float | None = None
         self._hb_sync = 0
         self._hb_due_now = False
+        self._next_own_heartbeat = float("inf")        # wall-clock heartbeat producer (health.py), set by its timer
+        self._own_heartbeat_lock = threading.Lock()
         self._lockstep_wait_expired = 0.0     # s of the last TPDO wait that ran out
         self._connected = False
         self._stop = threading.Event()
