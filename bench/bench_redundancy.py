@@ -12,8 +12,9 @@
    both-lines-lost events (target 0); the starvation of the two timers meanwhile.
 2. Lockstep cycle cost with two lines vs one (target <= 10 % above): the same enabled network
    cycled `--cycles` times in lockstep (SYNC, wait for every TPDO, read), blocks of one line
-   and two lines alternated; CPU and wall per cycle, median of the blocks; the ratio is of
-   the same run. Each setup runs in a process of its own, so a block's process CPU is its
+   and two lines alternated; CPU and wall per cycle, median of the blocks; the ratio judged is
+   the median of the blocks' ratios (each two-line block to the one-line block just before it),
+   of the same run. Each setup runs in a process of its own, so a block's process CPU is its
    setup's alone, timer threads included (the pair's redundancy timers, its faster master
    heartbeat), not the idle other setup's.
 3. Real-time cycle cost, the same way: cycles paced at the SYNC period (as the daemon's
@@ -182,14 +183,18 @@ def cycle_cost(cycles: int, rt_cycles: int, blocks: int, steal: CpuSteal) -> lis
 
 
 def cost_rows(label: str, cpu: dict, wall: dict, where: str) -> list[list[str]]:
+    """The ratio judged is the median of the blocks' ratios, each two-line block to the one-line
+    block run just before it (a loaded machine's drift cancels in a pair of neighbours); the
+    ratio of the two medians is printed beside it."""
     one, two = statistics.median(cpu["one line"]), statistics.median(cpu["two lines"])
-    ratio = two / one
+    ratio = statistics.median(b / a for a, b in zip(cpu["one line"], cpu["two lines"]))
     return [[f"{label} cycle, one line (reference)",
              f"{1e6 * one:.0f} us CPU / {1e6 * statistics.median(wall['one line']):.0f} us wall",
              "", "", "", "", "", where],
             [f"{label} cycle, two lines",
              f"{1e6 * two:.0f} us CPU / {1e6 * statistics.median(wall['two lines']):.0f} us wall",
-             f"<= {COST_TARGET:.2f} x", f"{ratio:.3f} x", "", "", "ok" if ratio <= COST_TARGET else "MISSED", where]]
+             f"<= {COST_TARGET:.2f} x", f"{ratio:.3f} x (of medians {two / one:.3f} x)", "", "",
+             "ok" if ratio <= COST_TARGET else "MISSED", where]]
 
 
 def main() -> int:

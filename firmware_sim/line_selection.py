@@ -216,15 +216,15 @@ class LineSelection:
         lockstep controller (Simulator time_base 'sync'), else the monotonic clock."""
         return self.sim.plant.time if getattr(self.sim, "sync_time_base", False) else time.monotonic()
 
-    def searching(self) -> bool:
-        """Is a node due to toggle (the timer then runs every TICK)?"""
-        return any(rule.toggle_at is not None for rule in self.rules.values())
-
-    def timer_pass(self, locked: bool = False) -> None:
+    def timer_pass(self, locked: bool = False) -> bool:
         """Toggle the nodes that are due: from the simulator's timer thread, and on the SYNC time
-        base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock)."""
+        base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock). Returns
+        whether a node still searches (the timer then runs every TICK)."""
+        searching = [(node_id, rule) for node_id, rule in self.rules.items() if rule.toggle_at is not None]
+        if not searching:
+            return False        # the usual pass: nothing more than this
         now = self.clock()
-        for node_id, rule in self.rules.items():
+        for node_id, rule in searching:
             node = self.sim.nodes[node_id]
             if not rule.due(now) or not node.powered or node.faults.silent:
                 continue
@@ -241,6 +241,7 @@ class LineSelection:
                     self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
                     node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
                     node.on_heartbeat_lost(master[0])
+        return any(rule.toggle_at is not None for rule in self.rules.values())
 
 
 def attach(sim) -> LineSelection | None:

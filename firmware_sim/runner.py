@@ -435,10 +435,8 @@ class Simulator:
                 if due_hb:
                     wake = min(wake, due_hb)
             selection = self.line_selection
-            if selection is not None:
-                selection.timer_pass()
-                if selection.searching():
-                    wake = min(wake, now + line_selection.TICK)
+            if selection is not None and selection.timer_pass():
+                wake = min(wake, now + line_selection.TICK)
             if self.diag_node_id is not None:
                 if self.lateness.due(now):
                     self._send(od.TPDO_BASE[0] + self.diag_node_id, self.lateness.report(now))
