@@ -158,6 +158,10 @@ class RedundantBus(can.BusABC):
         self._closing = threading.Event()
         self.channel_info = self.channel_id = f"{spec_a}{PAIR_SEPARATOR}{spec_b}"
         super().__init__(channel=self.channel_info)
+        self._readers: list[threading.Thread] = []
+        self._start_readers()
+
+    def _start_readers(self) -> None:
         self._readers = [threading.Thread(target=self._read, args=(i,), name=f"can-line-{LINE_NAMES[i]}",
                                           daemon=True) for i in (0, 1)]
         for reader in self._readers:
@@ -186,12 +190,16 @@ class RedundantBus(can.BusABC):
                     return
                 continue
             if msg is not None:
-                # observed here, as it arrives: the queue's reader (a Notifier) may run much later
-                # on a loaded machine, and the master's rule judges a line by when its frames came
-                if not (self._rx_blocked(line) and not msg.is_error_frame):
-                    self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
-                if self._reaches_application(line, msg):
-                    self._queue.put((line, msg))
+                self._arrived(line, msg)
+
+    def _arrived(self, line: int, msg: can.Message) -> None:
+        """A frame of `line` for the queue the application reads. Observed here, as it arrives:
+        the queue's reader (a Notifier) may run much later on a loaded machine, and the
+        master's rule judges a line by when its frames came."""
+        if not (self._rx_blocked(line) and not msg.is_error_frame):
+            self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        if self._reaches_application(line, msg):
+            self._queue.put((line, msg))
 
     def _recv_internal(self, timeout):
         try:
@@ -295,8 +303,41 @@ class RedundantBus(can.BusABC):
         super().shutdown()
 
 
+class _LineQueue:
+    """An in-process line's receive queue, as the senders on that line see it: a frame put
+    there goes straight to the pair's queue, tagged with its line, in the sender's thread. No
+    reader thread per line: two threads more would wake ten times a second each and lengthen
+    every pass of peer_timing's per-thread scan. `queue` (the senders' test for frames still
+    waiting, before they deliver inline) is the pair's: order is kept across both lines."""
+
+    def __init__(self, pair: "InlineRedundantBus", line: int):
+        self.pair, self.line = pair, line
+
+    @property
+    def queue(self):
+        return self.pair._queue.queue
+
+    def empty(self) -> bool:
+        return self.pair._queue.empty()
+
+    def put(self, msg: can.Message, block: bool = True, timeout: float | None = None) -> None:
+        self.pair._arrived(self.line, msg)
+
+    def get(self, block: bool = True, timeout: float | None = None):
+        raise queue.Empty     # the line is read through the pair
+
+
 class InlineRedundantBus(RedundantBus):
     """A pair of in-process buses: listeners may take frames inline in the sender's thread."""
+
+    def _start_readers(self) -> None:
+        from can.interfaces.virtual import channels_lock
+
+        for i, line in enumerate(self.lines):
+            tagged = _LineQueue(self, i)
+            with channels_lock:
+                line.channel[line.channel.index(line.queue)] = tagged
+                line.queue = tagged
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         for i, line in enumerate(self.lines):
