@@ -142,6 +142,7 @@ class LineRedundancyMaster:
         bus.rx_observers.append(self.on_rx)
         bus.tx_watch.setdefault(od.SYNC_COB_ID_DEFAULT, []).append(self.on_tx)
         bus.standby_passes = standby_passes
+        bus.rx_note = self._seen          # the in-process pair notes active-line frames without a call
         self._thread = None
         if timer:
             self._thread = threading.Thread(target=self._run, name="arm-line-redundancy", daemon=True)
@@ -365,6 +366,8 @@ class LineRedundancyMaster:
                 observers.remove(observer)
         if self.bus.standby_passes is standby_passes:
             self.bus.standby_passes = None
+        if self.bus.rx_note is self._seen:
+            self.bus.rx_note = None
         self._stop.set()
         if self._thread is not None:
             self._thread.join(1.0)

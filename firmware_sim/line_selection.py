@@ -131,6 +131,7 @@ class LineSelection:
                 self.rules[node.node_id] = NodeLineRule(node)
             self._gate(node)
         self.bus.tx_router = self.tx_line
+        self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
         # no thread of its own: the simulator's timer runs timer_pass() (a thread more would cost
         # every pass of peer_timing's per-thread scan, and a wake-up every TICK)
 

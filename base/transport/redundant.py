@@ -15,11 +15,15 @@ The pair models ECSS-E-ST-50-15C's two bus access architectures in one class:
   EMCY only; the standard's master watches the standby line for the nodes' life, it does not
   run process data off it), while the observers still see all of them;
   `tx_watch[can_id]` are callbacks(line, can_id) for the few COB-IDs someone counts (SYNC),
-  looked up by COB-ID so the other frames cost nothing;
+  looked up by COB-ID so the other frames cost nothing; `rx_note`, when set (two sets, one
+  per line), takes the COB-IDs of the active line's frames other than heartbeats in place of
+  the observers on the in-process pair (one set insertion per frame; the master folds them
+  in at its next SYNC or timer pass);
 * selective access (each simulated node): `tx_router(can_id) -> line` sends a frame on the
   line its sender listens on (None: on both, for frames of no node), and the simulator
   delivers a received frame only to the nodes listening on its line
-  (firmware_sim/line_selection.py).
+  (firmware_sim/line_selection.py); `tx_owners[can_id].line`, where known, spares the router
+  call per frame of a burst.
 
 Faults of one line (line_faults.py: cut, babble, stuck_dominant, error_passive,
 intermittent) are applied where a frame enters the line, so every receiver loses the same
@@ -95,8 +99,12 @@ class _LineListener(can.Listener):
         pair, line = self.pair, self.line
         if self._fault.mode != "ok" and pair._rx_blocked(line):
             return
-        for observer in pair.rx_observers:
-            observer(line, can_id, data, timestamp)
+        note = pair.rx_note
+        if note is not None and line == pair.active and can_id & 0x780 != 0x700:
+            note[line].add(can_id)          # instead of the observers: the owner folds it in later
+        else:
+            for observer in pair.rx_observers:
+                observer(line, can_id, data, timestamp)
         if line != pair.active and pair.standby_passes is not None and not pair.standby_passes(can_id):
             return
         if not self._tags and self._on_frame is not None:
@@ -150,6 +158,8 @@ class RedundantBus(can.BusABC):
         self.tx_router: Callable[[int], int | None] | None = None
         self.rx_observers: list[Callable[[int, int, bytes, float], None]] = []
         self.standby_passes: Callable[[int], bool] | None = None
+        self.rx_note: tuple[set[int], set[int]] | None = None
+        self.tx_owners: dict[int, object] | None = None
         self.tx_watch: dict[int, list[Callable[[int, int], None]]] = {}
         self.sent = [0, 0]
         self._senders = tuple(frame_sender(line) for line in self.lines)
@@ -272,8 +282,10 @@ class RedundantBus(can.BusABC):
                     self._batch_senders[self.active](frames)
                 return
             per_line: tuple[list, list] = ([], [])
+            owners = self.tx_owners if self.tx_owners is not None else {}
             for frame in frames:
-                line = router(frame[0])
+                owner = owners.get(frame[0])
+                line = owner.line if owner is not None else router(frame[0])
                 if line is None:
                     per_line[0].append(frame)
                     per_line[1].append(frame)
@@ -312,10 +324,7 @@ class _LineQueue:
 
     def __init__(self, pair: "InlineRedundantBus", line: int):
         self.pair, self.line = pair, line
-
-    @property
-    def queue(self):
-        return self.pair._queue.queue
+        self.queue = pair._queue.queue      # queue.Queue keeps its deque for life
 
     def empty(self) -> bool:
         return self.pair._queue.empty()
