@@ -184,9 +184,11 @@ class LineSelection:
             line = getattr(rx, "line", None)      # hears(node), inlined: every node, every master heartbeat
             if line is not None and line != own_line.line:
                 return
-            master = rule.master() if rule is not None else None
-            if master is not None and producer == master[0] and rule.master_heard():
-                self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
+            # only a node that searches or is due to toggle has anything to end here (master_heard)
+            if rule is not None and (rule.searching or rule.toggle_at is not None):
+                master = rule.master()
+                if master is not None and producer == master[0] and rule.master_heard():
+                    self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
         def consumers(now: float) -> None:
