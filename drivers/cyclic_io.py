@@ -60,6 +60,8 @@ class CyclicIO:
             self.stats.expected_tpdos += len(self._expected)
         if self.controller_period is not None:
             self._send_lockstep_heartbeat()
+        elif self._monitor is not None:
+            self._own_heartbeat_if_due(time.monotonic())    # if the timer has not sent it yet
         self._send(od.SYNC_COB_ID_DEFAULT, b"")
         self.stats.syncs_sent += 1
         return self._sync

@@ -134,17 +134,22 @@ class HealthMonitor:
             self.timer_scheduling = use_fifo(self.timer_priority) or describe()
         factor = self.config.bus.heartbeat_loss_factor
         period = self.config.bus.master_heartbeat_period
-        next_hb = time.monotonic()
-        due = next_hb
+        # at most one SYNC period, and half the margin to the nodes' consumer time: a heartbeat
+        # the cycle did not send comes this late, the gap the nodes see is period + slack
+        slack = max(0.0, min(self.config.bus.sync_period,
+                             (self.config.bus.master_heartbeat_timeout - period) / 2))
+        self._next_own_heartbeat = time.monotonic()
+        due = self._next_own_heartbeat
         while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
             now = time.monotonic()
             excess = now - due - STARVED_SLACK
+            redundancy = getattr(self, "line_redundancy", None)
+            if redundancy is not None:
+                redundancy.timer_pass(now - due)     # its timer is this one: no thread of its own
             due = now + MONITOR_PERIOD
-            if period > 0 and now >= next_hb:          # the controller's own heartbeat producer
-                next_hb = max(next_hb + period, now)
-                self._send_own_heartbeat()
-            if period > 0:
-                due = min(due, next_hb)
+            if period > 0:                             # the controller's own heartbeat producer
+                # `slack` late: a free-running cycle sends it first at its SYNC (_own_heartbeat_if_due)
+                due = min(due, self._own_heartbeat_if_due(now - slack) + slack)
             if not self._monitoring:
                 continue
             self._poll_guarded(now)
@@ -216,6 +221,23 @@ class HealthMonitor:
         if self._hb_due_now:
             self._hb_due_now = False
             self._send_own_heartbeat()
+
+    def _own_heartbeat_if_due(self, now: float) -> float:
+        """The controller's heartbeat on the wall clock, if due; returns when the next one is.
+        The timer calls it, and a free-running cycle at its SYNC too (whichever runs first
+        sends): the cycle's thread runs anyway, while a heartbeat from the timer's thread costs
+        a wake-up and a GIL hand-over (measured ~10x its cost inline, bench_redundancy.py:
+        on a redundant pair the heartbeat runs 5x as often)."""
+        period = self.config.bus.master_heartbeat_period
+        if period <= 0 or not self._own_heartbeat_lock.acquire(blocking=False):
+            return self._next_own_heartbeat
+        try:
+            if now >= self._next_own_heartbeat:
+                self._next_own_heartbeat = max(self._next_own_heartbeat + period, now)
+                self._send_own_heartbeat()
+            return self._next_own_heartbeat
+        finally:
+            self._own_heartbeat_lock.release()
 
     def _send_own_heartbeat(self) -> None:
         """The controller's heartbeat (on the wall clock from the timer, in lockstep also per SYNC)."""

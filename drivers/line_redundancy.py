@@ -27,6 +27,13 @@ ago and not every node back) `bridging()` is True: the daemon does not count tha
 missing process data as node loss; the window ends at `lost_after`, so a node that does not
 come back is still lost within the usual bounds.
 
+What it reads per frame (a second line must cost a cycle almost nothing, issue 34): a node
+frame on the active line is one set insertion (`_seen`), folded into the rule at the next
+SYNC and timer pass, where the rule judges anyway (`_absorb`); heartbeats and every frame of
+the standby line are judged as they come. Of the standby line only heartbeats (boot-ups) and
+EMCYs reach the network's handlers (`standby_passes`): the nodes' life and their error
+reports, never process data or SDO answers of a line the master does not drive.
+
 Every switch is a LineEvent with a code: `line_switch`, `line_switch_complete` (every node
 heard on the new line; with the time from the old line's last frame), `bus_lines_lost`.
 """
@@ -52,8 +59,9 @@ LINES_LOST = "bus_lines_lost"
 SYNCS_UNANSWERED = 2        # SYNCs with no node frame back before the active line counts as silent
 IDLE_SILENCE_PERIODS = 1.5  # node heartbeat periods of silence that make an idle line silent
 SEARCH_PERIOD = 1.0         # s between switches while both lines are lost
-TICK = 0.002                # s: the rule's timer
+TICK = 0.010                # s: the rule's timer (health.py's MONITOR_PERIOD; the silences it judges are >= 40 ms)
 STARVED_SLACK = 0.020       # s: a timer pass this late was starved (health.py's slack)
+CHECKED_RECENTLY = 0.001    # s: bridging() takes a check() this recent as its own
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,13 @@ class LineEvent:
     line: int               # the active line after the event
     message: str
     duration: float | None = None   # SWITCH_COMPLETE: s from the old line's last node frame
+
+
+def standby_passes(can_id: int) -> bool:
+    """The frames of the standby line that reach the master's handlers: heartbeats (and
+    boot-ups) and EMCYs."""
+    function = can_id & 0x780
+    return (function == od.HEARTBEAT_BASE or function == od.EMCY_BASE) and can_id & 0x7F != 0
 
 
 def settings_of(config: BusConfig) -> RedundancySettings:
@@ -117,13 +132,17 @@ class LineRedundancyMaster:
         self.pending: set[int] = set()           # nodes not yet heard on the new line
         self.lost = False
         self.left_silent_at = [float("-inf")] * 2   # when the line was left for silence (no node heard since)
+        self._checked_at = float("-inf")
         self.switches = 0
         self.bridged_cycles = 0
         self.events: list[LineEvent] = []
+        self._seen: tuple[set[int], set[int]] = (set(), set())   # COB-IDs on each line since the last _absorb
         self._lock = threading.Lock()
         self._stop = threading.Event()
         bus.rx_observers.append(self.on_rx)
-        bus.tx_observers.append(self.on_tx)
+        bus.tx_watch.setdefault(od.SYNC_COB_ID_DEFAULT, []).append(self.on_tx)
+        bus.standby_passes = standby_passes
+        bus.rx_note = self._seen          # the in-process pair notes active-line frames without a call
         self._thread = None
         if timer:
             self._thread = threading.Thread(target=self._run, name="arm-line-redundancy", daemon=True)
@@ -135,41 +154,78 @@ class LineRedundancyMaster:
 
     # ------------------------------------------------------------------ what the lines show
     def on_rx(self, line: int, can_id: int, data: bytes, timestamp: float) -> None:
+        if line == self.bus.active and can_id & 0x780 != od.HEARTBEAT_BASE:
+            self._seen[line].add(can_id)        # the hot path (every TPDO): judged at the next SYNC or pass
+            return
         node = self.node_of(can_id)
         if node is None:
             return
         now = self.clock()
-        events = []
         with self._lock:
-            self.heard[line][node] = now
-            self.line_last[line] = now
-            self.unanswered[line] = 0
-            self.left_silent_at[line] = float("-inf")
-            self.lost = False
+            # a heartbeat of the active line needs no absorbing first: the next SYNC or pass does it
+            events = self._absorb(now) if line != self.bus.active else []
             if can_id == od.HEARTBEAT_BASE + node and len(data) == 1:
                 if data[0] & 0x7F == od.NMT_STATE_OPERATIONAL:
                     self.operational.add(node)
                 else:
                     self.operational.discard(node)
-            if line == self.bus.active:
-                # the hot path (every TPDO): only a switch under way has anything to decide here
-                if node in self.pending:
-                    self.pending.discard(node)
-                    if not self.pending:
-                        events.append(self._complete(now))
-            else:
-                events += self._decide(now)
+            events += self._heard(line, node, now)
         if events:
             self._emit(events)
+
+    def _heard(self, line: int, node: int, now: float) -> list[LineEvent]:
+        """Under the lock: a frame of `node` came on `line`."""
+        self.heard[line][node] = now
+        self.line_last[line] = now
+        self.unanswered[line] = 0
+        self.left_silent_at[line] = float("-inf")
+        self.lost = False
+        if line == self.bus.active:
+            if node in self.pending:
+                self.pending.discard(node)
+                if not self.pending:
+                    return [self._complete(now)]
+            return []
+        return self._decide(now)
+
+    def _absorb(self, now: float) -> list[LineEvent]:
+        """Under the lock: the node frames the hot path only noted, as heard now (once per
+        node and line, however many PDOs it sent)."""
+        events = []
+        for line in (0, 1):
+            seen = self._seen[line]
+            if not seen:
+                continue
+            ids = set(seen)
+            seen.difference_update(ids)    # not clear(): a frame noted meanwhile stays for the next pass
+            nodes = set(map(self.node_of, ids))
+            nodes.discard(None)
+            if not nodes:
+                continue
+            heard = self.heard[line]
+            for node in nodes:
+                heard[node] = now
+            self.line_last[line] = now
+            self.unanswered[line] = 0
+            self.left_silent_at[line] = float("-inf")
+            self.lost = False
+            if line != self.bus.active:
+                events += self._decide(now)
+            elif self.pending and not self.pending.isdisjoint(nodes):
+                self.pending -= nodes
+                if not self.pending:
+                    events.append(self._complete(now))
+        return events
 
     def on_tx(self, line: int, can_id: int) -> None:
         if can_id != od.SYNC_COB_ID_DEFAULT or line != self.bus.active:
             return
         with self._lock:
-            if not self.operational:
-                return
-            self.unanswered[line] += 1
-            events = self._decide(self.clock())
+            now = self.clock()
+            events = self._absorb(now)
+            if self.operational:
+                self.unanswered[line] += 1
+                events += self._decide(now)
         self._emit(events)
 
     # ------------------------------------------------------------------ the rule
@@ -179,9 +235,15 @@ class LineRedundancyMaster:
         last = self.line_last[active]
         if last is None and self.line_last[other] is None:
             return []                               # nothing heard yet: not armed
-        moved = [n for n in self.node_ids
-                 if self.heard[other].get(n, float("-inf")) > max(self.heard[active].get(n, float("-inf")),
-                                                                  self.switched_at)]
+        moved = []
+        other_last, heard_active = self.line_last[other], self.heard[active]
+        # the nodes heard on the other line later than on this one: only looked for when the other
+        # line's last frame is newer than the switch and than some node's last frame here
+        if other_last is not None and other_last > self.switched_at and (
+                len(heard_active) < len(self.node_ids) or other_last > min(heard_active.values())):
+            moved = [n for n in self.node_ids
+                     if self.heard[other].get(n, float("-inf")) > max(heard_active.get(n, float("-inf")),
+                                                                      self.switched_at)]
         # right after a switch of its own the master waits for the nodes: frames they still send
         # on the old line until they toggle are not a reason to go back
         if 2 * len(moved) > len(self.node_ids) and now - self.switched_at >= self.hold_off:
@@ -229,10 +291,12 @@ class LineRedundancyMaster:
                             else ""), duration)
 
     def check(self, now: float | None = None) -> None:
-        """One pass of the timer (tests call it with their own clock)."""
+        """The rule's judgement at `now` (the timer's pass; tests call it with their own clock)."""
         now = self.clock() if now is None else now
         with self._lock:
-            events = self._decide(now)
+            self._checked_at = now
+            events = self._absorb(now)
+            events += self._decide(now)
             heard = [t for t in self.line_last if t is not None]
             if heard and self.operational and not self.lost and now - max(heard) > self.lost_after:
                 self.lost = True
@@ -244,7 +308,8 @@ class LineRedundancyMaster:
     def bridging(self, now: float | None = None) -> bool:
         """Is a switch under way (missing process data is the switch, not node loss)?"""
         now = self.clock() if now is None else now
-        self.check(now)     # a loss of both lines is reported before anyone judges the silence
+        if not 0.0 <= now - self._checked_at < CHECKED_RECENTLY:
+            self.check(now)     # a loss of both lines is reported before anyone judges the silence
         with self._lock:
             if self.lost:
                 return False
@@ -273,26 +338,36 @@ class LineRedundancyMaster:
                     logger.exception("line event callback failed")
 
     def _run(self) -> None:
-        """The timer. A pass that wakes late (this process was starved: frames may wait unread)
-        judges nothing; the time it lost is not silence of either line (as health.py does)."""
         due = time.monotonic() + TICK
         while not self._stop.wait(max(0.0, due - time.monotonic())):
             late = time.monotonic() - due
             due = time.monotonic() + TICK
-            if late > STARVED_SLACK and self.clock is time.monotonic:
-                with self._lock:
-                    for line in (0, 1):
-                        if self.line_last[line] is not None:
-                            self.line_last[line] += late
-                        for node in self.heard[line]:
-                            self.heard[line][node] += late
-                continue
-            self.check()
+            self.timer_pass(late)
+
+    def timer_pass(self, late: float) -> None:
+        """One pass of the timer, `late` s after it was due (an ArmNetwork's monitor runs it,
+        standalone its own thread). A pass that wakes late (this process was starved: frames may
+        wait unread) judges nothing; the time it lost is not silence of either line (as
+        health.py does)."""
+        if late > STARVED_SLACK and self.clock is time.monotonic:
+            with self._lock:
+                for line in (0, 1):
+                    if self.line_last[line] is not None:
+                        self.line_last[line] += late
+                    for node in self.heard[line]:
+                        self.heard[line][node] += late
+            return
+        self.check()
 
     def stop(self) -> None:
-        for observers, observer in ((self.bus.rx_observers, self.on_rx), (self.bus.tx_observers, self.on_tx)):
+        for observers, observer in ((self.bus.rx_observers, self.on_rx),
+                                    (self.bus.tx_watch.get(od.SYNC_COB_ID_DEFAULT, []), self.on_tx)):
             if observer in observers:
                 observers.remove(observer)
+        if self.bus.standby_passes is standby_passes:
+            self.bus.standby_passes = None
+        if self.bus.rx_note is self._seen:
+            self.bus.rx_note = None
         self._stop.set()
         if self._thread is not None:
             self._thread.join(1.0)
@@ -326,7 +401,7 @@ def attach(net) -> LineRedundancyMaster | None:
     master = LineRedundancyMaster(
         bus, sorted(ids), node_of, node_period=max(n.heartbeat_period for n in net.config.nodes),
         master_period=net.config.bus.master_heartbeat_period, settings=settings_of(net.config), on_event=on_event,
-        clock=clock)
+        clock=clock, timer=False)     # the network's monitor thread runs its timer (timer_pass)
     net.line_redundancy = master
     return master
 

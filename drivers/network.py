@@ -75,6 +75,8 @@ class NetworkStats:
 class _Listener(can.Listener):
     """Replaces canopen's MessageListener: filters and counts, never raises."""
 
+    needs_rx_line = False     # a redundant pair need not tag frames with their line for it
+
     def __init__(self, arm: "ArmNetwork"):
         self.arm = arm
 
@@ -174,6 +176,8 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.controller_period: float | None = None
         self._hb_sync = 0
         self._hb_due_now = False
+        self._next_own_heartbeat = float("inf")        # wall-clock heartbeat producer (health.py), set by its timer
+        self._own_heartbeat_lock = threading.Lock()
         self._lockstep_wait_expired = 0.0     # s of the last TPDO wait that ran out
         self._connected = False
         self._stop = threading.Event()

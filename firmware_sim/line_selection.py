@@ -25,15 +25,15 @@ Every toggle is a LineEvent in `events` (`spacearm sim` prints them).
 """
 from __future__ import annotations
 
-import threading
 import time
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen import redundancy_object as rdn
 from spacearm.base.transport.redundant import LINE_NAMES, rx_line, rx_state
 
-TICK = 0.002   # s: the toggle timer's resolution
+TICK = 0.002   # s: the toggle timer's resolution while a node searches (the simulator's timer runs it)
 
 
 @dataclass(frozen=True)
@@ -52,20 +52,22 @@ class NodeLineRule:
 
     def __init__(self, node):
         self.node = node
+        # SimNode.param: cached until a write reaches the object (read for every master heartbeat)
+        self._read = getattr(node, "param", None) or node.get
         self.line = self._get(rdn.BDEFAULT) & 1
         self.toggle_at: float | None = None
         self.searching = False
 
     def _get(self, sub: int) -> int:
         try:
-            return int(self.node.get(rdn.REDUNDANCY, sub))
+            return int(self._read(rdn.REDUNDANCY, sub))
         except Exception:
             return rdn.DEFAULTS[sub]
 
     def master(self) -> tuple[int, float] | None:
         """(node ID, consumer time s) of the redundancy master (1016h:1), None if unset."""
         try:
-            value = self.node.get(od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB)
+            value = self._read(od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB)
         except Exception:
             return None
         producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
@@ -129,8 +131,9 @@ class LineSelection:
                 self.rules[node.node_id] = NodeLineRule(node)
             self._gate(node)
         self.bus.tx_router = self.tx_line
-        self._thread = threading.Thread(target=self._run, name="sim-line-selection", daemon=True)
-        self._thread.start()
+        self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
+        # no thread of its own: the simulator's timer runs timer_pass() (a thread more would cost
+        # every pass of peer_timing's per-thread scan, and a wake-up every TICK)
 
     # ------------------------------------------------------------------ lines
     def line_of(self, node) -> int:
@@ -173,17 +176,22 @@ class LineSelection:
         on_heartbeat = node.on_heartbeat
         check_consumers = node.check_consumers
 
+        rule = self.rules.get(node.node_id)
+        own_line = rule if rule is not None else _ON_LINE_A
+        rx = rx_state
+
         def heartbeat(producer: int, now: float) -> None:
-            if not self.hears(node):
+            line = getattr(rx, "line", None)      # hears(node), inlined: every node, every master heartbeat
+            if line is not None and line != own_line.line:
                 return
-            rule = self.rules.get(node.node_id)
-            master = rule.master() if rule is not None else None
-            if master is not None and producer == master[0] and rule.master_heard():
-                self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
+            # only a node that searches or is due to toggle has anything to end here (master_heard)
+            if rule is not None and (rule.searching or rule.toggle_at is not None):
+                master = rule.master()
+                if master is not None and producer == master[0] and rule.master_heard():
+                    self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
         def consumers(now: float) -> None:
-            rule = self.rules.get(node.node_id)
             master = rule.master() if rule is not None else None
             if master is not None:
                 last = node.consumer_last.get(master[0])
@@ -211,26 +219,32 @@ class LineSelection:
         lockstep controller (Simulator time_base 'sync'), else the monotonic clock."""
         return self.sim.plant.time if getattr(self.sim, "sync_time_base", False) else time.monotonic()
 
-    def _run(self) -> None:
-        while not self.sim._stop.wait(TICK):
-            now = self.clock()
-            for node_id, rule in self.rules.items():
-                node = self.sim.nodes[node_id]
-                if not rule.due(now) or not node.powered or node.faults.silent:
-                    continue
-                master = rule.master()
-                if master is None:
-                    rule.toggle_at = None
-                    continue
-                with self.sim._sync_lock:
-                    kind = rule.toggle(now, master[1])
-                    self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
-                    node.next_heartbeat = 0.0     # the producer restarts on the new line
-                    node.send_heartbeat()
-                    if kind == "no_master":
-                        self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
-                        node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
-                        node.on_heartbeat_lost(master[0])
+    def timer_pass(self, locked: bool = False) -> bool:
+        """Toggle the nodes that are due: from the simulator's timer thread, and on the SYNC time
+        base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock). Returns
+        whether a node still searches (the timer then runs every TICK)."""
+        searching = [(node_id, rule) for node_id, rule in self.rules.items() if rule.toggle_at is not None]
+        if not searching:
+            return False        # the usual pass: nothing more than this
+        now = self.clock()
+        for node_id, rule in searching:
+            node = self.sim.nodes[node_id]
+            if not rule.due(now) or not node.powered or node.faults.silent:
+                continue
+            master = rule.master()
+            if master is None:
+                rule.toggle_at = None
+                continue
+            with nullcontext() if locked else self.sim._sync_lock:
+                kind = rule.toggle(now, master[1])
+                self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
+                node.next_heartbeat = 0.0     # the producer restarts on the new line
+                node.send_heartbeat()
+                if kind == "no_master":
+                    self.events.append(LineEvent(time.monotonic(), node.name, kind, rule.line))
+                    node.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([master[0]]))
+                    node.on_heartbeat_lost(master[0])
+        return any(rule.toggle_at is not None for rule in self.rules.values())
 
 
 def attach(sim) -> LineSelection | None:

@@ -151,6 +151,7 @@ class SimNode:
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
         self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
+        self._consumer_entries: tuple[dict[int, float], dict] | None = None   # consumer_entries(), what it read
         self.local.params_cache = self._params
         self.sdo_session = SdoSession()
 
@@ -414,15 +415,22 @@ class SimNode:
 
     # ------------------------------------------------------------------ heartbeat consumer
     def consumer_entries(self) -> dict[int, float]:
-        """1016h: producer node ID -> timeout (s), for the active entries."""
+        """1016h: producer node ID -> timeout (s), for the active entries. Every consumed
+        heartbeat and every timer pass asks, a write is rare: kept while the param() cache
+        still holds the very values it was built from (a write or a reset drops them)."""
+        cached = self._consumer_entries
+        if cached is not None and self._params.items() >= cached[1].items():
+            return cached[0]
         out = {}
-        if od.CONSUMER_HEARTBEAT not in self.od:     # a device without a heartbeat consumer
-            return out
-        for sub in range(1, self.get(od.CONSUMER_HEARTBEAT, 0) + 1):
-            value = self.get(od.CONSUMER_HEARTBEAT, sub)
-            producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
-            if producer and ms:
-                out[producer] = ms / 1000.0
+        read = {}
+        if od.CONSUMER_HEARTBEAT in self.od:     # else a device without a heartbeat consumer
+            count = read[(od.CONSUMER_HEARTBEAT, 0)] = self.param(od.CONSUMER_HEARTBEAT, 0)
+            for sub in range(1, count + 1):
+                value = read[(od.CONSUMER_HEARTBEAT, sub)] = self.param(od.CONSUMER_HEARTBEAT, sub)
+                producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
+                if producer and ms:
+                    out[producer] = ms / 1000.0
+        self._consumer_entries = (out, read)
         return out
 
     def on_heartbeat(self, producer: int, now: float) -> None:

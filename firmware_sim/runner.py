@@ -142,6 +142,7 @@ class Simulator:
         self._sync_ids: set[int] = {od.SYNC_COB_ID_DEFAULT}
         self._stop = threading.Event()
         self._hb_thread: threading.Thread | None = None
+        self.line_selection = None    # line_selection.LineSelection on a redundant pair (start)
 
     # ------------------------------------------------------------------ public
     def start(self) -> "Simulator":
@@ -388,6 +389,8 @@ class Simulator:
             if now >= due - 1e-9:
                 node.send_heartbeat()
                 self._next_sync_heartbeat[node.node_id] = max(due + period, now)
+        if self.line_selection is not None:
+            self.line_selection.timer_pass(locked=True)    # a toggle falls due on this clock too
 
     def _heartbeat_loop(self) -> None:
         """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
@@ -431,6 +434,9 @@ class Simulator:
                     due_hb = self._heartbeat_due(node, now)
                 if due_hb:
                     wake = min(wake, due_hb)
+            selection = self.line_selection
+            if selection is not None and selection.timer_pass():
+                wake = min(wake, now + line_selection.TICK)
             if self.diag_node_id is not None:
                 if self.lateness.due(now):
                     self._send(od.TPDO_BASE[0] + self.diag_node_id, self.lateness.report(now))

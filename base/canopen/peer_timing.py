@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import os
 import struct
+import threading
 import time
 from dataclasses import dataclass
 
@@ -98,19 +99,49 @@ def _schedstat(path: str) -> tuple[int, int]:
     return int(fields[0]), int(fields[1])
 
 
+_task_files: dict[str, int] = {}     # thread ID -> open descriptor of its schedstat (read with pread)
+_task_lock = threading.Lock()
+
+
+def _forget_task_files() -> None:
+    for fd in _task_files.values():
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    _task_files.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_task_files)    # a child's threads are others
+
+
 def _task_times() -> tuple[int, int, int]:
     """(CPU ns, run-queue ns) summed over this process's threads, and the calling thread's
-    run-queue ns; zeros where /proc cannot say."""
+    run-queue ns; zeros where /proc cannot say. Each thread's file stays open (one pread per
+    thread and wake, not open/read/close): the cost of a pass grows with the process's
+    threads, and the simulator's timer pays it on every wake."""
     cpu = queue = 0
     try:
         own = _schedstat("/proc/thread-self/schedstat")[1]
-        for tid in os.listdir("/proc/self/task"):
-            try:
-                c, q = _schedstat(f"/proc/self/task/{tid}/schedstat")
-            except (OSError, ValueError, IndexError):
-                continue            # a thread that ended meanwhile
-            cpu += c
-            queue += q
+        with _task_lock:
+            tids = os.listdir("/proc/self/task")
+            for tid in tids:
+                fd = _task_files.get(tid)
+                try:
+                    if fd is None:
+                        fd = _task_files[tid] = os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
+                    fields = os.pread(fd, 128, 0).split()
+                    c, q = int(fields[0]), int(fields[1])
+                except (OSError, ValueError, IndexError):
+                    if fd is not None:          # a thread that ended meanwhile
+                        os.close(_task_files.pop(tid))
+                    continue
+                cpu += c
+                queue += q
+            if len(_task_files) > len(tids):
+                for tid in set(_task_files) - set(tids):
+                    os.close(_task_files.pop(tid))
     except (OSError, ValueError, IndexError):
         return 0, 0, 0
     return cpu, queue, own

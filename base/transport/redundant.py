@@ -10,16 +10,30 @@ The pair models ECSS-E-ST-50-15C's two bus access architectures in one class:
 * parallel access (the master): frames of both lines are received, each tagged with its
   line (`rx_line()` in the receiving thread, `rx_observers(line, can_id, data, t)`), and
   every frame is sent on the active line (`active`), which the master's redundancy manager
-  moves (drivers/line_redundancy.py);
+  moves (drivers/line_redundancy.py); `standby_passes(can_id)`, when set, names the frames of
+  the line that is not active that still reach the application (the master: heartbeats and
+  EMCY only; the standard's master watches the standby line for the nodes' life, it does not
+  run process data off it), while the observers still see all of them;
+  `tx_watch[can_id]` are callbacks(line, can_id) for the few COB-IDs someone counts (SYNC),
+  looked up by COB-ID so the other frames cost nothing; `rx_note`, when set (two sets, one
+  per line), takes the COB-IDs of the active line's frames other than heartbeats in place of
+  the observers on the in-process pair (one set insertion per frame; the master folds them
+  in at its next SYNC or timer pass);
 * selective access (each simulated node): `tx_router(can_id) -> line` sends a frame on the
   line its sender listens on (None: on both, for frames of no node), and the simulator
   delivers a received frame only to the nodes listening on its line
-  (firmware_sim/line_selection.py).
+  (firmware_sim/line_selection.py); `tx_owners[can_id].line`, where known, spares the router
+  call per frame of a burst.
 
 Faults of one line (line_faults.py: cut, babble, stuck_dominant, error_passive,
 intermittent) are applied where a frame enters the line, so every receiver loses the same
 frame, and again on receipt for the deterministic ones (a cut line also cuts frames of a
 plain bus attached to it).
+
+Cost: a second line must not make a cycle dearer (issue 34: <= 10 %). On the in-process pair a
+frame costs one fault check and the observers on top of one line; the thread-local is set only
+for listeners that read it (`needs_rx_line`, default True; the master's listener says False);
+a burst of the master goes to the active line in one call, with no per-frame routing.
 
 Why a thread-local for the receive line: python-can's Listener API has no place for it,
 and the pair delivers each frame in the thread that reads it (the sender's thread on the
@@ -77,16 +91,27 @@ class _LineListener(can.Listener):
     def __init__(self, pair: "RedundantBus", line: int, target: can.Listener):
         self.pair, self.line, self.target = pair, line, target
         self._on_frame = getattr(target, "on_frame", None)
+        self._tags = getattr(target, "needs_rx_line", True)
         self._fault = pair.faults[line]
 
     def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
         # the hot path of every frame on the in-process bus: no fault, no method call
-        if self._fault.mode != "ok" and self.pair._rx_blocked(self.line):
+        pair, line = self.pair, self.line
+        if self._fault.mode != "ok" and pair._rx_blocked(line):
             return
-        for observer in self.pair.rx_observers:
-            observer(self.line, can_id, data, timestamp)
+        note = pair.rx_note
+        if note is not None and line == pair.active and can_id & 0x780 != 0x700:
+            note[line].add(can_id)          # instead of the observers: the owner folds it in later
+        else:
+            for observer in pair.rx_observers:
+                observer(line, can_id, data, timestamp)
+        if line != pair.active and pair.standby_passes is not None and not pair.standby_passes(can_id):
+            return
+        if not self._tags and self._on_frame is not None:
+            self._on_frame(can_id, data, timestamp)
+            return
         previous = getattr(_rx, "line", None)
-        _rx.line = self.line
+        _rx.line = line
         try:
             if self._on_frame is not None:
                 self._on_frame(can_id, data, timestamp)
@@ -100,6 +125,8 @@ class _LineListener(can.Listener):
         if self.pair._rx_blocked(self.line):
             return
         self.pair._observe(self.line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        if not self.pair._reaches_application(self.line, msg):
+            return
         previous, _rx.line = rx_line(), self.line
         try:
             self.target.on_message_received(msg)
@@ -130,7 +157,10 @@ class RedundantBus(can.BusABC):
         self.active = 0
         self.tx_router: Callable[[int], int | None] | None = None
         self.rx_observers: list[Callable[[int, int, bytes, float], None]] = []
-        self.tx_observers: list[Callable[[int, int], None]] = []
+        self.standby_passes: Callable[[int], bool] | None = None
+        self.rx_note: tuple[set[int], set[int]] | None = None
+        self.tx_owners: dict[int, object] | None = None
+        self.tx_watch: dict[int, list[Callable[[int, int], None]]] = {}
         self.sent = [0, 0]
         self._senders = tuple(frame_sender(line) for line in self.lines)
         self._batch_senders = tuple(frames_sender(line) for line in self.lines)
@@ -138,6 +168,10 @@ class RedundantBus(can.BusABC):
         self._closing = threading.Event()
         self.channel_info = self.channel_id = f"{spec_a}{PAIR_SEPARATOR}{spec_b}"
         super().__init__(channel=self.channel_info)
+        self._readers: list[threading.Thread] = []
+        self._start_readers()
+
+    def _start_readers(self) -> None:
         self._readers = [threading.Thread(target=self._read, args=(i,), name=f"can-line-{LINE_NAMES[i]}",
                                           daemon=True) for i in (0, 1)]
         for reader in self._readers:
@@ -151,6 +185,11 @@ class RedundantBus(can.BusABC):
         for observer in self.rx_observers:
             observer(line, can_id, data, timestamp)
 
+    def _reaches_application(self, line: int, msg: can.Message) -> bool:
+        """A frame of the standby line reaches the application only if `standby_passes` says so."""
+        passes = self.standby_passes
+        return line == self.active or passes is None or msg.is_error_frame or passes(msg.arbitration_id)
+
     def _read(self, line: int) -> None:
         bus = self.lines[line]
         while not self._closing.is_set():
@@ -161,11 +200,16 @@ class RedundantBus(can.BusABC):
                     return
                 continue
             if msg is not None:
-                # observed here, as it arrives: the queue's reader (a Notifier) may run much later
-                # on a loaded machine, and the master's rule judges a line by when its frames came
-                if not (self._rx_blocked(line) and not msg.is_error_frame):
-                    self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
-                self._queue.put((line, msg))
+                self._arrived(line, msg)
+
+    def _arrived(self, line: int, msg: can.Message) -> None:
+        """A frame of `line` for the queue the application reads. Observed here, as it arrives:
+        the queue's reader (a Notifier) may run much later on a loaded machine, and the
+        master's rule judges a line by when its frames came."""
+        if not (self._rx_blocked(line) and not msg.is_error_frame):
+            self._observe(line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
+        if self._reaches_application(line, msg):
+            self._queue.put((line, msg))
 
     def _recv_internal(self, timeout):
         try:
@@ -189,8 +233,10 @@ class RedundantBus(can.BusABC):
     def _admit(self, line: int, can_id: int, data: bytes) -> bool:
         """The frame enters the line unless the line's fault keeps it off (then what
         receivers see instead is sent)."""
-        for observer in self.tx_observers:
-            observer(line, can_id)
+        watchers = self.tx_watch.get(can_id)
+        if watchers:
+            for watcher in watchers:
+                watcher(line, can_id)
         fault = self.faults[line]
         if fault.mode == "ok" or fault.passes():
             self.sent[line] += 1
@@ -213,17 +259,46 @@ class RedundantBus(can.BusABC):
                 self.lines[line].send(msg, timeout)
 
     def send_frame(self, can_id: int, data: bytes) -> None:
+        if self.tx_router is None:      # the master: the active line only
+            line = self.active
+            if self._admit(line, can_id, data):
+                self._senders[line](can_id, data)
+            return
         for line in self._tx_lines(can_id):
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
 
     def send_frames(self, frames) -> None:
         """A burst of (can_id, data): each line's share in one write, order kept per line."""
-        per_line: tuple[list, list] = ([], [])
-        for can_id, data in frames:
-            for line in self._tx_lines(can_id):
-                if self._admit(line, can_id, data):
-                    per_line[line].append((can_id, data))
+        router, watch, faults = self.tx_router, self.tx_watch, self.faults
+        if not isinstance(frames, list):
+            frames = list(frames)
+        if faults[0].mode == "ok" and faults[1].mode == "ok" and not (
+                watch and any(frame[0] in watch for frame in frames)):
+            # the common case, without a call per frame: no fault to apply, nothing watched
+            if router is None:
+                self.sent[self.active] += len(frames)
+                if frames:
+                    self._batch_senders[self.active](frames)
+                return
+            per_line: tuple[list, list] = ([], [])
+            owners = self.tx_owners if self.tx_owners is not None else {}
+            for frame in frames:
+                owner = owners.get(frame[0])
+                line = owner.line if owner is not None else router(frame[0])
+                if line is None:
+                    per_line[0].append(frame)
+                    per_line[1].append(frame)
+                else:
+                    per_line[line].append(frame)
+            self.sent[0] += len(per_line[0])
+            self.sent[1] += len(per_line[1])
+        else:
+            per_line = ([], [])
+            for can_id, data in frames:
+                for line in self._tx_lines(can_id):
+                    if self._admit(line, can_id, data):
+                        per_line[line].append((can_id, data))
         for line in (0, 1):
             if per_line[line]:
                 self._batch_senders[line](per_line[line])
@@ -240,8 +315,38 @@ class RedundantBus(can.BusABC):
         super().shutdown()
 
 
+class _LineQueue:
+    """An in-process line's receive queue, as the senders on that line see it: a frame put
+    there goes straight to the pair's queue, tagged with its line, in the sender's thread. No
+    reader thread per line: two threads more would wake ten times a second each and lengthen
+    every pass of peer_timing's per-thread scan. `queue` (the senders' test for frames still
+    waiting, before they deliver inline) is the pair's: order is kept across both lines."""
+
+    def __init__(self, pair: "InlineRedundantBus", line: int):
+        self.pair, self.line = pair, line
+        self.queue = pair._queue.queue      # queue.Queue keeps its deque for life
+
+    def empty(self) -> bool:
+        return self.pair._queue.empty()
+
+    def put(self, msg: can.Message, block: bool = True, timeout: float | None = None) -> None:
+        self.pair._arrived(self.line, msg)
+
+    def get(self, block: bool = True, timeout: float | None = None):
+        raise queue.Empty     # the line is read through the pair
+
+
 class InlineRedundantBus(RedundantBus):
     """A pair of in-process buses: listeners may take frames inline in the sender's thread."""
+
+    def _start_readers(self) -> None:
+        from can.interfaces.virtual import channels_lock
+
+        for i, line in enumerate(self.lines):
+            tagged = _LineQueue(self, i)
+            with channels_lock:
+                line.channel[line.channel.index(line.queue)] = tagged
+                line.queue = tagged
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         for i, line in enumerate(self.lines):

@@ -60,7 +60,7 @@ def test_slave_ttoggle_zero_never_toggles():
 class FakeBus:
     def __init__(self):
         self.active = 0
-        self.rx_observers, self.tx_observers = [], []
+        self.rx_observers, self.tx_watch, self.standby_passes = [], {}, None
 
 
 class Clock:
