@@ -84,8 +84,10 @@ class StealTimeline:
     def worst_cpu(self, start: float, end: float) -> float:
         """s of steal of the most-stolen vCPU between the last sample before `start` and the
         first after `end` (USER_HZ ticks: 10 ms resolution)."""
-        before = [s for t, s in self._samples if t <= start][-1:] or self._samples[:1]
-        after = [s for t, s in self._samples if t >= end][:1] or self._samples[-1:]
+        samples = list(self._samples)
+        # a window reaching before the first sample (or past the last) starts (ends) there
+        before = [s for t, s in samples if t <= start][-1:] or [s for _, s in samples[:1]]
+        after = [s for t, s in samples if t >= end][:1] or [s for _, s in samples[-1:]]
         if not before or not after:
             return 0.0
         return max((b - a for a, b in zip(before[0], after[0])), default=0) / os.sysconf("SC_CLK_TCK")
