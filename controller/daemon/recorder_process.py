@@ -84,8 +84,9 @@ class RecorderProcess:
                   missing: tuple[str, ...]) -> None:
         """The /cycle message (channels.py), handed over as one packed record."""
         if len(dq_cmd) != len(q):       # not the fixed layout: as a whole message, same content
-            self.put("/cycle", t, _cycle_message(t, sync, cycle, q_cmd, dq_cmd, q, dq, tau, wrench, end_effector,
-                                                 state, mode, period_error, execution, io_wait, missing))
+            self.put("/cycle", t, record_stream.cycle_message(
+                t, sync, cycle, q_cmd.tolist(), list(dq_cmd), q.tolist(), dq.tolist(), tau.tolist(), wrench.tolist(),
+                end_effector, state, mode, period_error, execution, io_wait, missing))
             return
         labels = (end_effector, state, mode, missing)
         if labels != self._labels:
@@ -175,10 +176,3 @@ def cycle_record(t: float, sync: int, cycle: int, period_error: float, execution
     head = record_stream.CYCLE_HEAD.pack(len(q), len(wrench), t, sync, cycle, period_error, execution, io_wait)
     return record_stream.FRAME.pack(len(head) + 8 * len(values), record_stream.CYCLE) + head + values.tobytes()
 
-
-def _cycle_message(t, sync, cycle, q_cmd, dq_cmd, q, dq, tau, wrench, end_effector, state, mode,
-                   period_error, execution, io_wait, missing) -> dict[str, Any]:
-    return {"t": t, "sync": sync, "cycle": cycle, "q_cmd": q_cmd.tolist(), "dq_cmd": list(dq_cmd),
-            "q": q.tolist(), "dq": dq.tolist(), "tau": tau.tolist(), "wrench": wrench.tolist(),
-            "end_effector": end_effector, "state": state, "mode": mode, "period_error": period_error,
-            "execution": execution, "io_wait": io_wait, **({"missing": list(missing)} if missing else {})}

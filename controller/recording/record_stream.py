@@ -94,11 +94,19 @@ class StreamDecoder:
         layout = _doubles.get(count) or _doubles.setdefault(count, struct.Struct(f"<{count}d"))
         values = list(layout.unpack_from(payload, CYCLE_HEAD.size))
         end_effector, state, mode, missing = self._labels
-        # the keys in the order the cycle used to build them, so the JSON reads the same
-        message = {"t": t, "sync": sync, "cycle": cycle, "q_cmd": values[:n], "dq_cmd": values[n:2 * n],
-                   "q": values[2 * n:3 * n], "dq": values[3 * n:4 * n], "tau": values[4 * n:5 * n],
-                   "wrench": values[5 * n:], "end_effector": end_effector, "state": state, "mode": mode,
-                   "period_error": period_error, "execution": execution, "io_wait": io_wait}
-        if missing:
-            message["missing"] = missing
-        return t, message
+        return t, cycle_message(t, sync, cycle, values[:n], values[n:2 * n], values[2 * n:3 * n],
+                                values[3 * n:4 * n], values[4 * n:5 * n], values[5 * n:], end_effector, state,
+                                mode, period_error, execution, io_wait, missing)
+
+
+def cycle_message(t: float, sync: int, cycle: int, q_cmd: list, dq_cmd: list, q: list, dq: list, tau: list,
+                  wrench: list, end_effector: str, state: str, mode: str, period_error: float, execution: float,
+                  io_wait: float, missing) -> dict[str, Any]:
+    """The /cycle message (channels.py), its keys in the order the cycle always built them, so
+    the JSON reads the same and a reader listing columns in file order sees the same columns."""
+    message = {"t": t, "sync": sync, "cycle": cycle, "q_cmd": q_cmd, "dq_cmd": dq_cmd, "q": q, "dq": dq,
+               "tau": tau, "wrench": wrench, "end_effector": end_effector, "state": state, "mode": mode,
+               "period_error": period_error, "execution": execution, "io_wait": io_wait}
+    if missing:
+        message["missing"] = list(missing)
+    return message
