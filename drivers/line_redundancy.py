@@ -169,24 +169,26 @@ class LineRedundancyMaster:
                     self.operational.add(node)
                 else:
                     self.operational.discard(node)
-            events += self._heard(line, node, now)
+            events += self._heard(line, (node,), now)
         if events:
             self._emit(events)
 
-    def _heard(self, line: int, node: int, now: float) -> list[LineEvent]:
-        """Under the lock: a frame of `node` came on `line`."""
-        self.heard[line][node] = now
+    def _heard(self, line: int, nodes, now: float) -> list[LineEvent]:
+        """Under the lock: frames of `nodes` came on `line` (as of now)."""
+        heard = self.heard[line]
+        for node in nodes:
+            heard[node] = now
         self.line_last[line] = now
         self.unanswered[line] = 0
         self.left_silent_at[line] = float("-inf")
         self.lost = False
-        if line == self.bus.active:
-            if node in self.pending:
-                self.pending.discard(node)
-                if not self.pending:
-                    return [self._complete(now)]
-            return []
-        return self._decide(now)
+        if line != self.bus.active:
+            return self._decide(now)
+        if self.pending and not self.pending.isdisjoint(nodes):
+            self.pending.difference_update(nodes)
+            if not self.pending:
+                return [self._complete(now)]
+        return []
 
     def _absorb(self, now: float) -> list[LineEvent]:
         """Under the lock: the node frames the hot path only noted, as heard now (once per
@@ -200,21 +202,8 @@ class LineRedundancyMaster:
             seen.difference_update(ids)    # not clear(): a frame noted meanwhile stays for the next pass
             nodes = set(map(self.node_of, ids))
             nodes.discard(None)
-            if not nodes:
-                continue
-            heard = self.heard[line]
-            for node in nodes:
-                heard[node] = now
-            self.line_last[line] = now
-            self.unanswered[line] = 0
-            self.left_silent_at[line] = float("-inf")
-            self.lost = False
-            if line != self.bus.active:
-                events += self._decide(now)
-            elif self.pending and not self.pending.isdisjoint(nodes):
-                self.pending -= nodes
-                if not self.pending:
-                    events.append(self._complete(now))
+            if nodes:
+                events += self._heard(line, nodes, now)
         return events
 
     def on_tx(self, line: int, can_id: int) -> None:
