@@ -97,6 +97,11 @@ class ControllerCore:
         self.last_measurement: Measurement | None = None
         self._enable_started = 0.0
         self._pending: "queue.Queue[_Pending]" = queue.Queue()
+        # A daemon answers a command only once the cycle that took it has published its status:
+        # a console that reads `status` right after "ok" sees its own command (a mode that
+        # started, a state that changed), never the cycle before it.
+        self.defer_answers = False
+        self._answers: list[tuple[Future, Any, BaseException | None]] = []
         self._lock = threading.Lock()
 
     @property
@@ -321,17 +326,30 @@ class ControllerCore:
             try:
                 pending = self._pending.get_nowait()
             except queue.Empty:
-                return
+                break
             if not pending.future.set_running_or_notify_cancel():
                 continue
+            result, error = None, None
             try:
-                pending.future.set_result(pending.apply(m.time, m))
+                result = pending.apply(m.time, m)
             except CommandRefused as exc:
-                pending.future.set_exception(exc)
+                error = exc
             except PlanningError as exc:
-                pending.future.set_exception(CommandRefused(str(exc), ErrorCode.PLANNING_REFUSED))
+                error = CommandRefused(str(exc), ErrorCode.PLANNING_REFUSED)
             except Exception as exc:  # a bug in a command must not kill the cycle
-                pending.future.set_exception(CommandRefused(f"internal error: {exc!r}", ErrorCode.INTERNAL))
+                error = CommandRefused(f"internal error: {exc!r}", ErrorCode.INTERNAL)
+            self._answers.append((pending.future, result, error))
+        if not self.defer_answers:
+            self.answer_commands()
+
+    def answer_commands(self) -> None:
+        """Hand the commands this cycle took their answers (the daemon: after its snapshot)."""
+        answers, self._answers = self._answers, []
+        for future, result, error in answers:
+            if error is None:
+                future.set_result(result)
+            else:
+                future.set_exception(error)
 
     # ---- commands (run inside the cycle via submit) ------------------------------------
     def cmd_enable(self, t: float, m: Measurement) -> str:

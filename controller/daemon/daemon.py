@@ -95,6 +95,7 @@ class Daemon:
             settings=self.arm.supervision), names)
         self.core = ControllerCore(self.supervisor, names, options.period,
                                    a_max=np.array([j.limits.acceleration for j in self.arm.joints]))
+        self.core.defer_answers = True     # answered after the cycle's snapshot: status shows the command
         self.lease = ControlLease()
         self.stats = CycleStats(options.thresholds)
         bus_config = load_bus_config(options.bus_config)
@@ -237,6 +238,12 @@ class Daemon:
         measurement = self.hardware.read(tick.time)
         if self.vision is not None:
             self.vision.on_cycle(measurement.sync_counter)
+        try:
+            return self._cycle(tick, measurement)
+        finally:
+            self.core.answer_commands()     # a cycle that raised still answers what it took
+
+    def _cycle(self, tick, measurement: Measurement) -> Snapshot:
         command = self.core.update(measurement)
         self.hardware.write(command, self.core.drive_request if self.core.state is MachineState.STOPPED else None)
         events = self.core.drain_events()
@@ -251,6 +258,7 @@ class Daemon:
                             self.core.mode_progress(),
                             self.core.stop_reason, self.core.motions_finished)
         self.snapshot = snapshot
+        self.core.answer_commands()
         self._record(snapshot, execution, events)
         return snapshot
 
