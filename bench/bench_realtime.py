@@ -234,7 +234,7 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     import cv2
     from bench.reference_work import reference_loop_seconds
     from spacearm.base.config.board import load_board
-    from spacearm.firmware_sim.calibration_board import board_layer
+    from spacearm.firmware_sim.calibration_board import board_patch
     from spacearm.firmware_sim.camera.render_process import RENDER_OPENCV_THREADS
     from spacearm.firmware_sim.camera.renderer import FlatLayer
     from spacearm.firmware_sim.camera.simulator import CameraSimulator
@@ -249,8 +249,8 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         camera_T_board = np.eye(4)                      # board facing the camera, centred, `distance` away
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
-        albedo, alpha = board_layer(camera_T_board, board, c.K, c.dist, (c.width, c.height))
-        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance)],
+        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height))
+        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance, origin)],
                                         gain=cam.sensor.electrons_per_unit)      # as the camera service does
         cam.sensor.expose_electrons(electrons, cam.rng)
 

@@ -68,10 +68,12 @@ EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline bef
 @dataclass(frozen=True)
 class FlatLayer:
     """A flat object drawn straight into the output (distorted) image, parallel to the wall:
-    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at."""
-    albedo: np.ndarray     # float32 (H, W)
-    alpha: np.ndarray      # float32 (H, W)
+    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at; the planes
+    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it)."""
+    albedo: np.ndarray     # float32 (h, w)
+    alpha: np.ndarray      # float32 (h, w)
     depth: float
+    origin: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)
@@ -520,20 +522,22 @@ class Renderer:
 
     def _lay_flat(self, img: np.ndarray, flat: FlatLayer, light: np.ndarray, shade: float) -> None:
         """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
-        over the box its coverage reaches grown by its blur's reach (OpenCV's Gaussian kernel
-        for float images reaches 4 sigma; beyond the coverage the planes are 0, so the box's
-        border reflects zeros as the whole frame's blur would see them)."""
+        over its patch grown by its blur's reach (OpenCV's Gaussian kernel for float images
+        reaches 4 sigma; beyond the patch its planes are 0, so the grown box's border reflects
+        zeros as the whole frame's blur would see them)."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-        x, y, w, h = cv2.boundingRect((flat.alpha > 0).view(np.uint8))
+        (x, y), (h, w) = flat.origin, flat.alpha.shape
         if w == 0 or h == 0:
             return
         reach = int(np.ceil(4 * sigma)) + 2
         H, W = img.shape
         x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
+                 for plane in (flat.albedo, flat.alpha)]
         box = np.s_[y0:y1, x0:x1]
-        lit = cv2.multiply(_blur(flat.albedo[box], sigma), light[box], scale=shade)
+        lit = cv2.multiply(_blur(grown[0], sigma), light[box], scale=shade)
         region = img[box]
-        cv2.multiply(region, cv2.subtract(1.0, _blur(flat.alpha[box], sigma)), dst=region)
+        cv2.multiply(region, cv2.subtract(1.0, _blur(grown[1], sigma)), dst=region)
         cv2.add(region, lit, dst=region)
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:

@@ -38,7 +38,7 @@ import numpy as np
 from spacearm.base.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
 from spacearm.base.spatial import inv_transform
 from spacearm.base.vision.frames import CameraTrigger
-from spacearm.firmware_sim.calibration_board import board_layer
+from spacearm.firmware_sim.calibration_board import board_patch
 from spacearm.firmware_sim.camera.renderer import FlatLayer
 from spacearm.firmware_sim.camera.scene import OruShape
 from spacearm.firmware_sim.camera.simulator import CameraSimulator
@@ -195,12 +195,12 @@ class CameraService:
             return []
         cam = self.camera.camera
         camera_T_board = inv_transform(base_T_camera) @ self.base_T_board
-        layer = board_layer(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height))
-        if layer is None:
+        patch = board_patch(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height))
+        if patch is None:
             return []
         nx, ny = self.board.inner
         centre = camera_T_board @ np.array([(nx - 1) * self.board.square / 2, (ny - 1) * self.board.square / 2, 0, 1])
-        return [FlatLayer(layer[0], layer[1], float(centre[2]))]
+        return [FlatLayer(patch[0], patch[1], float(centre[2]), patch[2])]
 
     def _site_in_view(self, base_T_camera: np.ndarray) -> MarkerSite:
         """The marker nearest to the optical axis in front of the camera."""
