@@ -63,6 +63,7 @@ BODY_HUGE_BOX = 500_000  # px: a body box this large and defocused by BODY_SHARP
 BODY_SHARP_SIGMA = 1.0   # is drawn without supersampling
 HALF_RES_SIGMA = 1.05  # px: blurs from this sigma on may be done at half resolution (_blur)
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
+BAND_ROWS = 128   # rows per band of the compositing passes (the band's planes stay in the cache)
 
 
 @dataclass(frozen=True)
@@ -148,8 +149,38 @@ def _may_halve(sigma: float, size: tuple[int, int]) -> bool:
 
 def _blur_halved(small: np.ndarray, sigma: float) -> np.ndarray:
     """The rest of _blur's half-resolution blur from the 2x2 box average `small` on."""
-    small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+    return _twice(_blur_small(small, sigma))
+
+
+def _blur_small(small: np.ndarray, sigma: float) -> np.ndarray:
+    """_blur's middle Gaussian on the 2x2 box average `small` (still at half resolution)."""
+    return cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+
+
+def _twice(small: np.ndarray) -> np.ndarray:
+    """_blur's last step: bilinear 2x up."""
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
+
+
+def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
+    """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
+    weighs the two source rows nearest to each output row with weights set by its position
+    alone, so a band cut out of the source with a row to spare on each side gives the same
+    pixels as the whole image's upsampling."""
+    a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
+    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    return band[y0 - 2 * a:y1 - 2 * a]
+
+
+def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
+    """Rows y0:y1 of _blur(image, sigma) (no halving), from the rows the kernel reaches: OpenCV's
+    float kernel reaches round(8 sigma + 1) // 2 rows, so a band cut with that many to spare on
+    each side (the image's own border where it has none) gives the whole image's pixels."""
+    if sigma < 0.1:
+        return image[y0:y1]
+    reach = int(np.ceil(4 * sigma)) + 1
+    a, b = max(y0 - reach, 0), min(y1 + reach, image.shape[0])
+    return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
 
 
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
@@ -193,13 +224,16 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
                 cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
             planes.append(buf)
         return planes[0], planes[1]
-    for levels, clear in (([int(round(min(value, 1.0) * 65535)) for _, value in polys], 0), ([0] * len(polys), 65535)):
-        buf = np.zeros((h * ss, w * ss), np.uint16) if clear == 0 else np.full((h * ss, w * ss), clear, np.uint16)
+    # one 2x2 average (the body's usual case) keeps quarter coverages exact in 8 bits, for half
+    # the memory traffic of 16 (its levels then move by < 1/510)
+    dtype, full = (np.uint8, 255) if ss * down == 2 else (np.uint16, 65535)
+    for levels, clear in (([int(round(min(value, 1.0) * full)) for _, value in polys], 0), ([0] * len(polys), full)):
+        buf = np.zeros((h * ss, w * ss), dtype) if clear == 0 else np.full((h * ss, w * ss), clear, dtype)
         for pts, level in zip(outlines, levels):
             cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
         for _ in range(int(np.log2(ss * down))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
             buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
+        planes.append(np.multiply(buf, np.float32(1.0 / full), dtype=np.float32))
     return planes[0], planes[1]
 
 
@@ -328,10 +362,10 @@ class Renderer:
         allpts = np.vstack([uv for group in [body, *groups] for uv, _ in group])
         w, h = self.camera.width, self.camera.height
         x0, y0, x1, y1 = _pixel_box(allpts, reach + 2, (w, h))
-        x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
-        if x0 < 0 or y0 < 0:
-            x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
-            y0, y1 = (y0, y1) if y0 >= 0 else (0, y1 - (y1 % 2))
+        # on even pixels, so that the blur may halve it and a halved box lies on the halved
+        # wall's pixels (_composite lays them together at half resolution)
+        x0, y0, x1, y1 = x0 - x0 % 2, y0 - y0 % 2, x1 + x1 % 2, y1 + y1 % 2
+        x1, y1 = x1 - 2 * (x1 > w), y1 - 2 * (y1 > h)
         if x1 <= x0 or y1 <= y0:
             return None
         # The body (ORU faces, plate): supersampled SS x SS while its box is small (far away: the
@@ -435,9 +469,10 @@ class Renderer:
             self._clutter_cache = {key: cached}
         return cached
 
-    def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> np.ndarray:
+    def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> tuple[np.ndarray, bool]:
         """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) uint8, 255 =
-        albedo 1 in full light. Its small bright dots are the vision's distractors at a
+        albedo 1 in full light, and whether it is at half resolution (H/2, W/2: the blurred
+        half-resolution image whose _twice is the wall; the compositing upsamples it band by band). Its small bright dots are the vision's distractors at a
         distance: drawn at full resolution, as the detector's contrast ranking of them depends
         on it. The polygons' vertices are distorted and drawn straight into the output pixels
         (a full-frame remap cost more than the rest of the frame); their edges are not split:
@@ -474,7 +509,10 @@ class Renderer:
                 for poly, value in zip(polys, values):
                     cv2.fillPoly(img, [pixels[start:start + len(poly)].reshape(-1, 1, 2)], value, cv2.LINE_AA, 4)
                     start += len(poly)
-        return _blur(img, sigma, may_halve=True)
+        h, w = img.shape
+        if not _may_halve(sigma, (w, h)):
+            return _blur(img, sigma), False
+        return _blur_small(cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA), sigma), True
 
     @staticmethod
     def _wall_axis_depth(scene: Scene, cam_T_m: np.ndarray) -> float:
@@ -532,13 +570,65 @@ class Renderer:
         reach = int(np.ceil(4 * sigma)) + 2
         H, W = img.shape
         x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
-                 for plane in (flat.albedo, flat.alpha)]
-        box = np.s_[y0:y1, x0:x1]
-        lit = cv2.multiply(_blur(grown[0], sigma), light[box], scale=shade)
-        region = img[box]
-        cv2.multiply(region, cv2.subtract(1.0, _blur(grown[1], sigma)), dst=region)
-        cv2.add(region, lit, dst=region)
+        # grown planes: the albedo lit by the wall's shade, and the transparency (1 - coverage),
+        # whose blur is 1 - the coverage's (the kernel sums to 1)
+        inside = np.s_[y - y0:y - y0 + h, x - x0:x - x0 + w]
+        grown = (np.zeros((y1 - y0, x1 - x0), np.float32), np.ones((y1 - y0, x1 - x0), np.float32))
+        np.multiply(flat.albedo, np.float32(shade), out=grown[0][inside])
+        np.subtract(np.float32(1.0), flat.alpha, out=grown[1][inside])
+        Renderer._composite_over(img, light, grown, (x0, y0), 1, sigma)
+
+    @staticmethod
+    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer) -> np.ndarray:
+        """The lit wall (the lighting applied in its one float conversion) and the foreground
+        `layer` ((albedo, transparency), origin, down, sigma) over it, or None, a band of rows at
+        a time: the half-resolution planes are upsampled band by band and every pass of a band
+        works on planes still in the cache (full-frame passes were memory-bound). A wall and a
+        foreground both at half resolution are laid together there and upsampled once (the
+        upsampling of a product then stands for the product of upsamplings: they differ only
+        where both the wall and the foreground's coverage change within a pixel pair, i.e. at
+        the foreground's outline against the wall's dots, by a fraction of the contrast)."""
+        wall, halved = background
+        height = light.shape[0]
+        img = np.empty(light.shape, np.float32)
+        if halved and layer is not None and layer[2] == 2:
+            wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
+            (albedo, clear), (x0, y0), _, sigma = layer
+            h, w = albedo.shape
+            region = wall[y0 // 2:y0 // 2 + h, x0 // 2:x0 // 2 + w]
+            cv2.multiply(region, _blur_small(clear, sigma), dst=region)
+            cv2.add(region, _blur_small(albedo, sigma), dst=region)
+            for y in range(0, height, BAND_ROWS):
+                y1 = min(y + BAND_ROWS, height)
+                cv2.multiply(_twice_rows(wall, y, y1), light[y:y1], dst=img[y:y1])
+            return img
+        for y in range(0, height, BAND_ROWS):
+            y1 = min(y + BAND_ROWS, height)
+            cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
+                         dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
+        if layer is not None:
+            Renderer._composite_over(img, light, *layer)
+        return img
+
+    @staticmethod
+    def _composite_over(img: np.ndarray, light: np.ndarray, planes: tuple[np.ndarray, np.ndarray],
+                        origin: tuple[int, int], down: int, sigma: float) -> None:
+        """Blur the foreground planes (albedo premultiplied, transparency) by `sigma` px and lay
+        them over `img` in place from `origin`, lit by `light`, a band of rows at a time (blurred
+        and upsampled band by band: the band's planes stay in the cache); `down` 2: the planes are
+        at half resolution (_blur's 2x2 box average done: blurred whole, they are a quarter of the
+        work, and upsampled band by band)."""
+        if down == 2:
+            planes = (_blur_small(planes[0], sigma), _blur_small(planes[1], sigma))
+        x0, y0 = origin
+        h, w = planes[0].shape[0] * down, planes[0].shape[1] * down
+        for y in range(0, h, BAND_ROWS):
+            y1 = min(y + BAND_ROWS, h)
+            a, c = ((_twice_rows(planes[0], y, y1), _twice_rows(planes[1], y, y1)) if down == 2
+                    else (_blur_rows(planes[0], y, y1, sigma), _blur_rows(planes[1], y, y1, sigma)))
+            region = img[y0 + y:y0 + y1, x0:x0 + w]
+            cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
+            cv2.accumulateProduct(a, light[y0 + y:y0 + y1, x0:x0 + w], region)
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -579,20 +669,18 @@ class Renderer:
         # the lighting multiplies every layer: applied to each as it is laid down, the wall's
         # 8-bit levels become irradiance in the same full-frame pass
         light = self._illumination(scene, gain)
-        img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
-        for flat in flat_layers:
-            self._lay_flat(img, flat, light, self._wall_shade(scene))
-        # OpenCV's Gaussian kernel for float images reaches 4 sigma
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
-            albedo, clear, (x0, y0), down = layer
-            albedo, clear = ((_blur_halved(albedo, sf), _blur_halved(clear, sf)) if down == 2
-                             else (_blur(albedo, sf), _blur(clear, sf)))
-            h, w = albedo.shape
-            region = img[y0:y0 + h, x0:x0 + w]
-            cv2.multiply(region, clear, dst=region)        # OpenCV writes into the view, in place
-            cv2.accumulateProduct(albedo, light[y0:y0 + h, x0:x0 + w], region)
+            albedo, clear, origin, down = layer
+            layer = (albedo, clear), origin, down, sf
+        img = self._composite(self._background(scene, camera_T_marker, sb), light,
+                              None if flat_layers else layer)
+        if flat_layers:
+            for flat in flat_layers:
+                self._lay_flat(img, flat, light, self._wall_shade(scene))
+            if layer is not None:
+                self._composite_over(img, light, *layer)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
         self._last = None if flat_layers else (key, img if again else None)
