@@ -562,7 +562,10 @@ class Renderer:
         """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
         over its patch grown by its blur's reach (OpenCV's Gaussian kernel for float images
         reaches 4 sigma; beyond the patch its planes are 0, so the grown box's border reflects
-        zeros as the whole frame's blur would see them)."""
+        zeros as the whole frame's blur would see them), a band of rows at a time: each band of
+        the grown planes (the albedo lit by the wall's shade, and the transparency 1 - coverage,
+        whose blur is 1 - the coverage's: the kernel sums to 1) is built with the rows its blur
+        reaches, blurred and laid while in the cache."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
         (x, y), (h, w) = flat.origin, flat.alpha.shape
         if w == 0 or h == 0:
@@ -570,13 +573,34 @@ class Renderer:
         reach = int(np.ceil(4 * sigma)) + 2
         H, W = img.shape
         x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        # grown planes: the albedo lit by the wall's shade, and the transparency (1 - coverage),
-        # whose blur is 1 - the coverage's (the kernel sums to 1)
-        inside = np.s_[y - y0:y - y0 + h, x - x0:x - x0 + w]
-        grown = (np.zeros((y1 - y0, x1 - x0), np.float32), np.ones((y1 - y0, x1 - x0), np.float32))
-        np.multiply(flat.albedo, np.float32(shade), out=grown[0][inside])
-        np.subtract(np.float32(1.0), flat.alpha, out=grown[1][inside])
-        Renderer._composite_over(img, light, grown, (x0, y0), 1, sigma)
+        for b0 in range(y0, y1, BAND_ROWS):
+            b1 = min(b0 + BAND_ROWS, y1)
+            g0, g1 = max(b0 - reach, y0), min(b1 + reach, y1)             # the rows the band's blur reaches
+            p0, p1 = max(g0, y) - y, min(g1, y + h) - y                   # of those, the patch's
+            albedo = np.zeros((g1 - g0, x1 - x0), np.float32)
+            clear = np.ones((g1 - g0, x1 - x0), np.float32)
+            if p1 > p0:
+                inside = np.s_[y + p0 - g0:y + p1 - g0, x - x0:x - x0 + w]
+                np.multiply(flat.albedo[p0:p1], np.float32(shade), out=albedo[inside])
+                np.subtract(np.float32(1.0), flat.alpha[p0:p1], out=clear[inside])
+            keep = np.s_[b0 - g0:b1 - g0]
+            region = img[b0:b1, x0:x1]
+            cv2.multiply(region, self._blur_clear(clear, sigma, reach)[keep], dst=region)   # in place, into the view
+            cv2.accumulateProduct(_blur(albedo, sigma)[keep], light[b0:b1, x0:x1], region)
+
+    @staticmethod
+    def _blur_clear(clear: np.ndarray, sigma: float, reach: int) -> np.ndarray:
+        """_blur(clear, sigma) of a band of a flat layer's transparency, blurring only the columns
+        within `reach` (>= the kernel's) of a non-zero: between, where the band is covered in
+        every row (the inside of an opaque board), the blur is 0 without computing it."""
+        covered = np.flatnonzero((clear == 0).all(0))
+        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
+            return _blur(clear, sigma)
+        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach               # blurred to 0 exactly
+        out = np.zeros_like(clear)
+        out[:, :c0] = _blur(clear[:, :c0 + reach], sigma)[:, :c0]
+        out[:, c1:] = _blur(clear[:, c1 - reach:], sigma)[:, reach:]
+        return out
 
     @staticmethod
     def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer) -> np.ndarray:
@@ -591,23 +615,33 @@ class Renderer:
         wall, halved = background
         height = light.shape[0]
         img = np.empty(light.shape, np.float32)
-        if halved and layer is not None and layer[2] == 2:
-            wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
-            (albedo, clear), (x0, y0), _, sigma = layer
-            h, w = albedo.shape
-            region = wall[y0 // 2:y0 // 2 + h, x0 // 2:x0 // 2 + w]
-            cv2.multiply(region, _blur_small(clear, sigma), dst=region)
-            cv2.add(region, _blur_small(albedo, sigma), dst=region)
+        if layer is None:
             for y in range(0, height, BAND_ROWS):
                 y1 = min(y + BAND_ROWS, height)
-                cv2.multiply(_twice_rows(wall, y, y1), light[y:y1], dst=img[y:y1])
+                cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
+                             dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
             return img
+        wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
+        (albedo, clear), (x0, y0), down, sigma = layer
+        h, w = albedo.shape[0] * down, albedo.shape[1] * down
+        if halved and down == 2:
+            region = wall[y0 // 2:(y0 + h) // 2, x0 // 2:(x0 + w) // 2]
+            cv2.multiply(region, _blur_small(clear, sigma), dst=region)
+            cv2.add(region, _blur_small(albedo, sigma), dst=region)
+            layer = None
+        elif down == 2:
+            albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
-            cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
-                         dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
-        if layer is not None:
-            Renderer._composite_over(img, light, *layer)
+            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
+            f0, f1 = max(y, y0) - y0, min(y1, y0 + h) - y0          # the foreground's rows in the band
+            if layer is not None and f1 > f0:
+                a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
+                        else (_blur_rows(albedo, f0, f1, sigma), _blur_rows(clear, f0, f1, sigma)))
+                region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
+                cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
+                cv2.add(region, a, dst=region)
+            cv2.multiply(band, light[y:y1], dst=img[y:y1])
         return img
 
     @staticmethod
