@@ -593,7 +593,7 @@ class Renderer:
         """_blur(clear, sigma) of a band of a flat layer's transparency, blurring only the columns
         within `reach` (>= the kernel's) of a non-zero: between, where the band is covered in
         every row (the inside of an opaque board), the blur is 0 without computing it."""
-        covered = np.flatnonzero((clear == 0).all(0))
+        covered = np.flatnonzero(clear.max(axis=0) == 0)           # (a row-wise reduction: fast)
         if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
             return _blur(clear, sigma)
         c0, c1 = covered[0] + reach, covered[-1] + 1 - reach               # blurred to 0 exactly
