@@ -35,7 +35,12 @@ wall's one float conversion; the illumination field is cached and an unchanged p
 last image again. Since: the sensor's electrons-per-unit field rides in the lighting's pass
 (render(gain=...)), the foreground is transparency planes composited in place, drawn straight
 at half resolution when its blur halves it, a flat layer (the board) is blurred only over its
-box, and the measured shapes' small groups share one supersampled box.
+box, and the measured shapes' small groups share one supersampled box. Since (30-50% less): the
+layers are composited a band of 128 rows at a time (the wall's and the foreground's upsampling,
+a sharp foreground's and a flat layer's blur, the lighting), so that each band's planes stay in
+the cache (the full-frame passes were memory-bound); a halved foreground is laid on the halved
+wall and the sum upsampled once; the sensor's noise goes band by band as well; a flat layer is
+a patch over the pixels it covers.
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
@@ -558,35 +563,43 @@ class Renderer:
         self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
 
-    def _lay_flat(self, img: np.ndarray, flat: FlatLayer, light: np.ndarray, shade: float) -> None:
-        """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
-        over its patch grown by its blur's reach (OpenCV's Gaussian kernel for float images
-        reaches 4 sigma; beyond the patch its planes are 0, so the grown box's border reflects
-        zeros as the whole frame's blur would see them), a band of rows at a time: each band of
-        the grown planes (the albedo lit by the wall's shade, and the transparency 1 - coverage,
-        whose blur is 1 - the coverage's: the kernel sums to 1) is built with the rows its blur
-        reaches, blurred and laid while in the cache."""
+    def _flat_box(self, flat: FlatLayer, shape: tuple[int, int], shade: float):
+        """(flat, sigma, reach, shade, (x0, y0, x1, y1)): `flat` with its blur (sigma px, parallel
+        to the wall: lit alike, by the wall's `shade`) and the box it is laid over, its patch
+        grown by its blur's reach (OpenCV's Gaussian kernel for float images reaches 4 sigma;
+        beyond the patch its planes are 0, so the grown box's border reflects zeros as the whole
+        frame's blur would see them); None for an empty patch."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
         (x, y), (h, w) = flat.origin, flat.alpha.shape
         if w == 0 or h == 0:
-            return
+            return None
         reach = int(np.ceil(4 * sigma)) + 2
-        H, W = img.shape
-        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        for b0 in range(y0, y1, BAND_ROWS):
-            b1 = min(b0 + BAND_ROWS, y1)
-            g0, g1 = max(b0 - reach, y0), min(b1 + reach, y1)             # the rows the band's blur reaches
-            p0, p1 = max(g0, y) - y, min(g1, y + h) - y                   # of those, the patch's
-            albedo = np.zeros((g1 - g0, x1 - x0), np.float32)
-            clear = np.ones((g1 - g0, x1 - x0), np.float32)
-            if p1 > p0:
-                inside = np.s_[y + p0 - g0:y + p1 - g0, x - x0:x - x0 + w]
-                np.multiply(flat.albedo[p0:p1], np.float32(shade), out=albedo[inside])
-                np.subtract(np.float32(1.0), flat.alpha[p0:p1], out=clear[inside])
-            keep = np.s_[b0 - g0:b1 - g0]
-            region = img[b0:b1, x0:x1]
-            cv2.multiply(region, self._blur_clear(clear, sigma, reach)[keep], dst=region)   # in place, into the view
-            cv2.accumulateProduct(_blur(albedo, sigma)[keep], light[b0:b1, x0:x1], region)
+        H, W = shape
+        return flat, sigma, reach, shade, (max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H))
+
+    @staticmethod
+    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid) -> None:
+        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box) over `band` (those
+        rows of the image, unlit) in place: the grown planes' rows its blur reaches (the albedo
+        lit by the wall's shade, and the transparency 1 - coverage, whose blur is 1 - the
+        coverage's: the kernel sums to 1) are built, blurred and laid while in the cache."""
+        flat, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        (x, y), (h, w) = flat.origin, flat.alpha.shape
+        r0, r1 = max(b0, y0), min(b1, y1)
+        if r1 <= r0:
+            return
+        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)             # the rows the band's blur reaches
+        p0, p1 = max(g0, y) - y, min(g1, y + h) - y                   # of those, the patch's
+        albedo = np.zeros((g1 - g0, x1 - x0), np.float32)
+        clear = np.ones((g1 - g0, x1 - x0), np.float32)
+        if p1 > p0:
+            inside = np.s_[y + p0 - g0:y + p1 - g0, x - x0:x - x0 + w]
+            np.multiply(flat.albedo[p0:p1], np.float32(shade), out=albedo[inside])
+            np.subtract(np.float32(1.0), flat.alpha[p0:p1], out=clear[inside])
+        keep = np.s_[r0 - g0:r1 - g0]
+        region = band[r0 - b0:r1 - b0, x0:x1]
+        cv2.multiply(region, Renderer._blur_clear(clear, sigma, reach)[keep], dst=region)   # in place, into the view
+        cv2.add(region, _blur(albedo, sigma)[keep], dst=region)
 
     @staticmethod
     def _blur_clear(clear: np.ndarray, sigma: float, reach: int) -> np.ndarray:
@@ -603,39 +616,43 @@ class Renderer:
         return out
 
     @staticmethod
-    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer) -> np.ndarray:
-        """The lit wall (the lighting applied in its one float conversion) and the foreground
-        `layer` ((albedo, transparency), origin, down, sigma) over it, or None, a band of rows at
-        a time: the half-resolution planes are upsampled band by band and every pass of a band
-        works on planes still in the cache (full-frame passes were memory-bound). A wall and a
-        foreground both at half resolution are laid together there and upsampled once (the
-        upsampling of a product then stands for the product of upsamplings: they differ only
-        where both the wall and the foreground's coverage change within a pixel pair, i.e. at
-        the foreground's outline against the wall's dots, by a fraction of the contrast)."""
+    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=()) -> np.ndarray:
+        """The lit wall (the lighting applied in its one float conversion), the flat layers
+        (Renderer._flat_box) and the foreground `layer` ((albedo, transparency), origin, down,
+        sigma) over it, or None, a band of rows at a time: the half-resolution planes are
+        upsampled band by band and every pass of a band works on planes still in the cache
+        (full-frame passes were memory-bound). A wall and a foreground both at half resolution
+        (and nothing between) are laid together there and upsampled once (the upsampling of a
+        product then stands for the product of upsamplings: they differ only where both the
+        wall and the foreground's coverage change within a pixel pair, i.e. at the foreground's
+        outline against the wall's dots, by a fraction of the contrast)."""
         wall, halved = background
         height = light.shape[0]
         img = np.empty(light.shape, np.float32)
-        if layer is None:
+        if layer is None and not flats:
             for y in range(0, height, BAND_ROWS):
                 y1 = min(y + BAND_ROWS, height)
                 cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
                              dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
             return img
         wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
-        (albedo, clear), (x0, y0), down, sigma = layer
-        h, w = albedo.shape[0] * down, albedo.shape[1] * down
-        if halved and down == 2:
-            region = wall[y0 // 2:(y0 + h) // 2, x0 // 2:(x0 + w) // 2]
-            cv2.multiply(region, _blur_small(clear, sigma), dst=region)
-            cv2.add(region, _blur_small(albedo, sigma), dst=region)
-            layer = None
-        elif down == 2:
-            albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
+        if layer is not None:
+            (albedo, clear), (x0, y0), down, sigma = layer
+            h, w = albedo.shape[0] * down, albedo.shape[1] * down
+            if halved and down == 2 and not flats:
+                region = wall[y0 // 2:(y0 + h) // 2, x0 // 2:(x0 + w) // 2]
+                cv2.multiply(region, _blur_small(clear, sigma), dst=region)
+                cv2.add(region, _blur_small(albedo, sigma), dst=region)
+                layer = None
+            elif down == 2:
+                albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
             band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
-            f0, f1 = max(y, y0) - y0, min(y1, y0 + h) - y0          # the foreground's rows in the band
-            if layer is not None and f1 > f0:
+            for laid in flats:
+                Renderer._lay_flat_band(band, y, y1, laid)
+            f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
+            if f1 > f0:
                 a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
                         else (_blur_rows(albedo, f0, f1, sigma), _blur_rows(clear, f0, f1, sigma)))
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
@@ -643,26 +660,6 @@ class Renderer:
                 cv2.add(region, a, dst=region)
             cv2.multiply(band, light[y:y1], dst=img[y:y1])
         return img
-
-    @staticmethod
-    def _composite_over(img: np.ndarray, light: np.ndarray, planes: tuple[np.ndarray, np.ndarray],
-                        origin: tuple[int, int], down: int, sigma: float) -> None:
-        """Blur the foreground planes (albedo premultiplied, transparency) by `sigma` px and lay
-        them over `img` in place from `origin`, lit by `light`, a band of rows at a time (blurred
-        and upsampled band by band: the band's planes stay in the cache); `down` 2: the planes are
-        at half resolution (_blur's 2x2 box average done: blurred whole, they are a quarter of the
-        work, and upsampled band by band)."""
-        if down == 2:
-            planes = (_blur_small(planes[0], sigma), _blur_small(planes[1], sigma))
-        x0, y0 = origin
-        h, w = planes[0].shape[0] * down, planes[0].shape[1] * down
-        for y in range(0, h, BAND_ROWS):
-            y1 = min(y + BAND_ROWS, h)
-            a, c = ((_twice_rows(planes[0], y, y1), _twice_rows(planes[1], y, y1)) if down == 2
-                    else (_blur_rows(planes[0], y, y1, sigma), _blur_rows(planes[1], y, y1, sigma)))
-            region = img[y0 + y:y0 + y1, x0:x0 + w]
-            cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
-            cv2.accumulateProduct(a, light[y0 + y:y0 + y1, x0:x0 + w], region)
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -708,13 +705,9 @@ class Renderer:
         if layer is not None:
             albedo, clear, origin, down = layer
             layer = (albedo, clear), origin, down, sf
-        img = self._composite(self._background(scene, camera_T_marker, sb), light,
-                              None if flat_layers else layer)
-        if flat_layers:
-            for flat in flat_layers:
-                self._lay_flat(img, flat, light, self._wall_shade(scene))
-            if layer is not None:
-                self._composite_over(img, light, *layer)
+        flats = [laid for laid in (self._flat_box(flat, light.shape, self._wall_shade(scene)) for flat in flat_layers)
+                 if laid is not None]
+        img = self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
         self._last = None if flat_layers else (key, img if again else None)
