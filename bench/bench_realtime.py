@@ -249,8 +249,10 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         camera_T_board = np.eye(4)                      # board facing the camera, centred, `distance` away
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
-        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height))
-        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance, origin)],
+        margin = cam.renderer.flat_margin(distance)
+        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
+        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0),
+                                        [FlatLayer(albedo, alpha, distance, origin, margin)],
                                         gain=cam.sensor.electrons_per_unit)      # as the camera service does
         cam.sensor.expose_electrons(electrons, cam.rng)
 

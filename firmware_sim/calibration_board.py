@@ -46,10 +46,11 @@ def _polygons(s: float, squares: tuple[int, int], m: float) -> tuple[np.ndarray,
 
 
 def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, dist: np.ndarray,
-                size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, tuple[int, int]] | None:
+                size: tuple[int, int], margin: int = 2) -> tuple[np.ndarray, np.ndarray, tuple[int, int]] | None:
     """The board alone in the (distorted) image, only over the pixels it covers: albedo
     premultiplied by coverage and the coverage (alpha), float32, and the patch's top-left
-    pixel (x, y) in the image of `size` (w, h); None when the camera sees its back, it is behind
+    pixel (x, y) in the image of `size` (w, h), with `margin` px of zeros around the pixels the
+    vertices fall in (within the image); None when the camera sees its back, it is behind
     the camera or out of view. All vertices go through one cv2.projectPoints call and the
     polygons are drawn into the patch (why: per square, the calls and full-frame planes cost
     ~12 ms a frame); a vertex shift by whole pixels moves the rasterisation exactly, so the
@@ -67,9 +68,8 @@ def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, d
     px, _ = cv2.projectPoints(vertices, cv2.Rodrigues(R)[0], t, K, dist)
     pts = np.round(px.reshape(-1, 2) * (1 << SHIFT)).astype(np.int64)
     outline = pts[:ends[0]]
-    # anti-aliased edges reach a pixel beyond the vertices' pixels
-    lo = np.maximum(np.floor_divide(outline.min(0), 1 << SHIFT) - 2, 0)
-    hi = np.minimum(np.floor_divide(outline.max(0), 1 << SHIFT) + 3, (width, height))
+    lo = np.maximum(np.floor_divide(outline.min(0), 1 << SHIFT) - margin, 0)
+    hi = np.minimum(np.floor_divide(outline.max(0), 1 << SHIFT) + 1 + margin, (width, height))
     if (hi <= lo).any():
         return None
     pts = (pts - (lo << SHIFT)).astype(np.int32)

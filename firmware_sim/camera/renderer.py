@@ -75,11 +75,14 @@ BAND_ROWS = 128   # rows per band of the compositing passes (the band's planes s
 class FlatLayer:
     """A flat object drawn straight into the output (distorted) image, parallel to the wall:
     albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at; the planes
-    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it)."""
+    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it),
+    with `margin` px of zero coverage inside the patch on every side not at the image's edge
+    (Renderer.flat_margin(depth) of them: laid as it is, else grown first)."""
     albedo: np.ndarray     # float32 (h, w)
     alpha: np.ndarray      # float32 (h, w)
     depth: float
     origin: tuple[int, int] = (0, 0)
+    margin: int = 0
 
 
 @dataclass(frozen=True)
@@ -563,56 +566,59 @@ class Renderer:
         self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
 
+    def flat_margin(self, depth: float) -> int:
+        """Px of zero coverage a FlatLayer at `depth` (m) needs around what it draws to be laid
+        without growing its planes: its blur's reach (OpenCV's Gaussian kernel for float images
+        reaches 4 sigma) and 2."""
+        return int(np.ceil(4 * min(self.coc_sigma_px(max(depth, 0.01)), MAX_BLUR))) + 2
+
     def _flat_box(self, flat: FlatLayer, shape: tuple[int, int], shade: float):
-        """(flat, sigma, reach, shade, (x0, y0, x1, y1)): `flat` with its blur (sigma px, parallel
-        to the wall: lit alike, by the wall's `shade`) and the box it is laid over, its patch
-        grown by its blur's reach (OpenCV's Gaussian kernel for float images reaches 4 sigma;
-        beyond the patch its planes are 0, so the grown box's border reflects zeros as the whole
-        frame's blur would see them); None for an empty patch."""
+        """(albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s planes over the box
+        they are laid over (grown by zeros to its blur's reach unless its margin has it: beyond
+        the patch its planes are 0, so the box's border reflects zeros as the whole frame's blur
+        would see them), its blur (sigma px) and the wall's `shade` (parallel to the wall: lit
+        alike); None for an empty patch."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
         (x, y), (h, w) = flat.origin, flat.alpha.shape
         if w == 0 or h == 0:
             return None
-        reach = int(np.ceil(4 * sigma)) + 2
+        reach = self.flat_margin(flat.depth)
+        if flat.margin >= reach:
+            return flat.albedo, flat.alpha, sigma, reach, shade, (x, y, x + w, y + h)
         H, W = shape
-        return flat, sigma, reach, shade, (max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H))
+        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
+                 for plane in (flat.albedo, flat.alpha)]
+        return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
 
     @staticmethod
     def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid) -> None:
         """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box) over `band` (those
-        rows of the image, unlit) in place: the grown planes' rows its blur reaches (the albedo
-        lit by the wall's shade, and the transparency 1 - coverage, whose blur is 1 - the
-        coverage's: the kernel sums to 1) are built, blurred and laid while in the cache."""
-        flat, sigma, reach, shade, (x0, y0, x1, y1) = laid
-        (x, y), (h, w) = flat.origin, flat.alpha.shape
+        rows of the image, unlit) in place: its planes' rows the band's blur reaches are blurred
+        and laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo."""
+        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
         r0, r1 = max(b0, y0), min(b1, y1)
         if r1 <= r0:
             return
         g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)             # the rows the band's blur reaches
-        p0, p1 = max(g0, y) - y, min(g1, y + h) - y                   # of those, the patch's
-        albedo = np.zeros((g1 - g0, x1 - x0), np.float32)
-        clear = np.ones((g1 - g0, x1 - x0), np.float32)
-        if p1 > p0:
-            inside = np.s_[y + p0 - g0:y + p1 - g0, x - x0:x - x0 + w]
-            np.multiply(flat.albedo[p0:p1], np.float32(shade), out=albedo[inside])
-            np.subtract(np.float32(1.0), flat.alpha[p0:p1], out=clear[inside])
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
-        cv2.multiply(region, Renderer._blur_clear(clear, sigma, reach)[keep], dst=region)   # in place, into the view
-        cv2.add(region, _blur(albedo, sigma)[keep], dst=region)
+        cv2.subtract(region, cv2.multiply(region, Renderer._blur_alpha(alpha[g0 - y0:g1 - y0], sigma, reach)[keep]),
+                     dst=region)                                       # in place, into the view
+        cv2.scaleAdd(_blur(albedo[g0 - y0:g1 - y0], sigma)[keep], shade, region, dst=region)
 
     @staticmethod
-    def _blur_clear(clear: np.ndarray, sigma: float, reach: int) -> np.ndarray:
-        """_blur(clear, sigma) of a band of a flat layer's transparency, blurring only the columns
-        within `reach` (>= the kernel's) of a non-zero: between, where the band is covered in
-        every row (the inside of an opaque board), the blur is 0 without computing it."""
-        covered = np.flatnonzero(clear.max(axis=0) == 0)           # (a row-wise reduction: fast)
+    def _blur_alpha(alpha: np.ndarray, sigma: float, reach: int) -> np.ndarray:
+        """_blur(alpha, sigma) of a band of a flat layer's coverage, blurring only the columns
+        within `reach` (>= the kernel's) of a coverage below 1: between, where the band is
+        covered in every row (the inside of an opaque board), the blur is 1 without computing it."""
+        covered = np.flatnonzero(alpha.min(axis=0) >= 1.0)              # (a row-wise reduction: fast)
         if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
-            return _blur(clear, sigma)
-        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach               # blurred to 0 exactly
-        out = np.zeros_like(clear)
-        out[:, :c0] = _blur(clear[:, :c0 + reach], sigma)[:, :c0]
-        out[:, c1:] = _blur(clear[:, c1 - reach:], sigma)[:, reach:]
+            return _blur(alpha, sigma)
+        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach
+        out = np.ones_like(alpha)
+        out[:, :c0] = _blur(alpha[:, :c0 + reach], sigma)[:, :c0]
+        out[:, c1:] = _blur(alpha[:, c1 - reach:], sigma)[:, reach:]
         return out
 
     @staticmethod

@@ -195,12 +195,13 @@ class CameraService:
             return []
         cam = self.camera.camera
         camera_T_board = inv_transform(base_T_camera) @ self.base_T_board
-        patch = board_patch(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height))
-        if patch is None:
-            return []
         nx, ny = self.board.inner
         centre = camera_T_board @ np.array([(nx - 1) * self.board.square / 2, (ny - 1) * self.board.square / 2, 0, 1])
-        return [FlatLayer(patch[0], patch[1], float(centre[2]), patch[2])]
+        margin = self.camera.renderer.flat_margin(float(centre[2]))     # laid without growing its planes
+        patch = board_patch(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        if patch is None:
+            return []
+        return [FlatLayer(patch[0], patch[1], float(centre[2]), patch[2], margin)]
 
     def _site_in_view(self, base_T_camera: np.ndarray) -> MarkerSite:
         """The marker nearest to the optical axis in front of the camera."""
