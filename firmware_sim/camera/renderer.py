@@ -690,13 +690,15 @@ class Renderer:
         is then saved (SensorModel.expose_electrons).
         `flat_layers` (e.g. a calibration board) lie in front of the wall and behind the
         marker/ORU; none (the default) renders the marker scene alone. A new pose's image is the
-        caller's to overwrite (the sensor adds its noise in place); the same pose and scene as
-        the last call (an arm at rest) render once more and from then on give that image again,
-        read-only: only the noise moves."""
+        caller's to overwrite (the sensor adds its noise in place); the same pose, scene and flat
+        layers (the same FlatLayer objects: a caller keeps a still board's) as the last call (an
+        arm at rest) render once more and from then on give that image again, read-only: only
+        the noise moves."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
                id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
-               None if gain is None else id(gain))
-        again = not flat_layers and self._last is not None and self._last[0] == key
+               None if gain is None else id(gain), tuple(id(flat) for flat in flat_layers))
+        # (the flat layers' ids are the same layers': _last holds them, so no new one can take an id)
+        again = self._last is not None and self._last[0] == key
         if again and self._last[1] is not None:
             return self._last[1]
         marker_depth = float(camera_T_marker[2, 3])
@@ -719,5 +721,5 @@ class Renderer:
         img = self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
-        self._last = None if flat_layers else (key, img if again else None)
+        self._last = (key, img if again else None, tuple(flat_layers))
         return img

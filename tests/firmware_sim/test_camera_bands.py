@@ -119,3 +119,28 @@ def test_flat_layer_blur_skipping_the_covered_inside_is_the_whole_blur():
         alpha[:, left - 1] = rng.random(140)         # an anti-aliased edge
         # inside, the whole blur sums the kernel's weights: 1 within float rounding
         assert np.allclose(Renderer._blur_alpha(alpha, sigma, reach), _blur(alpha, sigma), rtol=0, atol=1e-6)
+
+
+def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
+    from spacearm.firmware_sim.camera.renderer import FlatLayer
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+
+    sim = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+    board, cam, gain = load_board(), sim.camera, sim.sensor.electrons_per_unit
+
+    def layers(distance):
+        T = xyz_rpy_to_transform([-0.1, -0.07, distance], [0.1, -0.1, 0.0])
+        margin = sim.renderer.flat_margin(distance)
+        albedo, alpha, origin = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+
+    still, marker = layers(0.4), view(0.7, 0.2, 1.0)
+    first = sim.renderer.render(sim.scene, marker, still, gain=gain).copy()
+    again = sim.renderer.render(sim.scene, marker, still, gain=gain)
+    kept = sim.renderer.render(sim.scene, marker, still, gain=gain)
+    assert np.array_equal(first, again) and kept is again and not kept.flags.writeable
+    moved = sim.renderer.render(sim.scene, marker, layers(0.45), gain=gain)
+    assert moved.flags.writeable and np.abs(moved - first).max() > 0.1 * first.max()
+    # the same pose, the board drawn anew (new layers): rendered anew, the same image
+    assert np.array_equal(sim.renderer.render(sim.scene, marker, layers(0.4), gain=gain), first)
