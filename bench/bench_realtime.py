@@ -234,7 +234,7 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     import cv2
     from bench.reference_work import reference_loop_seconds
     from spacearm.base.config.board import load_board
-    from spacearm.firmware_sim.calibration_board import board_layer
+    from spacearm.firmware_sim.calibration_board import board_patch
     from spacearm.firmware_sim.camera.render_process import RENDER_OPENCV_THREADS
     from spacearm.firmware_sim.camera.renderer import FlatLayer
     from spacearm.firmware_sim.camera.simulator import CameraSimulator
@@ -245,12 +245,18 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     board = load_board()
     centre = np.array([(board.inner[0] - 1) * board.square / 2, (board.inner[1] - 1) * board.square / 2])
 
-    def board_frame(distance: float) -> None:
+    def board_layers(distance: float) -> list:
         camera_T_board = np.eye(4)                      # board facing the camera, centred, `distance` away
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
-        albedo, alpha = board_layer(camera_T_board, board, c.K, c.dist, (c.width, c.height))
-        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), [FlatLayer(albedo, alpha, distance)],
+        margin = cam.renderer.flat_margin(distance)
+        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
+        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+
+    def board_frame(distance: float, layers: list | None = None) -> None:
+        """A frame with the board drawn anew, or the given layers (an arm at rest: the camera
+        service keeps a still board's)."""
+        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), layers or board_layers(distance),
                                         gain=cam.sensor.electrons_per_unit)      # as the camera service does
         cam.sensor.expose_electrons(electrons, cam.rng)
 
@@ -283,6 +289,10 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         out.append(row(f"camera frame, arm at rest (noise only), {beside}", timed(lambda: cam.render(still), frames), ref))
         out.append(row(f"camera frame, calibration board at 0.40 m, {beside}",
                        timed(lambda: board_frame(0.40), max(frames // 2, 1)), ref))
+        at_rest = board_layers(0.40)
+        board_frame(0.40, at_rest)
+        out.append(row(f"camera frame, calibration board at 0.40 m, arm at rest, {beside}",
+                       timed(lambda: board_frame(0.40, at_rest), max(frames // 2, 1)), ref))
         ref_after = reference_loop_seconds(3)[1]
         out.append(f"  reference loop CPU before / after the frames {beside}: {ref * 1e3:.0f} / {ref_after * 1e3:.0f} ms "
                    f"(a drift: the machine's speed changed during the run) | {conditions(steal)}")

@@ -7,6 +7,7 @@ import numpy as np
 from spacearm.base.vision.config import Sensor
 
 NOISE_FRAMES = 3     # size of the drawn Gaussian field, in frames (each frame reads one window of it)
+STRIP_ROWS = 128     # rows per band of the noise's passes (the band's planes fit in the cache)
 
 
 class SensorModel:
@@ -53,18 +54,31 @@ class SensorModel:
         """Photo-electrons (H, W) float32 (irradiance times electrons_per_unit, dark offset not
         included) -> 8-bit frame; `signal` is overwritten unless it is read-only."""
         s = self.sensor
-        # the dark offset is not added to the frame (one full-frame pass less): it is in the
-        # shot noise's variance and in the ADC's offset below
-        if noise and rng is not None:
-            if not signal.flags.writeable:
-                signal = signal.copy()
-            # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
-            sd = np.add(signal, np.float32(s.dark_offset + s.read_noise ** 2), dtype=np.float32)
-            cv2.sqrt(sd, dst=sd)                                                    # in place: no new array
-            cv2.accumulateProduct(sd, self._noise_window(rng), signal)              # in place: signal += sd * n
         # 12-bit ADC (round, clip at 0 and full scale), then the top 8 bits: floor(rint(e / gain) / 2^k)
         # equals round(e / (gain 2^k) - (2^k - 1) / 2^(k+1)), in one saturating conversion
         # (electrons never go below 0 here: the black level is 10 read-noise sigmas above it)
         k = 2 ** (s.adc_bits - s.output_bits)
         scale = 1.0 / (self.gain * k)
-        return cv2.convertScaleAbs(signal, alpha=scale, beta=s.dark_offset * scale - (k - 1) / (2.0 * k))
+        beta = s.dark_offset * scale - (k - 1) / (2.0 * k)
+        if not (noise and rng is not None):
+            return cv2.convertScaleAbs(signal, alpha=scale, beta=beta)
+        normal = self._noise_window(rng)
+        out = np.empty(signal.shape, np.uint8)
+        sd = np.empty((STRIP_ROWS, signal.shape[1]), np.float32)
+        kept = None if signal.flags.writeable else np.empty_like(sd)     # a read-only frame: a band copy
+        # the dark offset is not added to the frame (one pass less): it is in the shot noise's
+        # variance and in the ADC's offset. Done a band of rows at a time, so that the band's
+        # intermediate planes stay in the cache (full-frame passes were memory-bound).
+        for y in range(0, signal.shape[0], STRIP_ROWS):
+            band = signal[y:y + STRIP_ROWS]
+            rows = band.shape[0]
+            dev = sd[:rows]
+            if kept is not None:
+                np.copyto(kept[:rows], band)
+                band = kept[:rows]
+            # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
+            np.add(band, np.float32(s.dark_offset + s.read_noise ** 2), out=dev)
+            cv2.sqrt(dev, dst=dev)
+            cv2.accumulateProduct(dev, normal[y:y + STRIP_ROWS], band)                 # band += sd * n
+            cv2.convertScaleAbs(band, dst=out[y:y + STRIP_ROWS], alpha=scale, beta=beta)
+        return out

@@ -35,7 +35,12 @@ wall's one float conversion; the illumination field is cached and an unchanged p
 last image again. Since: the sensor's electrons-per-unit field rides in the lighting's pass
 (render(gain=...)), the foreground is transparency planes composited in place, drawn straight
 at half resolution when its blur halves it, a flat layer (the board) is blurred only over its
-box, and the measured shapes' small groups share one supersampled box.
+box, and the measured shapes' small groups share one supersampled box. Since (30-50% less): the
+layers are composited a band of 128 rows at a time (the wall's and the foreground's upsampling,
+a sharp foreground's and a flat layer's blur, the lighting), so that each band's planes stay in
+the cache (the full-frame passes were memory-bound); a halved foreground is laid on the halved
+wall and the sum upsampled once; the sensor's noise goes band by band as well; a flat layer is
+a patch over the pixels it covers.
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
@@ -63,15 +68,21 @@ BODY_HUGE_BOX = 500_000  # px: a body box this large and defocused by BODY_SHARP
 BODY_SHARP_SIGMA = 1.0   # is drawn without supersampling
 HALF_RES_SIGMA = 1.05  # px: blurs from this sigma on may be done at half resolution (_blur)
 EDGE_PX = 12.0    # ideal px: longest straight piece of a foreground outline before distortion
+BAND_ROWS = 128   # rows per band of the compositing passes (the band's planes stay in the cache)
 
 
 @dataclass(frozen=True)
 class FlatLayer:
     """A flat object drawn straight into the output (distorted) image, parallel to the wall:
-    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at."""
-    albedo: np.ndarray     # float32 (H, W)
-    alpha: np.ndarray      # float32 (H, W)
+    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at; the planes
+    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it),
+    with `margin` px of zero coverage inside the patch on every side not at the image's edge
+    (Renderer.flat_margin(depth) of them: laid as it is, else grown first)."""
+    albedo: np.ndarray     # float32 (h, w)
+    alpha: np.ndarray      # float32 (h, w)
     depth: float
+    origin: tuple[int, int] = (0, 0)
+    margin: int = 0
 
 
 @dataclass(frozen=True)
@@ -146,8 +157,38 @@ def _may_halve(sigma: float, size: tuple[int, int]) -> bool:
 
 def _blur_halved(small: np.ndarray, sigma: float) -> np.ndarray:
     """The rest of _blur's half-resolution blur from the 2x2 box average `small` on."""
-    small = cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+    return _twice(_blur_small(small, sigma))
+
+
+def _blur_small(small: np.ndarray, sigma: float) -> np.ndarray:
+    """_blur's middle Gaussian on the 2x2 box average `small` (still at half resolution)."""
+    return cv2.GaussianBlur(small, (0, 0), np.sqrt(sigma * sigma - 1.0) / 2.0)
+
+
+def _twice(small: np.ndarray) -> np.ndarray:
+    """_blur's last step: bilinear 2x up."""
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
+
+
+def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
+    """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
+    weighs the two source rows nearest to each output row with weights set by its position
+    alone, so a band cut out of the source with a row to spare on each side gives the same
+    pixels as the whole image's upsampling."""
+    a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
+    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    return band[y0 - 2 * a:y1 - 2 * a]
+
+
+def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
+    """Rows y0:y1 of _blur(image, sigma) (no halving), from the rows the kernel reaches: OpenCV's
+    float kernel reaches round(8 sigma + 1) // 2 rows, so a band cut with that many to spare on
+    each side (the image's own border where it has none) gives the whole image's pixels."""
+    if sigma < 0.1:
+        return image[y0:y1]
+    reach = int(np.ceil(4 * sigma)) + 1
+    a, b = max(y0 - reach, 0), min(y1 + reach, image.shape[0])
+    return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
 
 
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
@@ -191,13 +232,16 @@ def _supersampled(polys, origin: tuple[int, int], size: tuple[int, int], ss: int
                 cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
             planes.append(buf)
         return planes[0], planes[1]
-    for levels, clear in (([int(round(min(value, 1.0) * 65535)) for _, value in polys], 0), ([0] * len(polys), 65535)):
-        buf = np.zeros((h * ss, w * ss), np.uint16) if clear == 0 else np.full((h * ss, w * ss), clear, np.uint16)
+    # one 2x2 average (the body's usual case) keeps quarter coverages exact in 8 bits, for half
+    # the memory traffic of 16 (its levels then move by < 1/510)
+    dtype, full = (np.uint8, 255) if ss * down == 2 else (np.uint16, 65535)
+    for levels, clear in (([int(round(min(value, 1.0) * full)) for _, value in polys], 0), ([0] * len(polys), full)):
+        buf = np.zeros((h * ss, w * ss), dtype) if clear == 0 else np.full((h * ss, w * ss), clear, dtype)
         for pts, level in zip(outlines, levels):
             cv2.fillPoly(buf, [pts], level, cv2.LINE_8, SHIFT)
         for _ in range(int(np.log2(ss * down))):      # 2x steps: OpenCV's 2x box average is 4x faster than its 4x
             buf = cv2.resize(buf, (buf.shape[1] // 2, buf.shape[0] // 2), interpolation=cv2.INTER_AREA)
-        planes.append(np.multiply(buf, np.float32(1.0 / 65535.0), dtype=np.float32))
+        planes.append(np.multiply(buf, np.float32(1.0 / full), dtype=np.float32))
     return planes[0], planes[1]
 
 
@@ -326,10 +370,10 @@ class Renderer:
         allpts = np.vstack([uv for group in [body, *groups] for uv, _ in group])
         w, h = self.camera.width, self.camera.height
         x0, y0, x1, y1 = _pixel_box(allpts, reach + 2, (w, h))
-        x0, y0 = x0 - (x1 - x0) % 2, y0 - (y1 - y0) % 2      # even sizes: the blur may halve them
-        if x0 < 0 or y0 < 0:
-            x0, x1 = (x0, x1) if x0 >= 0 else (0, x1 - (x1 % 2))
-            y0, y1 = (y0, y1) if y0 >= 0 else (0, y1 - (y1 % 2))
+        # on even pixels, so that the blur may halve it and a halved box lies on the halved
+        # wall's pixels (_composite lays them together at half resolution)
+        x0, y0, x1, y1 = x0 - x0 % 2, y0 - y0 % 2, x1 + x1 % 2, y1 + y1 % 2
+        x1, y1 = x1 - 2 * (x1 > w), y1 - 2 * (y1 > h)
         if x1 <= x0 or y1 <= y0:
             return None
         # The body (ORU faces, plate): supersampled SS x SS while its box is small (far away: the
@@ -344,6 +388,9 @@ class Renderer:
             ss = 1 if area >= BODY_HUGE_BOX and sigma >= BODY_SHARP_SIGMA else 2
         # blurred at half resolution anyway (_blur): drawn and laid over straight at it
         down = 2 if _may_halve(sigma, (x1 - x0, y1 - y0)) else 1
+        # halved, SS x SS of the body is 2 SS x 2 SS of the half-resolution pixel it is averaged
+        # to: 2 x 2 (4 x 4 there) keeps its edges' coverage to 1/16 for a quarter of the pixels
+        ss = min(ss, 2) if down == 2 else ss
         albedo, clear = _supersampled(body, (x0, y0), (x1 - x0, y1 - y0), ss, down)
         for group in _merged(groups):      # the circles and the rod: supersampled, laid over the body
             self._lay_over(albedo, clear, group, (x0, y0), down)
@@ -433,9 +480,10 @@ class Renderer:
             self._clutter_cache = {key: cached}
         return cached
 
-    def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> np.ndarray:
+    def _background(self, scene: Scene, cam_T_m: np.ndarray, sigma: float) -> tuple[np.ndarray, bool]:
         """The wall and its clutter, distorted and defocused by `sigma` px: (H, W) uint8, 255 =
-        albedo 1 in full light. Its small bright dots are the vision's distractors at a
+        albedo 1 in full light, and whether it is at half resolution (H/2, W/2: the blurred
+        half-resolution image whose _twice is the wall; the compositing upsamples it band by band). Its small bright dots are the vision's distractors at a
         distance: drawn at full resolution, as the detector's contrast ranking of them depends
         on it. The polygons' vertices are distorted and drawn straight into the output pixels
         (a full-frame remap cost more than the rest of the frame); their edges are not split:
@@ -472,7 +520,10 @@ class Renderer:
                 for poly, value in zip(polys, values):
                     cv2.fillPoly(img, [pixels[start:start + len(poly)].reshape(-1, 1, 2)], value, cv2.LINE_AA, 4)
                     start += len(poly)
-        return _blur(img, sigma, may_halve=True)
+        h, w = img.shape
+        if not _may_halve(sigma, (w, h)):
+            return _blur(img, sigma), False
+        return _blur_small(cv2.resize(img, (w // 2, h // 2), interpolation=cv2.INTER_AREA), sigma), True
 
     @staticmethod
     def _wall_axis_depth(scene: Scene, cam_T_m: np.ndarray) -> float:
@@ -518,23 +569,106 @@ class Renderer:
         self._lighting_cache = {key: field}     # a new lighting: the fields of the old one go
         return field
 
-    def _lay_flat(self, img: np.ndarray, flat: FlatLayer, light: np.ndarray, shade: float) -> None:
-        """Blur `flat` (parallel to the wall: lit alike) and lay it over `img` in place, only
-        over the box its coverage reaches grown by its blur's reach (OpenCV's Gaussian kernel
-        for float images reaches 4 sigma; beyond the coverage the planes are 0, so the box's
-        border reflects zeros as the whole frame's blur would see them)."""
+    def flat_margin(self, depth: float) -> int:
+        """Px of zero coverage a FlatLayer at `depth` (m) needs around what it draws to be laid
+        without growing its planes: its blur's reach (OpenCV's Gaussian kernel for float images
+        reaches 4 sigma) and 2."""
+        return int(np.ceil(4 * min(self.coc_sigma_px(max(depth, 0.01)), MAX_BLUR))) + 2
+
+    def _flat_box(self, flat: FlatLayer, shape: tuple[int, int], shade: float):
+        """(albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s planes over the box
+        they are laid over (grown by zeros to its blur's reach unless its margin has it: beyond
+        the patch its planes are 0, so the box's border reflects zeros as the whole frame's blur
+        would see them), its blur (sigma px) and the wall's `shade` (parallel to the wall: lit
+        alike); None for an empty patch."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-        x, y, w, h = cv2.boundingRect((flat.alpha > 0).view(np.uint8))
+        (x, y), (h, w) = flat.origin, flat.alpha.shape
         if w == 0 or h == 0:
-            return
-        reach = int(np.ceil(4 * sigma)) + 2
-        H, W = img.shape
+            return None
+        reach = self.flat_margin(flat.depth)
+        if flat.margin >= reach:
+            return flat.albedo, flat.alpha, sigma, reach, shade, (x, y, x + w, y + h)
+        H, W = shape
         x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        box = np.s_[y0:y1, x0:x1]
-        lit = cv2.multiply(_blur(flat.albedo[box], sigma), light[box], scale=shade)
-        region = img[box]
-        cv2.multiply(region, cv2.subtract(1.0, _blur(flat.alpha[box], sigma)), dst=region)
-        cv2.add(region, lit, dst=region)
+        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
+                 for plane in (flat.albedo, flat.alpha)]
+        return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
+
+    @staticmethod
+    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid) -> None:
+        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box) over `band` (those
+        rows of the image, unlit) in place: its planes' rows the band's blur reaches are blurred
+        and laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo."""
+        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        r0, r1 = max(b0, y0), min(b1, y1)
+        if r1 <= r0:
+            return
+        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)             # the rows the band's blur reaches
+        keep = np.s_[r0 - g0:r1 - g0]
+        region = band[r0 - b0:r1 - b0, x0:x1]
+        cv2.subtract(region, cv2.multiply(region, Renderer._blur_alpha(alpha[g0 - y0:g1 - y0], sigma, reach)[keep]),
+                     dst=region)                                       # in place, into the view
+        cv2.scaleAdd(_blur(albedo[g0 - y0:g1 - y0], sigma)[keep], shade, region, dst=region)
+
+    @staticmethod
+    def _blur_alpha(alpha: np.ndarray, sigma: float, reach: int) -> np.ndarray:
+        """_blur(alpha, sigma) of a band of a flat layer's coverage, blurring only the columns
+        within `reach` (>= the kernel's) of a coverage below 1: between, where the band is
+        covered in every row (the inside of an opaque board), the blur is 1 without computing it."""
+        covered = np.flatnonzero(alpha.min(axis=0) >= 1.0)              # (a row-wise reduction: fast)
+        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
+            return _blur(alpha, sigma)
+        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach
+        out = np.ones_like(alpha)
+        out[:, :c0] = _blur(alpha[:, :c0 + reach], sigma)[:, :c0]
+        out[:, c1:] = _blur(alpha[:, c1 - reach:], sigma)[:, reach:]
+        return out
+
+    @staticmethod
+    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=()) -> np.ndarray:
+        """The lit wall (the lighting applied in its one float conversion), the flat layers
+        (Renderer._flat_box) and the foreground `layer` ((albedo, transparency), origin, down,
+        sigma) over it, or None, a band of rows at a time: the half-resolution planes are
+        upsampled band by band and every pass of a band works on planes still in the cache
+        (full-frame passes were memory-bound). A wall and a foreground both at half resolution
+        (and nothing between) are laid together there and upsampled once (the upsampling of a
+        product then stands for the product of upsamplings: they differ only where both the
+        wall and the foreground's coverage change within a pixel pair, i.e. at the foreground's
+        outline against the wall's dots, by a fraction of the contrast)."""
+        wall, halved = background
+        height = light.shape[0]
+        img = np.empty(light.shape, np.float32)
+        if layer is None and not flats:
+            for y in range(0, height, BAND_ROWS):
+                y1 = min(y + BAND_ROWS, height)
+                cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
+                             dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
+            return img
+        wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
+        if layer is not None:
+            (albedo, clear), (x0, y0), down, sigma = layer
+            h, w = albedo.shape[0] * down, albedo.shape[1] * down
+            if halved and down == 2 and not flats:
+                region = wall[y0 // 2:(y0 + h) // 2, x0 // 2:(x0 + w) // 2]
+                cv2.multiply(region, _blur_small(clear, sigma), dst=region)
+                cv2.add(region, _blur_small(albedo, sigma), dst=region)
+                layer = None
+            elif down == 2:
+                albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
+        for y in range(0, height, BAND_ROWS):
+            y1 = min(y + BAND_ROWS, height)
+            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
+            for laid in flats:
+                Renderer._lay_flat_band(band, y, y1, laid)
+            f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
+            if f1 > f0:
+                a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
+                        else (_blur_rows(albedo, f0, f1, sigma), _blur_rows(clear, f0, f1, sigma)))
+                region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
+                cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
+                cv2.add(region, a, dst=region)
+            cv2.multiply(band, light[y:y1], dst=img[y:y1])
+        return img
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -556,13 +690,15 @@ class Renderer:
         is then saved (SensorModel.expose_electrons).
         `flat_layers` (e.g. a calibration board) lie in front of the wall and behind the
         marker/ORU; none (the default) renders the marker scene alone. A new pose's image is the
-        caller's to overwrite (the sensor adds its noise in place); the same pose and scene as
-        the last call (an arm at rest) render once more and from then on give that image again,
-        read-only: only the noise moves."""
+        caller's to overwrite (the sensor adds its noise in place); the same pose, scene and flat
+        layers (the same FlatLayer objects: a caller keeps a still board's) as the last call (an
+        arm at rest) render once more and from then on give that image again, read-only: only
+        the noise moves."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
                id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
-               None if gain is None else id(gain))
-        again = not flat_layers and self._last is not None and self._last[0] == key
+               None if gain is None else id(gain), tuple(id(flat) for flat in flat_layers))
+        # (the flat layers' ids are the same layers': _last holds them, so no new one can take an id)
+        again = self._last is not None and self._last[0] == key
         if again and self._last[1] is not None:
             return self._last[1]
         marker_depth = float(camera_T_marker[2, 3])
@@ -575,21 +711,15 @@ class Renderer:
         # the lighting multiplies every layer: applied to each as it is laid down, the wall's
         # 8-bit levels become irradiance in the same full-frame pass
         light = self._illumination(scene, gain)
-        img = cv2.multiply(self._background(scene, camera_T_marker, sb), light, scale=1.0 / 255.0, dtype=cv2.CV_32F)
-        for flat in flat_layers:
-            self._lay_flat(img, flat, light, self._wall_shade(scene))
-        # OpenCV's Gaussian kernel for float images reaches 4 sigma
         layer = (self._foreground(scene, camera_T_marker, sf)
                  if self._marker_near_view(camera_T_marker) else None)
         if layer is not None:
-            albedo, clear, (x0, y0), down = layer
-            albedo, clear = ((_blur_halved(albedo, sf), _blur_halved(clear, sf)) if down == 2
-                             else (_blur(albedo, sf), _blur(clear, sf)))
-            h, w = albedo.shape
-            region = img[y0:y0 + h, x0:x0 + w]
-            cv2.multiply(region, clear, dst=region)        # OpenCV writes into the view, in place
-            cv2.accumulateProduct(albedo, light[y0:y0 + h, x0:x0 + w], region)
+            albedo, clear, origin, down = layer
+            layer = (albedo, clear), origin, down, sf
+        flats = [laid for laid in (self._flat_box(flat, light.shape, self._wall_shade(scene)) for flat in flat_layers)
+                 if laid is not None]
+        img = self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
-        self._last = None if flat_layers else (key, img if again else None)
+        self._last = (key, img if again else None, tuple(flat_layers))
         return img

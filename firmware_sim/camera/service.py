@@ -38,7 +38,7 @@ import numpy as np
 from spacearm.base.config.scene import DEFAULT_SCENE, SceneConfig, load_scene
 from spacearm.base.spatial import inv_transform
 from spacearm.base.vision.frames import CameraTrigger
-from spacearm.firmware_sim.calibration_board import board_layer
+from spacearm.firmware_sim.calibration_board import board_patch
 from spacearm.firmware_sim.camera.renderer import FlatLayer
 from spacearm.firmware_sim.camera.scene import OruShape
 from spacearm.firmware_sim.camera.simulator import CameraSimulator
@@ -83,6 +83,7 @@ class CameraService:
         self.errors = 0
         self.board = None                    # BoardConfig once show_board() was called
         self.base_T_board = None             # its true pose
+        self._board_seen: tuple | None = None    # (camera_T_board bytes, layers): an arm at rest keeps them
         self.scene_config = scene
         self.seeds: tuple[int, int | None] | None = None      # (scene, noise), set by from_files
         self.render_process = None           # RenderProcess after use_render_process()
@@ -91,6 +92,7 @@ class CameraService:
         """Put the calibration checkerboard (spacearm.controller.calibration.board.BoardConfig) in the cell."""
         self.base_T_board = board.pose.matrix() @ board.true_offset.matrix()
         self.board = board
+        self._board_seen = None
         if self.render_process is not None:
             self.render_process.show_board(board)
 
@@ -193,14 +195,21 @@ class CameraService:
     def _board_layers(self, base_T_camera: np.ndarray) -> list[FlatLayer]:
         if self.board is None:
             return []
-        cam = self.camera.camera
         camera_T_board = inv_transform(base_T_camera) @ self.base_T_board
-        layer = board_layer(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height))
-        if layer is None:
-            return []
+        pose = camera_T_board.tobytes()
+        if self._board_seen is None or self._board_seen[0] != pose:
+            self._board_seen = (pose, self._draw_board(camera_T_board))
+        return self._board_seen[1]           # the same layers at rest: the renderer gives its last image
+
+    def _draw_board(self, camera_T_board: np.ndarray) -> list[FlatLayer]:
+        cam = self.camera.camera
         nx, ny = self.board.inner
         centre = camera_T_board @ np.array([(nx - 1) * self.board.square / 2, (ny - 1) * self.board.square / 2, 0, 1])
-        return [FlatLayer(layer[0], layer[1], float(centre[2]))]
+        margin = self.camera.renderer.flat_margin(float(centre[2]))     # laid without growing its planes
+        patch = board_patch(camera_T_board, self.board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        if patch is None:
+            return []
+        return [FlatLayer(patch[0], patch[1], float(centre[2]), patch[2], margin)]
 
     def _site_in_view(self, base_T_camera: np.ndarray) -> MarkerSite:
         """The marker nearest to the optical axis in front of the camera."""

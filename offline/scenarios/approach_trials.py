@@ -153,8 +153,7 @@ class ApproachTrials:
             out = mode.update(sync * PERIOD, m)
             if sync % self.frame_every == 0:          # exposure at this SYNC, from the true arm
                 camera_T_marker = inv_transform(fk(self.true, data, q) @ self.end_T_camera) @ base_T_marker
-                image = self.camera.sensor.expose(self.camera.renderer.render(self.camera.scene, camera_T_marker),
-                                                  self.camera.rng, True)
+                image = self.camera.render(camera_T_marker, sync * PERIOD).image      # the sensor's gain in the lighting's pass
                 result = self.pipeline.process(Frame(sync * PERIOD, sync, image, None, sync), prior)
                 prior = result.camera_T_marker if result.ok else None
                 vision.add(result, sync)

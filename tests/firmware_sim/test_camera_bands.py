@@ -1,0 +1,146 @@
+"""The camera's cheaper passes give the pixels of the plain whole-image operations they replace:
+OpenCV's whole-image upsampling and Gaussian blur against the band-by-band versions, the
+sensor's physics written out over the whole frame against its banded noise, a flat layer's
+blur that skips the inside of an opaque board, and the board drawn in its patch against the
+board drawn square by square over the whole frame (the way it was drawn before)."""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from spacearm.base.config.board import load_board
+from spacearm.base.spatial import xyz_rpy_to_transform
+from spacearm.base.vision.camera import CameraModel
+from spacearm.base.vision.config import load_camera
+from spacearm.firmware_sim.calibration_board import EDGE_STEPS, SHIFT, board_patch
+from spacearm.firmware_sim.camera.noise import SensorModel
+from spacearm.firmware_sim.camera.renderer import Renderer, _blur, _blur_rows, _twice, _twice_rows
+
+SEED = 3207           # this file's draws
+
+
+@pytest.mark.parametrize("rows", [37, 300, 512])
+def test_band_upsampling_and_blur_are_the_whole_image_operations(rows):
+    rng = np.random.default_rng(SEED + rows)
+    for dtype in (np.uint8, np.float32):
+        small = (rng.random((rows, 201)) * 250).astype(dtype)
+        whole = cv2.resize(small, (402, 2 * rows), interpolation=cv2.INTER_LINEAR)
+        for step in (128, 7):
+            starts = range(int(rng.integers(0, 2)), 2 * rows, step)      # odd band starts too
+            bands = [_twice_rows(small, y, min(y + step, 2 * rows)) for y in starts]
+            assert np.array_equal(np.vstack(bands), whole[starts[0]:])
+    image = rng.random((rows, 133)).astype(np.float32)
+    for sigma in (0.05, 0.4, 0.9, 2.5, 20.0):
+        whole = cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
+        bands = [_blur_rows(image, y, min(y + 128, rows), sigma) for y in range(0, rows, 128)]
+        assert np.array_equal(np.vstack(bands), whole), sigma
+
+
+def test_banded_sensor_noise_is_the_whole_frame_physics():
+    cfg = load_camera().sensor
+    sensor = SensorModel(cfg)
+    rng = np.random.default_rng(SEED)
+    signal = (rng.random((cfg.height, cfg.width), dtype=np.float32) * sensor.electrons_per_unit).astype(np.float32)
+    normal = SensorModel(cfg)._noise_window(np.random.default_rng(SEED + 1))    # the window the frame reads
+    k = 2 ** (cfg.adc_bits - cfg.output_bits)
+    scale = 1.0 / (sensor.gain * k)
+    electrons = signal + np.sqrt(signal + np.float32(cfg.dark_offset + cfg.read_noise ** 2)) * normal
+    expected = np.clip(np.rint(electrons * scale + (cfg.dark_offset * scale - (k - 1) / (2.0 * k))), 0, 255)
+    for read_only in (False, True):
+        frame = signal.copy()
+        frame.flags.writeable = not read_only
+        got = sensor.expose_electrons(frame, np.random.default_rng(SEED + 1))
+        # float rounding of the same sum in another order moves a pixel by 1 DN at most, rarely
+        differ = got.astype(int) - expected
+        assert np.abs(differ).max() <= 1 and np.count_nonzero(differ) < 1e-4 * differ.size
+
+
+def _board_square_by_square(camera_T_board, board, camera):
+    """The full-frame drawing of the board as the simulator did it before its patch: each polygon
+    projected and filled alone into planes of the whole frame."""
+    R, t = camera_T_board[:3, :3], camera_T_board[:3, 3]
+    rvec = cv2.Rodrigues(R)[0]
+    s, (nx, ny), m = board.square, board.squares, board.margin
+    albedo = np.zeros((camera.height, camera.width), np.float32)
+    alpha = np.zeros_like(albedo)
+
+    def outline(x0, y0, x1, y1):
+        u = np.linspace(0.0, 1.0, EDGE_STEPS, endpoint=False)
+        pts = np.concatenate([np.c_[x0 + (x1 - x0) * u, np.full_like(u, y0)], np.c_[np.full_like(u, x1), y0 + (y1 - y0) * u],
+                              np.c_[x1 - (x1 - x0) * u, np.full_like(u, y1)], np.c_[np.full_like(u, x0), y1 - (y1 - y0) * u]])
+        return np.c_[pts, np.zeros(len(pts))]
+
+    def fill(canvas, poly, value):
+        if np.any((poly @ R.T + t)[:, 2] <= 0.01):
+            return
+        px, _ = cv2.projectPoints(poly, rvec, t, camera.K, camera.dist)
+        cv2.fillPoly(canvas, [np.round(px.reshape(-1, 2) * (1 << SHIFT)).astype(np.int32)], float(value),
+                     lineType=cv2.LINE_AA, shift=SHIFT)
+
+    edge = outline(-s - m, -s - m, (nx - 1) * s + m, (ny - 1) * s + m)
+    fill(alpha, edge, 1.0)
+    fill(albedo, edge, board.light)
+    for j in range(ny):
+        for i in range(nx):
+            if (i + j) % 2 == 0:
+                fill(albedo, outline((i - 1) * s, (j - 1) * s, i * s, j * s), board.dark)
+    return albedo, alpha
+
+
+def test_board_patch_is_the_square_by_square_full_frame_drawing():
+    board = load_board()
+    camera = CameraModel.from_config(load_camera())
+    rng = np.random.default_rng(SEED)
+    shown = 0
+    for _ in range(6):      # tilted, off centre, partly out of the frame
+        T = xyz_rpy_to_transform(list(rng.uniform([-0.3, -0.25, 0.25], [0.1, 0.1, 0.8])), list(rng.uniform(-0.5, 0.5, 3)))
+        albedo, alpha = _board_square_by_square(T, board, camera)
+        patch = board_patch(T, board, camera.K, camera.dist, (camera.width, camera.height))
+        if patch is None:
+            assert not alpha.any()
+            continue
+        (x, y), (h, w) = patch[2], patch[0].shape
+        for plane, drawn in zip(patch[:2], (albedo, alpha)):
+            assert np.array_equal(plane, drawn[y:y + h, x:x + w])
+            drawn[y:y + h, x:x + w] = 0
+            assert not drawn.any()                    # nothing of the board outside its patch
+        shown += 1
+    assert shown >= 4
+
+
+def test_flat_layer_blur_skipping_the_covered_inside_is_the_whole_blur():
+    rng = np.random.default_rng(SEED)
+    for sigma in (0.3, 0.67, 1.6):
+        reach = int(np.ceil(4 * sigma)) + 2
+        alpha = np.zeros((140, 400), np.float32)
+        left, right = rng.integers(5, 60), rng.integers(300, 395)
+        alpha[:, left:right] = 1.0
+        alpha[:, left - 1] = rng.random(140)         # an anti-aliased edge
+        # inside, the whole blur sums the kernel's weights: 1 within float rounding
+        assert np.allclose(Renderer._blur_alpha(alpha, sigma, reach), _blur(alpha, sigma), rtol=0, atol=1e-6)
+
+
+def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
+    from spacearm.firmware_sim.camera.renderer import FlatLayer
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+
+    sim = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+    board, cam, gain = load_board(), sim.camera, sim.sensor.electrons_per_unit
+
+    def layers(distance):
+        T = xyz_rpy_to_transform([-0.1, -0.07, distance], [0.1, -0.1, 0.0])
+        margin = sim.renderer.flat_margin(distance)
+        albedo, alpha, origin = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+
+    still, marker = layers(0.4), view(0.7, 0.2, 1.0)
+    first = sim.renderer.render(sim.scene, marker, still, gain=gain).copy()
+    again = sim.renderer.render(sim.scene, marker, still, gain=gain)
+    kept = sim.renderer.render(sim.scene, marker, still, gain=gain)
+    assert np.array_equal(first, again) and kept is again and not kept.flags.writeable
+    moved = sim.renderer.render(sim.scene, marker, layers(0.45), gain=gain)
+    assert moved.flags.writeable and np.abs(moved - first).max() > 0.1 * first.max()
+    # the same pose, the board drawn anew (new layers): rendered anew, the same image
+    assert np.array_equal(sim.renderer.render(sim.scene, marker, layers(0.4), gain=gain), first)
