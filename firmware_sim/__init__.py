@@ -13,6 +13,7 @@ SYNC period (exactly once per SYNC, never on a wall-clock timer) and sends its T
     sim.stop()
 
 As a process: ``spacearm sim --bus BUS [--plant PLANT.toml] [--bus-config BUS.toml]``.
-Modules: node (generic CiA 301 slave), joint_drive (CiA 402), end_effector, ft_sensor,
+Modules: node (generic CiA 301 slave) with its sdo_server and pdo_engine, joint_drive
+(CiA 402; its power state machine in cia402_state_machine), end_effector, ft_sensor,
 plant (physics + plant TOML schema), runner (Simulator), eds_builder (writes the EDS files).
 """

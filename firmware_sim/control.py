@@ -16,7 +16,7 @@ from canopen.sdo import SdoAbortedError
 from spacearm.base.canopen import od
 from spacearm.base.config.bus import EDS_DIR
 from spacearm.base.canopen.eds import load_od
-from spacearm.firmware_sim.node import SimLocalNode, _NodeTx
+from spacearm.firmware_sim.sdo_server import NodeTx, SimLocalNode, name_the_object
 
 if TYPE_CHECKING:
     from spacearm.firmware_sim.runner import Simulator
@@ -34,7 +34,7 @@ class SimControlNode:
         self.sim = sim
         self.local = SimLocalNode(node_id, load_od(EDS_DIR / "sim_control.eds", node_id))
         self.local._write_callbacks.remove(self.local.nmt.on_write)
-        self.local.sdo.network = _NodeTx(self)
+        self.local.sdo.network = NodeTx(self)
         self.local.add_write_callback(self._on_write)
 
     def send(self, can_id: int, data: bytes) -> None:
@@ -44,9 +44,7 @@ class SimControlNode:
         if len(data) != 8:
             self.sim.stats.malformed += 1
             return
-        sdo = self.local.sdo
-        if data[0] & 0xE0 not in (0x00, 0x60) or sdo._index is None:
-            sdo._index, sdo._subindex = int.from_bytes(data[1:3], "little"), data[3]
+        name_the_object(self.local.sdo, data)
         self.local.sdo.on_request(od.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)
 
     def _target(self):

@@ -29,6 +29,7 @@ from canopen.sdo import SdoAbortedError
 from spacearm.base.canopen.axis_scale import FEED_UNIT
 from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 
+from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
@@ -281,38 +282,12 @@ class JointDriveNode(SimNode):
         if s == State.FAULT_REACTION_ACTIVE or cw & CW_FAULT_RESET:
             return
         cmd = decode_controlword(cw)
-        new = s
-        if s == State.SWITCH_ON_DISABLED:
-            if cmd == Command.SHUTDOWN:
-                new = State.READY_TO_SWITCH_ON                                    # 2
-        elif s == State.READY_TO_SWITCH_ON:
-            if cmd == Command.SWITCH_ON:
-                new = State.SWITCHED_ON                                           # 3
-            elif cmd == Command.ENABLE_OPERATION:
-                new = State.OPERATION_ENABLED                                     # 3 + 4
-            elif cmd in (Command.DISABLE_VOLTAGE, Command.QUICK_STOP):
-                new = State.SWITCH_ON_DISABLED                                    # 7
-        elif s == State.SWITCHED_ON:
-            if cmd == Command.ENABLE_OPERATION:
-                new = State.OPERATION_ENABLED                                     # 4
-            elif cmd == Command.SHUTDOWN:
-                new = State.READY_TO_SWITCH_ON                                    # 6
-            elif cmd in (Command.DISABLE_VOLTAGE, Command.QUICK_STOP):
-                new = State.SWITCH_ON_DISABLED                                    # 10
-        elif s == State.OPERATION_ENABLED:
-            if cmd == Command.SWITCH_ON:
-                new = State.SWITCHED_ON                                           # 5
-            elif cmd == Command.SHUTDOWN:
-                new = State.READY_TO_SWITCH_ON                                    # 8
-            elif cmd == Command.DISABLE_VOLTAGE:
-                new = State.SWITCH_ON_DISABLED                                    # 9
-            elif cmd == Command.QUICK_STOP:
-                new = self._quick_stop()                                          # 11
-        elif s == State.QUICK_STOP_ACTIVE:
-            if cmd == Command.DISABLE_VOLTAGE:
-                new = State.SWITCH_ON_DISABLED                                    # 12
-            elif cmd == Command.ENABLE_OPERATION and self.param(od.QUICK_STOP_OPTION) in (5, 6, 7, 8):
-                new = State.OPERATION_ENABLED                                     # 16
+        if cmd == Command.QUICK_STOP and s == State.OPERATION_ENABLED and self.faults.ignore_quick_stop:
+            return                                      # fault injection: a drive that does not stop
+        option = self.param(od.QUICK_STOP_OPTION)
+        new = next_state(s, cmd, option)
+        if new == State.QUICK_STOP_ACTIVE and s == State.OPERATION_ENABLED:     # 11: 605Ah's ramp
+            self._start_ramp(quick=option not in (1, 5))
         if new == State.OPERATION_ENABLED and s != State.OPERATION_ENABLED:
             if s != State.QUICK_STOP_ACTIVE:
                 self.q_ref = self.joint.q_measured
@@ -321,16 +296,6 @@ class JointDriveNode(SimNode):
             self.target_reached = True
             self.fe_time = 0.0
         self.state = new
-
-    def _quick_stop(self) -> State:
-        """Transition 11 by 605Ah: the ramp its option names, or (0) power off at once."""
-        if self.faults.ignore_quick_stop:
-            return State.OPERATION_ENABLED          # fault injection: a drive that does not stop
-        option = self.param(od.QUICK_STOP_OPTION)
-        if option == 0:
-            return State.SWITCH_ON_DISABLED
-        self._start_ramp(quick=option not in (1, 5))
-        return State.QUICK_STOP_ACTIVE
 
     def _fault(self, code: int, register_bits: int = 0, emcy: bool = True) -> None:
         if self.state in (State.FAULT, State.FAULT_REACTION_ACTIVE):

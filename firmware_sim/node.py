@@ -1,84 +1,37 @@
-"""A simulated CANopen slave: NMT, SDO server, heartbeat, EMCY, SYNC-driven PDOs.
+"""A simulated CANopen slave: NMT, heartbeat producer and consumer, EMCY, node guarding,
+object dictionary access for the device code, fault injection.
 
-Built on canopen.LocalNode for the object dictionary (loaded from the EDS) and its SDO
-server; fills the library's gaps itself: boot-up message, NMT state handling (PDOs only in
-OPERATIONAL, no SDO in STOPPED), a heartbeat producer driven by the simulator's timer
-thread, an EMCY producer that maintains 1001h/1003h, TPDOs sampled from the object
-dictionary on SYNC, RPDOs written into the object dictionary, stricter SDO checks
-(value range, PDO mapping rules) and fault injection.
+Built on canopen.LocalNode for the object dictionary (loaded from the EDS); fills the
+library's gaps itself: boot-up message, NMT state handling (PDOs only in OPERATIONAL, no SDO
+in STOPPED), a heartbeat producer driven by the simulator's timer thread, an EMCY producer
+that maintains 1001h/1003h. Two parts live in their own modules and are the node's:
+sdo_server (the SDO server with its stricter checks) and pdo_engine (RPDOs in, TPDOs out
+on SYNC or event timer, the PDO mapping rules).
 
 Frames reach a node from ``spacearm.firmware_sim.runner.Simulator``, which owns the bus.
 """
 from __future__ import annotations
 
-import logging
 import struct
 import threading
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import canopen
 from canopen import objectdictionary as odlib
 from canopen.sdo import SdoAbortedError
 
 from spacearm.base.canopen import od
+from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 from spacearm.base.canopen.eds import load_od
-from spacearm.firmware_sim.sdo_session import SdoSession
+from spacearm.firmware_sim.pdo_engine import Pdo, PdoEngine, is_pdo_config
+from spacearm.firmware_sim.sdo_server import NodeTx, SdoServer, SimLocalNode, abort_frame
 
 if TYPE_CHECKING:
     from spacearm.firmware_sim.plant import Plant
 
-logger = logging.getLogger(__name__)
-
-from spacearm.base.canopen.codes import (ABORT_DEVICE_STATE, ABORT_LENGTH_HIGH, ABORT_LENGTH_LOW,  # noqa: E402
-                                   ABORT_NOT_MAPPABLE, ABORT_PDO_LENGTH, ABORT_READ_ONLY, ABORT_VALUE_HIGH,
-                                   ABORT_VALUE_INVALID, ABORT_VALUE_LOW)
-
-
-class SimLocalNode(canopen.LocalNode):
-    """LocalNode with the checks a conformant SDO server makes on download."""
-
-    def _find_object(self, index, subindex):
-        # Every SYNC reads and writes ~100 objects per node; the library's lookup walks the
-        # OD each time. The OD never changes after loading, so found objects are cached
-        # (misses still raise the library's SDO abort).
-        cache = self.__dict__.setdefault("_object_cache", {})
-        obj = cache.get((index, subindex))
-        if obj is None:
-            obj = cache[(index, subindex)] = super()._find_object(index, subindex)
-        return obj
-
-    def set_data(self, index, subindex, data, check_writable=False):
-        obj = self._find_object(index, subindex)
-        if check_writable and not obj.writable:
-            raise SdoAbortedError(ABORT_READ_ONLY)
-        if obj.data_type in odlib.NUMBER_TYPES:
-            size = len(obj) // 8
-            if len(data) > size:
-                raise SdoAbortedError(ABORT_LENGTH_HIGH)
-            if len(data) < size:
-                raise SdoAbortedError(ABORT_LENGTH_LOW)
-            if check_writable:
-                value = obj.decode_raw(bytes(data))
-                if obj.max is not None and value > obj.max:
-                    raise SdoAbortedError(ABORT_VALUE_HIGH)
-                if obj.min is not None and value < obj.min:
-                    raise SdoAbortedError(ABORT_VALUE_LOW)
-        super().set_data(index, subindex, data, check_writable)
-        params = self.__dict__.get("params_cache")
-        if params:                 # SimNode.param(): the stored value changed
-            params.pop((index, subindex), None)
-
-
-class _NodeTx:
-    """What the library's SdoServer sees as its network: sends through the node."""
-
-    def __init__(self, node: "SimNode"):
-        self.node = node
-
-    def send_message(self, can_id, data, remote=False):
-        self.node.send(can_id, bytes(data))
+# the names this module had before the SDO server and the PDO engine left it (control.py, tests)
+_NodeTx, _Pdo = NodeTx, Pdo
+__all__ = ["Faults", "NodeStats", "SimNode", "SimLocalNode"]
 
 
 @dataclass
@@ -106,20 +59,6 @@ class NodeStats:
     syncs: int = 0
 
 
-@dataclass
-class _Pdo:
-    cob_id: int
-    transmission_type: int
-    entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
-    event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
-    next_event: float = 0.0      # monotonic time of the next event-timer transmission
-    codec: tuple | None = None   # RPDO: decoder compiled on first use (SimNode._compile_rpdo)
-
-    @property
-    def length(self) -> int:
-        return sum(e[2] for e in self.entries)
-
-
 class SimNode:
     """One independent simulated node (own node ID, OD, NMT state, SDO server, heartbeat)."""
 
@@ -131,7 +70,6 @@ class SimNode:
         self.plant = plant
         self.local = SimLocalNode(node_id, load_od(eds_path, node_id))
         self.od = self.local.object_dictionary
-        self.local.sdo.network = _NodeTx(self)
         # the library's NmtSlave would start its own heartbeat timer on 1017h writes; ours is
         # driven by the simulator (so it can be silenced)
         self.local._write_callbacks.remove(self.local.nmt.on_write)
@@ -142,9 +80,9 @@ class SimNode:
         self.powered = False
         self._send = None            # set by the simulator: send(can_id, data)
         self._lock = threading.RLock()
-        self._tpdos: list[_Pdo] | None = None
-        self._rpdos: dict[int, _Pdo] | None = None
-        self._sync_counter = 0
+        self.pdo_engine = PdoEngine(self)
+        self.sdo_server = SdoServer(self, self.local)
+        self.sdo_session = self.sdo_server.session
         self.next_heartbeat = 0.0
         self.consumer_last: dict[int, float] = {}   # producer node ID -> last heartbeat (monotonic)
         self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
@@ -153,7 +91,6 @@ class SimNode:
         self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
         self._consumer_entries: tuple[dict[int, float], dict] | None = None   # consumer_entries(), what it read
         self.local.params_cache = self._params
-        self.sdo_session = SdoSession()
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
@@ -225,8 +162,7 @@ class SimNode:
                 for index in [i for i in self.local.data_store if 0x1000 <= i < 0x2000]:
                     if index not in (od.ERROR_REGISTER, od.PREDEFINED_ERROR_FIELD):
                         del self.local.data_store[index]
-            self._tpdos = self._rpdos = None
-            self._sync_counter = 0
+            self.pdo_engine.reset()
             self.consumer_last.clear()
             self._guard_toggle = 0
             self.send(od.HEARTBEAT_BASE + self.node_id, bytes([od.NMT_STATE_BOOTUP]))
@@ -249,8 +185,7 @@ class SimNode:
         self.stats.tx_frames += 1
         if can_id == od.SDO_TX_BASE + self.node_id and data[:1] == b"\x80":
             self.stats.sdo_aborts_sent += 1
-            self.sdo_session.aborted()
-            self.local.sdo._buffer = None      # no stale segments after an abort
+            self.sdo_server.aborted()
         self._send(can_id, data)
 
     def heartbeat_period(self) -> float:
@@ -314,104 +249,41 @@ class SimNode:
         if self.faults.sdo_abort is not None:
             _, index, sub = struct.unpack_from("<BHB", data)
             self.stats.sdo_aborts_sent += 1
-            self.send(od.SDO_TX_BASE + self.node_id,
-                      struct.pack("<BHBL", 0x80, index, sub, self.faults.sdo_abort))
+            self.send(od.SDO_TX_BASE + self.node_id, abort_frame(index, sub, self.faults.sdo_abort))
             return
-        sdo = self.local.sdo
-        go, abort = self.sdo_session.screen(data, time.monotonic(), self._object_size)
-        if abort is not None:
-            self._sdo_abort(self.sdo_session.index, self.sdo_session.sub, abort)
-        if not go:
-            sdo._buffer = None
-            return
-        ccs = data[0] & 0xE0
-        if ccs in (0x20, 0x40, 0xA0):
-            sdo._buffer = None      # a new transfer: nothing left over from the last one
-        if ccs not in (0x00, 0x60) or sdo._index is None:   # not a segment: the frame names the object
-            # (canopen's SdoServer.abort() needs these; it fails on the first request otherwise)
-            _, sdo._index, sdo._subindex = struct.unpack_from("<BHB", data)
-        with self._lock:
-            sdo.on_request(od.SDO_RX_BASE + self.node_id, bytearray(data), 0.0)
-            self.sdo_session.after(data, bool(sdo._buffer))
-
-    def _object_size(self, index: int, sub: int) -> int | None:
-        try:
-            return len(self.raw(index, sub))
-        except Exception:   # absent object: the library answers the request itself
-            return None
-
-    def _sdo_abort(self, index: int, sub: int, code: int) -> None:
-        self.send(od.SDO_TX_BASE + self.node_id, struct.pack("<BHBL", 0x80, index, sub, code))
+        self.sdo_server.request(data)
 
     def check_sdo_timeout(self, now: float) -> None:
         """Server-side SDO timeout: abort a transfer the client left unfinished."""
-        expired = self.sdo_session.expired(now)
-        if expired is not None:
-            self.local.sdo._buffer = None
-            self._sdo_abort(*expired)
+        self.sdo_server.check_timeout(now)
 
+    # ------------------------------------------------------------------ PDOs (pdo_engine)
+    # The node's entry points stay methods of the node: the simulator routes to them and a
+    # redundant pair's line selection wraps them per node (line_selection._GATED).
     def on_rpdo(self, cob_id: int, data: bytes) -> None:
-        if self.nmt_state != od.NMT_STATE_OPERATIONAL:
-            return
-        pdo = (self._rpdos or {}).get(cob_id)
-        if pdo is None:
-            return
-        if len(data) < pdo.length:
-            self.stats.malformed += 1
-            self.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
-            return
-        codec = pdo.codec
-        if codec is None:
-            codec = pdo.codec = self._compile_rpdo(pdo)
-        store = self.local.data_store
-        callbacks = self.local._write_callbacks
-        generic = callbacks != [self._on_od_write]
-        params = self._params
-        with self._lock:
-            self.in_rpdo = True
-            try:
-                for index, sub, start, end, obj, size_ok in codec:
-                    chunk = data[start:end]
-                    if not size_ok:          # mapped size differs from the object's type
-                        self.stats.malformed += 1
-                        continue
-                    try:
-                        if generic:
-                            for callback in callbacks:
-                                callback(index=index, subindex=sub, od=obj, data=chunk)
-                        elif index < 0x2000:   # communication area: the full write rules
-                            self._on_od_write(index, sub, obj, chunk)
-                        else:                  # application objects: only the device's reaction
-                            self.on_write(index, sub, chunk)
-                    except SdoAbortedError:
-                        self.stats.malformed += 1
-                        continue
-                    entry = store.get(index)
-                    if entry is None:
-                        entry = store[index] = {}
-                    entry[sub] = chunk
-                    if params and (index, sub) in params:
-                        del params[(index, sub)]
-            finally:
-                self.in_rpdo = False
+        self.pdo_engine.on_rpdo(cob_id, data)
 
-    def _compile_rpdo(self, pdo: "_Pdo") -> tuple:
-        """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
-        whether the mapped length fits the object's type (what LocalNode.set_data checks per
-        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
-        out, offset = [], 0
-        for index, sub, size in pdo.entries:
-            try:
-                obj = self.local._find_object(index, sub)
-            except SdoAbortedError:
-                obj = None
-            if obj is not None:
-                size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
-                out.append((index, sub, offset, offset + size, obj, size_ok))
-            else:
-                out.append((index, sub, offset, offset + size, None, False))
-            offset += size
-        return tuple(out)
+    def rpdo_cob_ids(self) -> list[int]:
+        return self.pdo_engine.rpdo_cob_ids()
+
+    def send_tpdos(self) -> None:
+        """Sample the mapped objects and send the synchronous TPDOs (OPERATIONAL only)."""
+        self.pdo_engine.send_tpdos()
+
+    @property
+    def has_event_tpdos(self) -> bool:
+        return self.pdo_engine.has_event_tpdos
+
+    def send_event_tpdos(self, now: float) -> None:
+        self.pdo_engine.send_event_tpdos(now)
+
+    @property
+    def _tpdos(self) -> list[Pdo] | None:
+        return self.pdo_engine.tpdos
+
+    @property
+    def _rpdos(self) -> dict[int, Pdo] | None:
+        return self.pdo_engine.rpdos
 
     # ------------------------------------------------------------------ heartbeat consumer
     def consumer_entries(self) -> dict[int, float]:
@@ -465,13 +337,6 @@ class SimNode:
     def on_heartbeat_lost(self, producer: int) -> None:
         """Device specific reaction to a consumer heartbeat timeout (after the EMCY)."""
 
-    def rpdo_cob_ids(self) -> list[int]:
-        if self._rpdos is None:
-            self._rpdos = {}
-            for pdo in self._read_pdos(od.RPDO_COMM, od.RPDO_MAP):
-                self._rpdos[pdo.cob_id] = pdo
-        return list(self._rpdos)
-
     def sync_cob_id(self) -> int:
         return self.get(od.COB_ID_SYNC) & 0x7FF
 
@@ -482,112 +347,14 @@ class SimNode:
     def on_sync_end(self, dt: float) -> None:
         """Update the OD from the plant after the physics step (device specific)."""
 
-    def send_tpdos(self) -> None:
-        """Sample the mapped objects and send the synchronous TPDOs (OPERATIONAL only)."""
-        self._sync_counter += 1
-        self.stats.syncs += 1
-        if self.nmt_state != od.NMT_STATE_OPERATIONAL or self.faults.ignore_sync:
-            return
-        if self._tpdos is None:
-            self._tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self._tpdos:
-            t = pdo.transmission_type
-            if not (0 <= t <= 240) or (t > 1 and self._sync_counter % t):
-                continue
-            self._transmit(pdo)
-
-    @property
-    def has_event_tpdos(self) -> bool:
-        """Cheap check for the timer thread: any event-timer TPDO (or not known yet)?"""
-        if self.nmt_state != od.NMT_STATE_OPERATIONAL:
-            return False
-        tpdos = self._tpdos
-        return tpdos is None or any(p.transmission_type >= 254 and p.event_timer > 0 for p in tpdos)
-
-    def send_event_tpdos(self, now: float) -> None:
-        """Event-driven TPDOs (transmission type 254/255) with an event timer: sent every
-        event-timer period while OPERATIONAL (the simulator's timer thread calls this)."""
-        if self.nmt_state != od.NMT_STATE_OPERATIONAL or self.faults.ignore_sync:
-            return
-        if self._tpdos is None:
-            self._tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self._tpdos:
-            if pdo.transmission_type < 254 or pdo.event_timer <= 0.0:
-                continue
-            if pdo.next_event == 0.0:
-                pdo.next_event = now + pdo.event_timer
-            elif now >= pdo.next_event:
-                pdo.next_event = max(pdo.next_event + pdo.event_timer, now)
-                self._transmit(pdo)
-
-    def _transmit(self, pdo: _Pdo) -> None:
-        with self._lock:
-            try:     # hot path: every entry is a stored value and no read callback is installed
-                if self.local._read_callbacks:
-                    raise KeyError
-                store = self.local.data_store
-                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
-            except KeyError:
-                data = b"".join([self.raw(index, sub) for index, sub, _ in pdo.entries])
-        if self.faults.drop_tx > 0:
-            self.faults.drop_tx -= 1
-            self.stats.dropped_tx += 1
-            return
-        if self.faults.corrupt_tx > 0 and data:
-            self.faults.corrupt_tx -= 1
-            self.stats.corrupted_tx += 1
-            data = data[:-1]
-        self.send(pdo.cob_id, data)
-
-    def _read_pdos(self, comm_base: int, map_base: int) -> list[_Pdo]:
-        pdos = []
-        for n in range(od.N_PDOS):
-            if comm_base + n not in self.od:     # the device has fewer PDOs
-                break
-            cob = self.get(comm_base + n, od.PDO_COB_ID)
-            if cob & od.PDO_COB_ID_INVALID:
-                continue
-            entries = []
-            for i in range(1, self.get(map_base + n, 0) + 1):
-                value = self.get(map_base + n, i)
-                entries.append((value >> 16, (value >> 8) & 0xFF, (value & 0xFF) // 8))
-            timer = 0.0
-            if comm_base == od.TPDO_COMM and (comm_base + n) in self.od \
-                    and od.PDO_EVENT_TIMER in self.od[comm_base + n]:
-                timer = self.get(comm_base + n, od.PDO_EVENT_TIMER) / 1000.0
-            pdos.append(_Pdo(cob & 0x7FF, self.get(comm_base + n, od.PDO_TRANSMISSION_TYPE), entries, timer))
-        return pdos
-
     # ------------------------------------------------------------------ OD write rules
     def _on_od_write(self, index, subindex, od, data, **_):  # noqa: A002 - library keyword
         self._params.pop((index, subindex), None)
         from spacearm.base.canopen import od as ids
-        if ids.RPDO_MAP <= index < ids.RPDO_MAP + ids.N_PDOS or ids.TPDO_MAP <= index < ids.TPDO_MAP + ids.N_PDOS:
-            comm = (ids.RPDO_COMM if index < ids.TPDO_MAP else ids.TPDO_COMM) + (index & 0xFF)
-            if not self.get(comm, ids.PDO_COB_ID) & ids.PDO_COB_ID_INVALID:
-                raise SdoAbortedError(ABORT_DEVICE_STATE)   # change mapping only while the PDO is disabled
-            value = int.from_bytes(bytes(data), "little")
-            if subindex == 0:
-                total = sum(self.get(index, i) & 0xFF for i in range(1, value + 1))
-                if total > 64:
-                    raise SdoAbortedError(ABORT_PDO_LENGTH)
-            else:
-                m_index, m_sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
-                if value != 0:
-                    try:
-                        target = self.local._find_object(m_index, m_sub)
-                    except SdoAbortedError:
-                        raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
-                    if not target.pdo_mappable or bits != len(target):
-                        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
-                    rx = index < ids.TPDO_MAP
-                    if rx and not target.writable or not rx and not target.readable:
-                        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
-        if ids.RPDO_COMM <= index < ids.TPDO_MAP + ids.N_PDOS:
-            self._tpdos = self._rpdos = None
-            if self.pdo_changed_callback:
-                # after the store: defer via flag (the value is stored after callbacks run)
-                self._routing_dirty = True
+        self.pdo_engine.check_config_write(index, subindex, data)
+        if is_pdo_config(index) and self.pdo_changed_callback:
+            # after the store: defer via flag (the value is stored after callbacks run)
+            self._routing_dirty = True
         if index == ids.PREDEFINED_ERROR_FIELD and subindex == 0:
             if int.from_bytes(bytes(data), "little") != 0:
                 raise SdoAbortedError(ABORT_VALUE_INVALID)  # CiA 301: only 0 may be written (clears history)

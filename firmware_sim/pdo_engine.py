@@ -1,0 +1,237 @@
+"""A simulated node's PDO engine: the PDO tables read from the object dictionary, RPDOs
+written into it, TPDOs sampled from it on SYNC or by their event timer (CiA 301 7.2.2).
+
+The tables are read once per configuration (the communication and mapping objects; a write
+to either drops them) and each RPDO's decoder is compiled on first use, so a frame costs a
+few slices and dict stores, not an object dictionary lookup per mapped object.
+
+The engine works on its node's object dictionary through the node (node.SimNode): its NMT
+state, fault switches, statistics, lock and send(); it imports nothing of the node's module.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from canopen import objectdictionary as odlib
+from canopen.sdo import SdoAbortedError
+
+from spacearm.base.canopen import od
+from spacearm.base.canopen.codes import ABORT_DEVICE_STATE, ABORT_NOT_MAPPABLE, ABORT_PDO_LENGTH
+
+
+@dataclass
+class Pdo:
+    cob_id: int
+    transmission_type: int
+    entries: list[tuple[int, int, int]] = field(default_factory=list)  # (index, sub, bytes)
+    event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
+    next_event: float = 0.0      # monotonic time of the next event-timer transmission
+    codec: tuple | None = None   # RPDO: decoder compiled on first use (PdoEngine._compile_rpdo)
+
+    @property
+    def length(self) -> int:
+        return sum(e[2] for e in self.entries)
+
+
+def is_pdo_config(index: int) -> bool:
+    """A communication or mapping object of an RPDO or TPDO (1400h-1BFFh)."""
+    return od.RPDO_COMM <= index < od.TPDO_MAP + od.N_PDOS
+
+
+class PdoEngine:
+    def __init__(self, node):
+        self.node = node
+        self.tpdos: list[Pdo] | None = None
+        self.rpdos: dict[int, Pdo] | None = None
+        self.sync_counter = 0
+
+    def invalidate(self) -> None:
+        """The PDO configuration changed (or the node reset): read the tables again."""
+        self.tpdos = self.rpdos = None
+
+    def reset(self) -> None:
+        self.invalidate()
+        self.sync_counter = 0
+
+    # ------------------------------------------------------------------ receive
+    def rpdo_cob_ids(self) -> list[int]:
+        if self.rpdos is None:
+            self.rpdos = {pdo.cob_id: pdo for pdo in self._read_pdos(od.RPDO_COMM, od.RPDO_MAP)}
+        return list(self.rpdos)
+
+    def on_rpdo(self, cob_id: int, data: bytes) -> None:
+        node = self.node
+        if node.nmt_state != od.NMT_STATE_OPERATIONAL:
+            return
+        pdo = (self.rpdos or {}).get(cob_id)
+        if pdo is None:
+            return
+        if len(data) < pdo.length:
+            node.stats.malformed += 1
+            node.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
+            return
+        codec = pdo.codec
+        if codec is None:
+            codec = pdo.codec = self._compile_rpdo(pdo)
+        local = node.local
+        store = local.data_store
+        callbacks = local._write_callbacks
+        write_rules = node._on_od_write
+        generic = callbacks != [write_rules]
+        params = node._params
+        with node._lock:
+            node.in_rpdo = True
+            try:
+                for index, sub, start, end, obj, size_ok in codec:
+                    chunk = data[start:end]
+                    if not size_ok:          # mapped size differs from the object's type
+                        node.stats.malformed += 1
+                        continue
+                    try:
+                        if generic:
+                            for callback in callbacks:
+                                callback(index=index, subindex=sub, od=obj, data=chunk)
+                        elif index < 0x2000:   # communication area: the full write rules
+                            write_rules(index, sub, obj, chunk)
+                        else:                  # application objects: only the device's reaction
+                            node.on_write(index, sub, chunk)
+                    except SdoAbortedError:
+                        node.stats.malformed += 1
+                        continue
+                    entry = store.get(index)
+                    if entry is None:
+                        entry = store[index] = {}
+                    entry[sub] = chunk
+                    if params and (index, sub) in params:
+                        del params[(index, sub)]
+            finally:
+                node.in_rpdo = False
+
+    def _compile_rpdo(self, pdo: Pdo) -> tuple:
+        """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
+        whether the mapped length fits the object's type (what LocalNode.set_data checks per
+        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
+        out, offset = [], 0
+        for index, sub, size in pdo.entries:
+            try:
+                obj = self.node.local._find_object(index, sub)
+            except SdoAbortedError:
+                obj = None
+            if obj is not None:
+                size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
+                out.append((index, sub, offset, offset + size, obj, size_ok))
+            else:
+                out.append((index, sub, offset, offset + size, None, False))
+            offset += size
+        return tuple(out)
+
+    # ------------------------------------------------------------------ transmit
+    def send_tpdos(self) -> None:
+        """Sample the mapped objects and send the synchronous TPDOs (OPERATIONAL only)."""
+        node = self.node
+        self.sync_counter += 1
+        node.stats.syncs += 1
+        if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
+            return
+        if self.tpdos is None:
+            self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
+        for pdo in self.tpdos:
+            t = pdo.transmission_type
+            if not (0 <= t <= 240) or (t > 1 and self.sync_counter % t):
+                continue
+            self._transmit(pdo)
+
+    @property
+    def has_event_tpdos(self) -> bool:
+        """Cheap check for the timer thread: any event-timer TPDO (or not known yet)?"""
+        if self.node.nmt_state != od.NMT_STATE_OPERATIONAL:
+            return False
+        tpdos = self.tpdos
+        return tpdos is None or any(p.transmission_type >= 254 and p.event_timer > 0 for p in tpdos)
+
+    def send_event_tpdos(self, now: float) -> None:
+        """Event-driven TPDOs (transmission type 254/255) with an event timer: sent every
+        event-timer period while OPERATIONAL (the simulator's timer thread calls this)."""
+        node = self.node
+        if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
+            return
+        if self.tpdos is None:
+            self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
+        for pdo in self.tpdos:
+            if pdo.transmission_type < 254 or pdo.event_timer <= 0.0:
+                continue
+            if pdo.next_event == 0.0:
+                pdo.next_event = now + pdo.event_timer
+            elif now >= pdo.next_event:
+                pdo.next_event = max(pdo.next_event + pdo.event_timer, now)
+                self._transmit(pdo)
+
+    def _transmit(self, pdo: Pdo) -> None:
+        node = self.node
+        local = node.local
+        with node._lock:
+            try:     # hot path: every entry is a stored value and no read callback is installed
+                if local._read_callbacks:
+                    raise KeyError
+                store = local.data_store
+                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
+            except KeyError:
+                data = b"".join([node.raw(index, sub) for index, sub, _ in pdo.entries])
+        faults = node.faults
+        if faults.drop_tx > 0:
+            faults.drop_tx -= 1
+            node.stats.dropped_tx += 1
+            return
+        if faults.corrupt_tx > 0 and data:
+            faults.corrupt_tx -= 1
+            node.stats.corrupted_tx += 1
+            data = data[:-1]
+        node.send(pdo.cob_id, data)
+
+    def _read_pdos(self, comm_base: int, map_base: int) -> list[Pdo]:
+        get, dictionary = self.node.get, self.node.od
+        pdos = []
+        for n in range(od.N_PDOS):
+            if comm_base + n not in dictionary:     # the device has fewer PDOs
+                break
+            cob = get(comm_base + n, od.PDO_COB_ID)
+            if cob & od.PDO_COB_ID_INVALID:
+                continue
+            entries = []
+            for i in range(1, get(map_base + n, 0) + 1):
+                value = get(map_base + n, i)
+                entries.append((value >> 16, (value >> 8) & 0xFF, (value & 0xFF) // 8))
+            timer = 0.0
+            if comm_base == od.TPDO_COMM and od.PDO_EVENT_TIMER in dictionary[comm_base + n]:
+                timer = get(comm_base + n, od.PDO_EVENT_TIMER) / 1000.0
+            pdos.append(Pdo(cob & 0x7FF, get(comm_base + n, od.PDO_TRANSMISSION_TYPE), entries, timer))
+        return pdos
+
+    # ------------------------------------------------------------------ write rules
+    def check_config_write(self, index: int, subindex: int, data) -> None:
+        """CiA 301's rules for a write to a mapping object (raises the SDO abort): a mapping
+        changes only while its PDO is disabled, maps only mappable objects of the right
+        length and direction, and fits 64 bits. Then the tables are read again."""
+        if od.RPDO_MAP <= index < od.RPDO_MAP + od.N_PDOS or od.TPDO_MAP <= index < od.TPDO_MAP + od.N_PDOS:
+            node = self.node
+            comm = (od.RPDO_COMM if index < od.TPDO_MAP else od.TPDO_COMM) + (index & 0xFF)
+            if not node.get(comm, od.PDO_COB_ID) & od.PDO_COB_ID_INVALID:
+                raise SdoAbortedError(ABORT_DEVICE_STATE)   # change mapping only while the PDO is disabled
+            value = int.from_bytes(bytes(data), "little")
+            if subindex == 0:
+                total = sum(node.get(index, i) & 0xFF for i in range(1, value + 1))
+                if total > 64:
+                    raise SdoAbortedError(ABORT_PDO_LENGTH)
+            elif value != 0:
+                m_index, m_sub, bits = value >> 16, (value >> 8) & 0xFF, value & 0xFF
+                try:
+                    target = node.local._find_object(m_index, m_sub)
+                except SdoAbortedError:
+                    raise SdoAbortedError(ABORT_NOT_MAPPABLE) from None
+                if not target.pdo_mappable or bits != len(target):
+                    raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+                rx = index < od.TPDO_MAP
+                if rx and not target.writable or not rx and not target.readable:
+                    raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        if is_pdo_config(index):
+            self.invalidate()
