@@ -31,7 +31,9 @@ PLANT = "configs/plant/oru_testbed_errors.toml"
 class ApproachStack:
     def __init__(self, plant: str = PLANT, threaded: bool = True):
         self.bus = f"virtual:approach-{time.monotonic_ns()}"
-        self.sim = start_simulator(self.bus, DEFAULT_BUS_CONFIG, plant)
+        # SYNC time beside the lockstep daemon: on the wall clock a starved run saw heartbeats
+        # lost (EMCY 8130) and two runs of one script parted by a SYNC
+        self.sim = start_simulator(self.bus, DEFAULT_BUS_CONFIG, plant, time_base="sync")
         self.frames = LocalFrameSource()
         self.camera = self.sim.attach_camera(self.frames)
         self.daemon = Daemon(DaemonOptions(bus=self.bus, clock="lockstep", api=None, record_dir=None))
