@@ -207,6 +207,7 @@ def start_at(path, posture, plant: str) -> str:
 
 
 @pytest.mark.vcan_vm
+@pytest.mark.timeout(900)      # the VM: bring-up alone took > 300 s there at host load 10-19
 def test_short_moves_and_impedance_through_cuts_each_way_then_both_lost(request, tmp_path, time_scale):
     """The cheap variant for the vcan VM (each cycle there costs ~15 host cycles): two short
     joint moves and the ORU paper's stiffness task (impedance on x, K = 1 N/mm; in free
