@@ -45,6 +45,7 @@ from __future__ import annotations
 import queue
 import threading
 from collections.abc import Callable
+from operator import itemgetter
 
 import can
 
@@ -53,6 +54,7 @@ from .line_faults import LineFault, line_fault
 PAIR_SEPARATOR = "+"
 LINE_NAMES = ("A", "B")
 _READ_POLL = 0.1   # s: a line reader's recv timeout, bounds shutdown
+_can_id = itemgetter(0)
 
 _rx = threading.local()
 rx_state = _rx     # the thread-local behind rx_line(): `.line`, for per-frame hot paths
@@ -274,7 +276,7 @@ class RedundantBus(can.BusABC):
         if not isinstance(frames, list):
             frames = list(frames)
         if faults[0].mode == "ok" and faults[1].mode == "ok" and not (
-                watch and any(frame[0] in watch for frame in frames)):
+                watch and any(map(watch.__contains__, map(_can_id, frames)))):   # no Python frame per frame
             # the common case, without a call per frame: no fault to apply, nothing watched
             if router is None:
                 self.sent[self.active] += len(frames)

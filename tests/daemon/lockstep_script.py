@@ -78,6 +78,7 @@ def lockstep_stack(plant: str | Path, *, arm: Path | None = None, bus_config: Pa
     if arm is not None:
         options.arm = arm
     daemon = Daemon(options)
+    daemon.plant_simulator = sim        # for tests that judge the plant's truth
     try:
         daemon.start()
         yield daemon
