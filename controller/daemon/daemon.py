@@ -40,6 +40,8 @@ from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, describe, use_fi
 
 # s of controller time a SIGINT/SIGTERM waits for the arm to stop before powering off anyway
 SHUTDOWN_STOP_LIMIT = 3.0
+REALTIME_CYCLE_TIMEOUT = 2.0     # s a command waits for the cycle to take it: 100 cycles at 20 ms
+LOCKSTEP_CYCLE_TIMEOUT = 30.0
 
 
 @dataclass
@@ -128,8 +130,11 @@ class Daemon:
         self.scheduling = "normal"   # the cycle's policy, or why the one asked for was refused
         self._stop = threading.Event()
         self._last_stats_time = -1.0
+        # A lockstep cycle's wall time is the machine's speed, not a fault: there the timeout only
+        # tells a console that the cycle is not running at all.
         self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
-                                        RecordingControl(self), self.model.nq)
+                                        RecordingControl(self), self.model.nq,
+                                        cycle_timeout=LOCKSTEP_CYCLE_TIMEOUT if lockstep else REALTIME_CYCLE_TIMEOUT)
         # Named postures for `move joints NAME`: the arm file's [postures], and "home" from the
         # joints' home angles unless the file names its own.
         self.handlers.postures = {"home": [j.home for j in self.arm.joints], **self.arm.postures}
