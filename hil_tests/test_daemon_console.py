@@ -147,14 +147,51 @@ net.close()
     assert alice.run("enable", check=False).stderr.startswith("error[protective_stop]:")
 
 
+def descendants(pid: int) -> list[int]:
+    found, todo = [], [pid]
+    while todo:
+        parent = todo.pop()
+        for task in Path(f"/proc/{parent}/task").glob("*"):
+            try:
+                children = [int(c) for c in (task / "children").read_text().split()]
+            except OSError:
+                continue
+            found += children
+            todo += children
+    return found
+
+
+def cmdline(pid: int) -> str:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def alive(pid: int) -> bool:
+    """Running, not a zombie waiting for its (re-)parent to reap it."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
 def test_recording_is_readable_after_kill_9(stack):
     alice = stack["alice"]
     alice.run("enable")
     alice.run("move", "joints", *map(str, READY), "--no-wait")
     time.sleep(2.0)
     path = alice.status()["recording"]["path"]
+    writers = [pid for pid in descendants(stack["daemon"].pid) if "writer_process" in cmdline(pid)]
+    assert writers, "the daemon runs no recording writer"
     os.killpg(stack["daemon"].pid, signal.SIGKILL)
     stack["daemon"].wait(10)
+    # The writer has its own session so it outlives the kill and drains what the daemon handed
+    # over; read the file once it has ended, or a second read sees more cycles than the first.
+    deadline = time.monotonic() + 60
+    while any(alive(pid) for pid in writers):
+        assert time.monotonic() < deadline, "the recording writer did not end after its daemon died"
+        time.sleep(0.05)
     recording = read_recording(path)
     assert not recording.complete
     cycles = [m.data["cycle"] for m in recording.topic("/cycle")]
