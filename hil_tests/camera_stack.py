@@ -19,7 +19,7 @@ def launch_camera_stack(loopback_hub, launch, plant: str, tag: str, procs: dict 
     # thread drops to normal scheduling); at normal priority their heartbeats went silent for
     # 0.66 s on this loaded machine while the renderer ran.
     sim = launch(["-m", "spacearm.console.main", "sim", "--plant", plant, "--camera", camera,
-                  "--bus-config", BUS_CONFIG, "--rt-priority", "50"], bus_spec=bus, ready="nodes ready")
+                  "--bus-config", BUS_CONFIG, "--rt-priority", "50", "--time-base", "sync"], bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
     daemon = launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--no-record",
                      "--camera", camera, "--bus-config", BUS_CONFIG], bus_spec=bus, ready="spacearm daemon:", timeout=30)

@@ -46,7 +46,7 @@ class Console:
 def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"daemon-{os.getpid()}-{time.monotonic_ns()}")
     launch(["-m", "spacearm.console.main", "sim", "--plant", "configs/plant/oru_testbed_nominal.toml",
-            "--control-node", "126", "--rt-priority", "50"], bus_spec=bus, ready="nodes ready")   # as the README runs it
+            "--control-node", "126", "--rt-priority", "50", "--time-base", "sync"], bus_spec=bus, ready="nodes ready")   # as the README runs it
     api = f"tcp:127.0.0.1:{free_port()}"
     daemon = launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api,
                      "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)

@@ -56,7 +56,7 @@ def stack(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"diagnose-run-{os.getpid()}-{time.monotonic_ns()}")
     bus_config = str(patient_bus(tmp_path / "bus.toml"))     # supervision is not under test here
     launch(["-m", "spacearm.console.main", "sim", "--plant", str(viscous_plant(tmp_path)), "--control-node", "126",
-            "--rt-priority", "50", "--bus-config", bus_config], bus_spec=bus, ready="nodes ready")
+            "--rt-priority", "50", "--bus-config", bus_config, "--time-base", "sync"], bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--bus-config", bus_config,
             "--record-dir", str(tmp_path / "runs")], bus_spec=bus, ready="spacearm daemon:", timeout=30)

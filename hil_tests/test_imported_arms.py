@@ -29,7 +29,7 @@ FILES = {   # arm: (arm file, bus file, plant file)
 def test_arm_runs_checkout_on_virtual_bus_with_rigid_body_plant(arm: str, tmp_path) -> None:
     arm_file, bus_file, plant_file = FILES[arm]
     bus = f"virtual:imported-{arm}-{time.monotonic_ns()}"
-    simulator = start_simulator(bus, bus_file, plant_file)
+    simulator = start_simulator(bus, bus_file, plant_file, time_base="sync")
     daemon = None
     try:
         assert simulator.plant.dynamics is not None   # coupled rigid-body plant, not per joint

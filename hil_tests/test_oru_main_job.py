@@ -22,7 +22,7 @@ def _embedded(vision: bool):
     from spacearm.offline.scenarios.changeout import start_camera
     from hil_tests.camera_stack import BUS_CONFIG
     bus = f"virtual:oru-cam-{time.monotonic_ns()}"
-    sim = start_simulator(bus, BUS_CONFIG, PLANT)
+    sim = start_simulator(bus, BUS_CONFIG, PLANT, time_base="sync")
     ring, camera = start_camera(sim) if vision else (None, None)
     daemon = Daemon(DaemonOptions(bus=bus, bus_config=BUS_CONFIG, clock="lockstep", api=None, record_dir=None,
                                   camera=camera))

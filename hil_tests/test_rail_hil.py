@@ -21,7 +21,7 @@ pytestmark = pytest.mark.hil
 
 def test_rail_moves_and_holds_over_the_loopback_hub(loopback_hub, launch, tmp_path):
     bus = loopback_hub.spec(f"rail-{os.getpid()}-{time.monotonic_ns()}")
-    launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT), "--bus-config", str(BUS)],
+    launch(["-m", "spacearm.console.main", "sim", "--plant", str(PLANT), "--bus-config", str(BUS), "--time-base", "sync"],
            bus_spec=bus, ready="nodes ready")
     api = f"tcp:127.0.0.1:{free_port()}"
     launch(["-m", "spacearm.console.main", "daemon", "--clock", "lockstep", "--api", api, "--arm", str(ARM),

@@ -99,7 +99,7 @@ def stepped_daemon(tmp_path: Path, *, arm: Path = ARM, plant: Path = PLANT,
     from spacearm.firmware_sim.runner import start_simulator
     bus_config = with_sync_period(period, tmp_path)
     bus = f"virtual:stops-{uuid.uuid4().hex[:8]}"
-    sim = start_simulator(bus, bus_config, plant=plant)
+    sim = start_simulator(bus, bus_config, plant=plant, time_base="sync")
     daemon = Daemon(DaemonOptions(bus=bus, arm=arm, bus_config=bus_config, clock="lockstep", api=None,
                                   record_dir=tmp_path, period=period))
     try:

@@ -26,7 +26,7 @@ def recorded(tmp_path_factory):
     from spacearm.firmware_sim.runner import start_simulator
     runs = tmp_path_factory.mktemp("runs")
     bus = f"virtual:rec-{uuid.uuid4().hex[:8]}"
-    sim = start_simulator(bus, plant="configs/plant/oru_testbed_nominal.toml")
+    sim = start_simulator(bus, plant="configs/plant/oru_testbed_nominal.toml", time_base="sync")
     daemon = Daemon(DaemonOptions(bus=bus, clock="lockstep", api=None, record_dir=runs,
                                   can_trace_limit=TRACE_LIMIT))
     started_ns = time.time_ns()
