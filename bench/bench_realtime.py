@@ -256,9 +256,7 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     def board_frame(distance: float, layers: list | None = None) -> None:
         """A frame with the board drawn anew, or the given layers (an arm at rest: the camera
         service keeps a still board's)."""
-        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), layers or board_layers(distance),
-                                        gain=cam.sensor.electrons_per_unit)      # as the camera service does
-        cam.sensor.expose_electrons(electrons, cam.rng)
+        cam.image(view(distance + 0.3, 0.2, 1.0), layers or board_layers(distance))     # as the camera service does
 
     def row(name: str, cpu: list[float], ref: float) -> str:
         c = np.array(cpu) * 1e3

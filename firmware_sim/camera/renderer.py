@@ -170,14 +170,20 @@ def _twice(small: np.ndarray) -> np.ndarray:
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
-    """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
-    weighs the two source rows nearest to each output row with weights set by its position
-    alone, so a band cut out of the source with a row to spare on each side gives the same
-    pixels as the whole image's upsampling."""
+def _twice_rows(small: np.ndarray, y0: int, y1: int, x0: int = 0, x1: int | None = None) -> np.ndarray:
+    """Rows y0:y1 (even y0) and columns x0:x1 (even x0; all by default) of _twice(small), from
+    the rows and columns of `small` they reach: bilinear 2x up weighs the two source rows (and
+    columns) nearest to each output pixel with weights set by its position alone, so a block cut
+    out of the source with a row and column to spare on each side gives the same pixels as the
+    whole image's upsampling."""
     a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
-    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
-    return band[y0 - 2 * a:y1 - 2 * a]
+    if x0 == 0 and x1 is None:
+        band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+        return band[y0 - 2 * a:y1 - 2 * a]
+    x1 = small.shape[1] * 2 if x1 is None else x1
+    c, d = max(x0 // 2 - 1, 0), min((x1 + 1) // 2 + 1, small.shape[1])
+    block = cv2.resize(small[a:b, c:d], ((d - c) * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    return block[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c]
 
 
 def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
@@ -595,37 +601,52 @@ class Renderer:
         return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
 
     @staticmethod
-    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid) -> None:
-        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box) over `band` (those
-        rows of the image, unlit) in place: its planes' rows the band's blur reaches are blurred
-        and laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo."""
+    def _flat_rows(laid, b0: int, b1: int):
+        """The rows of a flat layer (Renderer._flat_box) in the image's rows b0:b1: (r0, r1) the
+        rows it covers there, (g0, g1) the rows its blur reaches for them, and (c0, c1) the image's
+        columns where its blurred coverage is 1 in all of them (the inside of an opaque board:
+        what lies under it does not show), or None; None for no rows."""
         albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
         r0, r1 = max(b0, y0), min(b1, y1)
         if r1 <= r0:
+            return None
+        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)
+        covered = np.flatnonzero(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0)    # (a row-wise reduction: fast)
+        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
+            return (r0, r1), (g0, g1), None
+        return (r0, r1), (g0, g1), (x0 + covered[0] + reach, x0 + covered[-1] + 1 - reach)
+
+    @staticmethod
+    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
+        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box; `rows` its
+        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: its
+        planes' rows the band's blur reaches are blurred and laid while in the cache:
+        band * (1 - blurred coverage) + shade * blurred albedo. Where the blurred coverage is 1
+        (the covered columns) that is shade * blurred albedo, whatever the band held there (it
+        need not hold the wall), and the coverage is blurred only beside them."""
+        if rows is None:
             return
-        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)             # the rows the band's blur reaches
+        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        (r0, r1), (g0, g1), covered = rows
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
-        cv2.subtract(region, cv2.multiply(region, Renderer._blur_alpha(alpha[g0 - y0:g1 - y0], sigma, reach)[keep]),
-                     dst=region)                                       # in place, into the view
-        cv2.scaleAdd(_blur(albedo[g0 - y0:g1 - y0], sigma)[keep], shade, region, dst=region)
+        lit = _blur(albedo[g0 - y0:g1 - y0], sigma)[keep]
+        alpha = alpha[g0 - y0:g1 - y0]
+        if covered is None:
+            parts = [(np.s_[:], _blur(alpha, sigma)[keep])]
+        else:
+            c0, c1 = covered[0] - x0, covered[1] - x0
+            np.multiply(lit[:, c0:c1], np.float32(shade), out=region[:, c0:c1])
+            parts = [(np.s_[:, :c0], _blur(alpha[:, :c0 + reach], sigma)[keep][:, :c0]),
+                     (np.s_[:, c1:], _blur(alpha[:, c1 - reach:], sigma)[keep][:, reach:])]
+        for part, blurred in parts:
+            under = region[part]
+            cv2.subtract(under, cv2.multiply(under, blurred), dst=under)     # in place, into the view
+            cv2.scaleAdd(lit[part], shade, under, dst=under)
 
     @staticmethod
-    def _blur_alpha(alpha: np.ndarray, sigma: float, reach: int) -> np.ndarray:
-        """_blur(alpha, sigma) of a band of a flat layer's coverage, blurring only the columns
-        within `reach` (>= the kernel's) of a coverage below 1: between, where the band is
-        covered in every row (the inside of an opaque board), the blur is 1 without computing it."""
-        covered = np.flatnonzero(alpha.min(axis=0) >= 1.0)              # (a row-wise reduction: fast)
-        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
-            return _blur(alpha, sigma)
-        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach
-        out = np.ones_like(alpha)
-        out[:, :c0] = _blur(alpha[:, :c0 + reach], sigma)[:, :c0]
-        out[:, c1:] = _blur(alpha[:, c1 - reach:], sigma)[:, reach:]
-        return out
-
-    @staticmethod
-    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=()) -> np.ndarray:
+    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=(),
+                   finish=None) -> np.ndarray | None:
         """The lit wall (the lighting applied in its one float conversion), the flat layers
         (Renderer._flat_box) and the foreground `layer` ((albedo, transparency), origin, down,
         sigma) over it, or None, a band of rows at a time: the half-resolution planes are
@@ -634,16 +655,22 @@ class Renderer:
         (and nothing between) are laid together there and upsampled once (the upsampling of a
         product then stands for the product of upsamplings: they differ only where both the
         wall and the foreground's coverage change within a pixel pair, i.e. at the foreground's
-        outline against the wall's dots, by a fraction of the contrast)."""
+        outline against the wall's dots, by a fraction of the contrast). The wall is not made
+        where a flat layer hides it in every row of a band (the inside of a board).
+        `finish(band, y)`: given each band of the image (rows y:y+len(band)) as it is made,
+        while in the cache (the sensor's exposure): then no image is kept and None returned."""
         wall, halved = background
-        height = light.shape[0]
-        img = np.empty(light.shape, np.float32)
+        height, width = light.shape
+        img = np.empty((BAND_ROWS, width) if finish else light.shape, np.float32)
+        out = (lambda y0, y1: img[:y1 - y0]) if finish else (lambda y0, y1: img[y0:y1])
         if layer is None and not flats:
             for y in range(0, height, BAND_ROWS):
                 y1 = min(y + BAND_ROWS, height)
                 cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
-                             dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
-            return img
+                             dst=out(y, y1), scale=1.0 / 255.0, dtype=cv2.CV_32F)
+                if finish:
+                    finish(out(y, y1), y)
+            return None if finish else img
         wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
         if layer is not None:
             (albedo, clear), (x0, y0), down, sigma = layer
@@ -657,9 +684,11 @@ class Renderer:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
-            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
-            for laid in flats:
-                Renderer._lay_flat_band(band, y, y1, laid)
+            rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
+            hidden = [r[2] for r in rows if r is not None and r[0] == (y, y1) and r[2] is not None]
+            band = Renderer._wall_band(wall, halved, y, y1, max(hidden, key=lambda c: c[1] - c[0]) if hidden else None)
+            for laid, flat_rows in zip(flats, rows):
+                Renderer._lay_flat_band(band, y, y1, laid, flat_rows)
             f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
             if f1 > f0:
                 a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
@@ -667,8 +696,25 @@ class Renderer:
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
                 cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
                 cv2.add(region, a, dst=region)
-            cv2.multiply(band, light[y:y1], dst=img[y:y1])
-        return img
+            cv2.multiply(band, light[y:y1], dst=out(y, y1))
+            if finish:
+                finish(out(y, y1), y)
+        return None if finish else img
+
+    @staticmethod
+    def _wall_band(wall: np.ndarray, halved: bool, y0: int, y1: int, hidden: tuple[int, int] | None) -> np.ndarray:
+        """Rows y0:y1 of the wall (float, full resolution) to lay the rest over: a copy when halved
+        (the view else), its columns `hidden` (c0, c1) left unset when halved (a flat layer's
+        inside covers them)."""
+        if not halved:
+            return wall[y0:y1]
+        if hidden is None or hidden[1] - hidden[0] < 64:
+            return _twice_rows(wall, y0, y1)
+        c0, c1 = hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2     # the even columns within
+        band = np.empty((y1 - y0, wall.shape[1] * 2), np.float32)
+        band[:, :c0] = _twice_rows(wall, y0, y1, 0, c0)
+        band[:, c1:] = _twice_rows(wall, y0, y1, c1, band.shape[1])
+        return band
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -683,7 +729,8 @@ class Renderer:
 
     # ------------------------------------------------------------------ public
     def render(self, scene: Scene, camera_T_marker: np.ndarray,
-               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None) -> np.ndarray:
+               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None,
+               exposure=None) -> np.ndarray | None:
         """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose.
         `gain` (H, W): a per-pixel factor (the sensor's electrons per unit irradiance) applied in
         the lighting's pass, which every layer gets anyway: the sensor's own full-frame multiply
@@ -693,7 +740,10 @@ class Renderer:
         caller's to overwrite (the sensor adds its noise in place); the same pose, scene and flat
         layers (the same FlatLayer objects: a caller keeps a still board's) as the last call (an
         arm at rest) render once more and from then on give that image again, read-only: only
-        the noise moves."""
+        the noise moves. `exposure` (SensorModel.exposure, with `gain` its electrons_per_unit):
+        a new pose's image is exposed a band at a time as it is made, while in the cache, and
+        None returned (the frame is the exposure's); an image to keep is returned whole, for
+        the caller to expose (Exposure.whole)."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
                id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
                None if gain is None else id(gain), tuple(id(flat) for flat in flat_layers))
@@ -718,6 +768,10 @@ class Renderer:
             layer = (albedo, clear), origin, down, sf
         flats = [laid for laid in (self._flat_box(flat, light.shape, self._wall_shade(scene)) for flat in flat_layers)
                  if laid is not None]
+        if exposure is not None and not again:     # not kept: each band exposed as it is made
+            self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats, exposure.band)
+            self._last = (key, None, tuple(flat_layers))
+            return None
         img = self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False
