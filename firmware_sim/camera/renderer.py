@@ -197,6 +197,15 @@ def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
     return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
 
 
+def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
+    """(c0, c1): the columns a blur reaching `reach` px keeps opaque, given which columns of a
+    block are opaque in every row it reaches (one run of them; else, or too few, None)."""
+    run = np.flatnonzero(opaque)
+    if len(run) == 0 or run[-1] - run[0] + 1 != len(run) or len(run) <= 4 * reach:
+        return None
+    return int(run[0]) + reach, int(run[-1]) + 1 - reach
+
+
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
     """The closed polygons with every edge cut into pieces no longer than `longest`: all their
     vertices in one array and each polygon's vertex count (one NumPy pass for all of them:
@@ -611,10 +620,8 @@ class Renderer:
         if r1 <= r0:
             return None
         g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)
-        covered = np.flatnonzero(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0)    # (a row-wise reduction: fast)
-        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
-            return (r0, r1), (g0, g1), None
-        return (r0, r1), (g0, g1), (x0 + covered[0] + reach, x0 + covered[-1] + 1 - reach)
+        covered = _inside(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0, reach)    # (a row-wise reduction: fast)
+        return (r0, r1), (g0, g1), None if covered is None else (x0 + covered[0], x0 + covered[1])
 
     @staticmethod
     def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
@@ -682,24 +689,48 @@ class Renderer:
                 layer = None
             elif down == 2:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
+        reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
             rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
             hidden = [r[2] for r in rows if r is not None and r[0] == (y, y1) and r[2] is not None]
+            f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
+            opaque = None
+            if f1 > f0 and down == 1:        # the foreground's inside, where its blurred transparency is 0
+                opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
+                if opaque is not None and f1 - f0 == y1 - y:
+                    hidden.append((x0 + opaque[0], x0 + opaque[1]))
             band = Renderer._wall_band(wall, halved, y, y1, max(hidden, key=lambda c: c[1] - c[0]) if hidden else None)
             for laid, flat_rows in zip(flats, rows):
                 Renderer._lay_flat_band(band, y, y1, laid, flat_rows)
-            f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
             if f1 > f0:
-                a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
-                        else (_blur_rows(albedo, f0, f1, sigma), _blur_rows(clear, f0, f1, sigma)))
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
-                cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
-                cv2.add(region, a, dst=region)
+                if down == 2:
+                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1))]
+                else:
+                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
+                for part, a, c in parts:
+                    under = region[part]
+                    cv2.multiply(under, c, dst=under)        # OpenCV writes into the view, in place
+                    cv2.add(under, a, dst=under)
             cv2.multiply(band, light[y:y1], dst=out(y, y1))
             if finish:
                 finish(out(y, y1), y)
         return None if finish else img
+
+    @staticmethod
+    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region) -> list:
+        """The foreground's rows f0:f1 blurred, as (columns, albedo, transparency) to lay over
+        `region` (those rows of the image under it); with an opaque inside (c0, c1) (its
+        columns, _inside) that is written into `region` straight (the blurred albedo: what was
+        under it does not show, whatever it was) and the transparency is blurred only beside it."""
+        a = _blur_rows(albedo, f0, f1, sigma)
+        if opaque is None:
+            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma))]
+        c0, c1 = opaque
+        np.copyto(region[:, c0:c1], a[:, c0:c1])
+        return [(np.s_[:, :c0], a[:, :c0], _blur_rows(clear[:, :c0 + reach], f0, f1, sigma)[:, :c0]),
+                (np.s_[:, c1:], a[:, c1:], _blur_rows(clear[:, c1 - reach:], f0, f1, sigma)[:, reach:])]
 
     @staticmethod
     def _wall_band(wall: np.ndarray, halved: bool, y0: int, y1: int, hidden: tuple[int, int] | None) -> np.ndarray:

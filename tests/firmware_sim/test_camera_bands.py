@@ -195,3 +195,26 @@ def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
             got = fused.image(pose, layers)
             electrons = whole.renderer.render(whole.scene, pose, layers, gain=whole.sensor.electrons_per_unit)
             assert np.array_equal(got, whole.sensor.expose_electrons(electrons, whole.rng)), i
+
+
+def test_a_foreground_laid_skipping_its_opaque_inside_is_the_whole_blur_composite():
+    """A sharp foreground (full resolution) over a half-resolution wall: the composite, which
+    makes neither the wall nor the transparency's blur inside the opaque plate, is the plain
+    formula light * (wall * blur(transparency) + blur(albedo)) of whole-image operations."""
+    rng = np.random.default_rng(SEED + 1)
+    height, width = 512, 640
+    wall = (rng.random((height // 2, width // 2)) * 255).astype(np.uint8)
+    light = (1 + rng.random((height, width))).astype(np.float32)
+    for sigma in (0.3, 0.9):
+        clear = np.ones((420, 500), np.float32)
+        top, left = int(rng.integers(5, 40)), int(rng.integers(5, 40))
+        clear[top:400, left:480] = 0.0                           # the opaque plate
+        clear[top - 1, left:480] = rng.random(480 - left)          # an anti-aliased edge
+        clear[300:330, 100:140] = 0.5                             # a see-through detail inside
+        albedo = (1 - clear) * rng.random((420, 500)).astype(np.float32)
+        x0, y0 = 60, 40
+        got = Renderer._composite((wall, True), light, ((albedo, clear), (x0, y0), 1, sigma))
+        under = _twice(np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32))
+        region = under[y0:y0 + 420, x0:x0 + 500]
+        region[:] = region * _blur(clear, sigma) + _blur(albedo, sigma)
+        assert np.array_equal(got, under * light), sigma
