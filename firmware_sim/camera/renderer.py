@@ -308,6 +308,7 @@ class Renderer:
         self.canvas = ideal_canvas(camera)
         self._lighting_cache: dict = {}
         self._clutter_cache: dict = {}
+        self._marker_cache: tuple | None = None   # ((marker, ORU, lighting), their polygons)
         self._last: tuple | None = None      # (pose and scene key, image) of the last render
 
     # ------------------------------------------------------------------ geometry helpers
@@ -330,54 +331,12 @@ class Renderer:
         """Foreground in output pixels: (albedo*shade premultiplied, transparency) planes of the box
         it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
         reach = int(np.ceil(4 * sigma))
-        m = scene.marker
-        light = np.asarray(scene.lighting.sun, float)
-        light /= np.linalg.norm(light)
+        faces, circles, (rod_top, hull, rod_end) = self._marker_parts(scene)
         cam_pos_m = -cam_T_m[:3, :3].T @ cam_T_m[:3, 3]          # camera centre in marker frame
-
-        def shade(n: np.ndarray) -> float:
-            return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, float(n @ light))
-
-        items: list[tuple[np.ndarray, float]] = []                # (marker-frame polygon, value)
-        details: list[list[tuple[np.ndarray, float]]] = []         # the measured shapes, each group alone
-
-        def add_box(lo, hi, albedo):
-            for verts, n in box_faces(np.asarray(lo), np.asarray(hi)):
-                if (verts[0] - cam_pos_m) @ n < 0:     # front-facing (any vertex of the face tells)
-                    items.append((verts, albedo * shade(n)))
-
-        if scene.oru is not None:
-            # seated ORU (scene frame: bottom face centre, z up) and its adapter on top; only
-            # faces turned to the camera are drawn (the slot walls hide the sides in reality,
-            # the background wall stands in for the store around it)
-            R, c = m.marker_T_oru[:3, :3], m.marker_T_oru[:3, 3]
-            size, adapter = np.asarray(scene.oru.size), np.asarray(scene.oru.adapter)
-            boxes = [(np.array([-size[0] / 2, -size[1] / 2, 0.0]), np.array([size[0] / 2, size[1] / 2, size[2]])),
-                     (np.array([-adapter[0] / 2, -adapter[1] / 2, size[2]]),
-                      np.array([adapter[0] / 2, adapter[1] / 2, size[2] + adapter[2]]))]
-            for lo, hi in boxes:
-                for verts, n in box_faces(lo, hi):
-                    verts_m = verts @ R.T + c
-                    n_m = R @ n
-                    if (verts_m[0] - cam_pos_m) @ n_m < 0:
-                        items.append((verts_m, m.oru_albedo * shade(n_m)))
-        up = np.array([0.0, 0.0, 1.0])
-        px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
-        add_box((-px, -py, -m.plate_thickness), (px, py, 0.0), m.plate_albedo)
-        front = cam_pos_m[2] > 0
-        rod = m.points[m.rod_index]
-        for p in m.points[:3]:
-            if front:
-                details.append([(circle_points(p, m.circle_radius), m.circle_albedo * shade(up))])
-        # rod: silhouette = convex hull of the projected end discs (exact for a cylinder)
-        rod_base = np.array([rod[0], rod[1], 0.0])
-        hull_pts = np.vstack([circle_points(rod_base, m.rod_radius, 64), circle_points(rod, m.rod_radius, 64)])
-        rod_items = [(hull_pts, -m.plate_albedo * shade(np.array([1.0, 0, 0])))]  # negative: hull
-        if cam_pos_m[2] > rod[2]:
-            rod_items.append((circle_points(rod, m.rod_radius, 64), m.plate_albedo * shade(up)))
-            rod_items.append((circle_points(rod, m.circle_radius), m.circle_albedo * shade(up)))
-        details.append(rod_items)
-
+        # only faces turned to the camera are drawn (any vertex of a face tells)
+        items = [(verts, value) for verts, n, value in faces if (verts[0] - cam_pos_m) @ n < 0]
+        details = [[circle] for circle in circles] if cam_pos_m[2] > 0 else []   # the measured shapes, each group alone
+        details.append([hull, *rod_end] if cam_pos_m[2] > rod_top else [hull])
         body, *groups = self._project([items, *details], cam_T_m)
         groups = [g for g in groups if g]
         if not body and not groups:
@@ -410,6 +369,51 @@ class Renderer:
         for group in _merged(groups):      # the circles and the rod: supersampled, laid over the body
             self._lay_over(albedo, clear, group, (x0, y0), down)
         return albedo, clear, (x0, y0), down
+
+    def _marker_parts(self, scene: Scene):
+        """The foreground's polygons in the marker frame, lit (they do not move in it: made once
+        per marker, ORU and lighting): the body's faces (vertices, outward normal, value), the
+        circles (vertices, value) and the rod (its top's height, its silhouette's end discs
+        (vertices, negative value: their convex hull), its top (disc, circle))."""
+        key = (scene.marker, scene.oru, scene.lighting)
+        cached = self._marker_cache
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        m = scene.marker
+        light = np.asarray(scene.lighting.sun, float)
+        light /= np.linalg.norm(light)
+
+        def shade(n: np.ndarray) -> float:
+            return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, float(n @ light))
+
+        faces: list[tuple[np.ndarray, np.ndarray, float]] = []
+        if scene.oru is not None:
+            # seated ORU (scene frame: bottom face centre, z up) and its adapter on top (the
+            # slot walls hide the sides in reality, the background wall stands in for the store
+            # around it)
+            R, c = m.marker_T_oru[:3, :3], m.marker_T_oru[:3, 3]
+            size, adapter = np.asarray(scene.oru.size), np.asarray(scene.oru.adapter)
+            boxes = [(np.array([-size[0] / 2, -size[1] / 2, 0.0]), np.array([size[0] / 2, size[1] / 2, size[2]])),
+                     (np.array([-adapter[0] / 2, -adapter[1] / 2, size[2]]),
+                      np.array([adapter[0] / 2, adapter[1] / 2, size[2] + adapter[2]]))]
+            for lo, hi in boxes:
+                for verts, n in box_faces(lo, hi):
+                    faces.append((verts @ R.T + c, R @ n, m.oru_albedo * shade(R @ n)))
+        px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
+        faces += [(verts, n, m.plate_albedo * shade(n))
+                  for verts, n in box_faces(np.array([-px, -py, -m.plate_thickness]), np.array([px, py, 0.0]))]
+        up = np.array([0.0, 0.0, 1.0])
+        circles = [(circle_points(p, m.circle_radius), m.circle_albedo * shade(up)) for p in m.points[:3]]
+        # rod: silhouette = convex hull of the projected end discs (exact for a cylinder)
+        rod = m.points[m.rod_index]
+        rod_base = np.array([rod[0], rod[1], 0.0])
+        hull = (np.vstack([circle_points(rod_base, m.rod_radius, 64), circle_points(rod, m.rod_radius, 64)]),
+                -m.plate_albedo * shade(np.array([1.0, 0, 0])))
+        rod_end = [(circle_points(rod, m.rod_radius, 64), m.plate_albedo * shade(up)),
+                   (circle_points(rod, m.circle_radius), m.circle_albedo * shade(up))]
+        parts = faces, circles, (float(rod[2]), hull, rod_end)
+        self._marker_cache = (key, parts)
+        return parts
 
     def _project(self, groups, cam_T_m: np.ndarray) -> list[list[tuple[np.ndarray, float]]]:
         """Groups of marker-frame polygons (all convex) -> the same groups of output-pixel
