@@ -431,16 +431,21 @@ class Renderer:
         uv_all = self._ideal(np.where(in_front[:, None], pc, 1.0))
         box = np.array([[0, 0], [cv.width, 0], [cv.width, cv.height], [0, cv.height]], np.float32)
         kept: list[tuple[int, np.ndarray, float]] = []
-        start = 0
-        for g, verts, value in flat:
-            uv, ok = uv_all[start:start + len(verts)], in_front[start:start + len(verts)].all()
-            start += len(verts)
+        ends = np.cumsum([len(verts) for _, verts, _ in flat])
+        starts = ends - [len(verts) for _, verts, _ in flat]
+        # each polygon's bounds in two calls (per polygon, the calls' overhead was most of the time)
+        lo, hi = np.minimum.reduceat(uv_all, starts), np.maximum.reduceat(uv_all, starts)
+        inside = ((lo.min(axis=1) >= 0) & (hi[:, 0] <= cv.width) & (hi[:, 1] <= cv.height)).tolist()
+        for (g, verts, value), start, end, ok, within in zip(flat, starts.tolist(), ends.tolist(),
+                                                             np.logical_and.reduceat(in_front, starts).tolist(), inside):
             if not ok:
                 continue
+            uv = uv_all[start:end]
             if value < 0:
                 uv = cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2).astype(np.float64)
                 value = -value
-            if uv.min() < 0 or uv[:, 0].max() > cv.width or uv[:, 1].max() > cv.height:
+                within = not (uv.min() < 0 or uv[:, 0].max() > cv.width or uv[:, 1].max() > cv.height)
+            if not within:
                 area, cut = cv2.intersectConvexConvex(np.ascontiguousarray(uv, np.float32), box)
                 if cut is None or area <= 0:
                     continue
