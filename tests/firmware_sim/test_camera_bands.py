@@ -173,7 +173,7 @@ def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
     """The camera's frames (each band exposed as it is composited, the wall not made under a
     board's inside) against the renderer's whole irradiance image exposed whole, on poses the
     renderer's shortcuts were not written for: near and far, tilted, off centre, a board in view
-    or not, and an arm at rest (the kept image)."""
+    or not, the marker out of view, and an arm at rest (the kept image)."""
     from spacearm.firmware_sim.camera.renderer import FlatLayer
     from spacearm.firmware_sim.camera.simulator import CameraSimulator
     from tests.vision.views import view
@@ -183,7 +183,7 @@ def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
     rng = np.random.default_rng(SEED + 7)
     for i in range(10):
         pose = view(rng.uniform(0.15, 1.3), np.radians(rng.uniform(0, 35)), rng.uniform(0, 2 * np.pi),
-                    tuple(rng.uniform(-0.06, 0.06, 2)))
+                    tuple(rng.uniform(-0.06, 0.06, 2)) if i != 6 else (1.5, 0.0))     # 6: the marker out of view
         layers = []
         if i % 2:
             d = rng.uniform(0.25, 0.7)
