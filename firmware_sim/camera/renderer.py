@@ -40,7 +40,12 @@ layers are composited a band of 128 rows at a time (the wall's and the foregroun
 a sharp foreground's and a flat layer's blur, the lighting), so that each band's planes stay in
 the cache (the full-frame passes were memory-bound); a halved foreground is laid on the halved
 wall and the sum upsampled once; the sensor's noise goes band by band as well; a flat layer is
-a patch over the pixels it covers.
+a patch over the pixels it covers. Since (issue 32, same pixels): each band is exposed (the
+sensor's noise and ADC) as soon as it is composited, so no full-frame electrons image is
+written and read again; where an opaque layer (a board's inside, a sharp foreground's plate)
+covers a band's columns in every row its blur reaches, it is written straight there: the wall
+is not upsampled under it and its coverage is neither blurred nor multiplied; the marker's
+polygons are made and lit once per marker (only the culling is per pose).
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
