@@ -43,8 +43,9 @@ wall and the sum upsampled once; the sensor's noise goes band by band as well; a
 a patch over the pixels it covers. Since (issue 32, same pixels): each band is exposed (the
 sensor's noise and ADC) as soon as it is composited, so no full-frame electrons image is
 written and read again; where an opaque layer (a board's inside, a sharp foreground's plate)
-covers a band's columns in every row its blur reaches, it is written straight there: the wall
-is not upsampled under it and its coverage is neither blurred nor multiplied; the marker's
+covers a band's columns in every row its blur reaches, it is written straight there: its
+coverage is neither blurred nor multiplied there (the wall under it is still upsampled: skipping
+it left the band's memory cold for the writes, which then cost more); the marker's
 polygons are made and lit once per marker (only the culling is per pose).
 bench/bench_realtime.py render prints the CPU per frame.
 """
@@ -175,20 +176,14 @@ def _twice(small: np.ndarray) -> np.ndarray:
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _twice_rows(small: np.ndarray, y0: int, y1: int, x0: int = 0, x1: int | None = None) -> np.ndarray:
-    """Rows y0:y1 (even y0) and columns x0:x1 (even x0; all by default) of _twice(small), from
-    the rows and columns of `small` they reach: bilinear 2x up weighs the two source rows (and
-    columns) nearest to each output pixel with weights set by its position alone, so a block cut
-    out of the source with a row and column to spare on each side gives the same pixels as the
-    whole image's upsampling."""
+def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
+    """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
+    weighs the two source rows nearest to each output row with weights set by its position
+    alone, so a band cut out of the source with a row to spare on each side gives the same
+    pixels as the whole image's upsampling."""
     a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
-    if x0 == 0 and x1 is None:
-        band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
-        return band[y0 - 2 * a:y1 - 2 * a]
-    x1 = small.shape[1] * 2 if x1 is None else x1
-    c, d = max(x0 // 2 - 1, 0), min((x1 + 1) // 2 + 1, small.shape[1])
-    block = cv2.resize(small[a:b, c:d], ((d - c) * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
-    return block[y0 - 2 * a:y1 - 2 * a, x0 - 2 * c:x1 - 2 * c]
+    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    return band[y0 - 2 * a:y1 - 2 * a]
 
 
 def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
@@ -676,8 +671,7 @@ class Renderer:
         (and nothing between) are laid together there and upsampled once (the upsampling of a
         product then stands for the product of upsamplings: they differ only where both the
         wall and the foreground's coverage change within a pixel pair, i.e. at the foreground's
-        outline against the wall's dots, by a fraction of the contrast). The wall is not made
-        where a flat layer hides it in every row of a band (the inside of a board).
+        outline against the wall's dots, by a fraction of the contrast).
         `finish(band, y)`: given each band of the image (rows y:y+len(band)) as it is made,
         while in the cache (the sensor's exposure): then no image is kept and None returned."""
         wall, halved = background
@@ -706,22 +700,16 @@ class Renderer:
         reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
-            rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
-            hidden = [r[2] for r in rows if r is not None and r[0] == (y, y1) and r[2] is not None]
+            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
+            for laid in flats:
+                Renderer._lay_flat_band(band, y, y1, laid, Renderer._flat_rows(laid, y, y1))
             f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
-            opaque = None
-            if f1 > f0 and down == 1:        # the foreground's inside, where its blurred transparency is 0
-                opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
-                if opaque is not None and f1 - f0 == y1 - y:
-                    hidden.append((x0 + opaque[0], x0 + opaque[1]))
-            band = Renderer._wall_band(wall, halved, y, y1, max(hidden, key=lambda c: c[1] - c[0]) if hidden else None)
-            for laid, flat_rows in zip(flats, rows):
-                Renderer._lay_flat_band(band, y, y1, laid, flat_rows)
             if f1 > f0:
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
                 if down == 2:
                     parts = [(np.s_[:], _twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1))]
-                else:
+                else:       # its inside, where its blurred transparency is 0
+                    opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
                     parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
                 for part, a, c in parts:
                     under = region[part]
@@ -745,21 +733,6 @@ class Renderer:
         np.copyto(region[:, c0:c1], a[:, c0:c1])
         return [(np.s_[:, :c0], a[:, :c0], _blur_rows(clear[:, :c0 + reach], f0, f1, sigma)[:, :c0]),
                 (np.s_[:, c1:], a[:, c1:], _blur_rows(clear[:, c1 - reach:], f0, f1, sigma)[:, reach:])]
-
-    @staticmethod
-    def _wall_band(wall: np.ndarray, halved: bool, y0: int, y1: int, hidden: tuple[int, int] | None) -> np.ndarray:
-        """Rows y0:y1 of the wall (float, full resolution) to lay the rest over: a copy when halved
-        (the view else), its columns `hidden` (c0, c1) left unset when halved (a flat layer's
-        inside covers them)."""
-        if not halved:
-            return wall[y0:y1]
-        if hidden is None or hidden[1] - hidden[0] < 64:
-            return _twice_rows(wall, y0, y1)
-        c0, c1 = hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2     # the even columns within
-        band = np.empty((y1 - y0, wall.shape[1] * 2), np.float32)
-        band[:, :c0] = _twice_rows(wall, y0, y1, 0, c0)
-        band[:, c1:] = _twice_rows(wall, y0, y1, c1, band.shape[1])
-        return band
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view

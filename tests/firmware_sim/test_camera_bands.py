@@ -30,10 +30,6 @@ def test_band_upsampling_and_blur_are_the_whole_image_operations(rows):
             starts = range(int(rng.integers(0, 2)), 2 * rows, step)      # odd band starts too
             bands = [_twice_rows(small, y, min(y + step, 2 * rows)) for y in starts]
             assert np.array_equal(np.vstack(bands), whole[starts[0]:])
-        for x0, x1 in ((0, 2 * int(rng.integers(1, 100))), (2 * int(rng.integers(1, 100)), 402),
-                       tuple(sorted(2 * rng.choice(201, 2, replace=False)))):      # a block of even columns
-            y = 2 * int(rng.integers(0, rows // 2))
-            assert np.array_equal(_twice_rows(small, y, min(y + 128, 2 * rows), x0, x1), whole[y:y + 128, x0:x1])
     image = rng.random((rows, 133)).astype(np.float32)
     for sigma in (0.05, 0.4, 0.9, 2.5, 20.0):
         whole = cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
@@ -116,7 +112,7 @@ def test_board_patch_is_the_square_by_square_full_frame_drawing():
 def test_a_flat_layer_laid_skipping_the_covered_inside_is_the_whole_blur_composite():
     """A band with an opaque board across it: laid over the wall it is the plain formula
     wall * (1 - blur(coverage)) + shade * blur(albedo) over the whole band, whatever the band
-    held inside the board (the wall is not made there)."""
+    held inside the board."""
     rng = np.random.default_rng(SEED)
     shade = 0.83
     for sigma in (0.3, 0.67, 1.6):
@@ -170,8 +166,7 @@ def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
 
 
 def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
-    """The camera's frames (each band exposed as it is composited, the wall not made under a
-    board's inside) against the renderer's whole irradiance image exposed whole, on poses the
+    """The camera's frames (each band exposed as it is composited) against the renderer's whole irradiance image exposed whole, on poses the
     renderer's shortcuts were not written for: near and far, tilted, off centre, a board in view
     or not, the marker out of view, and an arm at rest (the kept image)."""
     from spacearm.firmware_sim.camera.renderer import FlatLayer
@@ -199,7 +194,7 @@ def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
 
 def test_a_foreground_laid_skipping_its_opaque_inside_is_the_whole_blur_composite():
     """A sharp foreground (full resolution) over a half-resolution wall: the composite, which
-    makes neither the wall nor the transparency's blur inside the opaque plate, is the plain
+    neither blurs the transparency nor lays it inside the opaque plate, is the plain
     formula light * (wall * blur(transparency) + blur(albedo)) of whole-image operations."""
     rng = np.random.default_rng(SEED + 1)
     height, width = 512, 640
