@@ -230,7 +230,12 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     more than the reference loop's). CPU is the process's (time.process_time: OpenCV's
     worker threads included), so a frame is charged all the work it causes. Beside each: the
     ratio to the reference loop (bench/reference_work.py) timed in the same run and process,
-    the machine-independent figure (a ~3x slower machine takes ~3x as long for both)."""
+    the machine-independent figure (a ~3x slower machine takes ~3x as long for both).
+    Where a board frame's CPU goes (thread CPU per stage, load ~4, issue 32): the board drawn
+    anew ~2.3 ms and laid (its blur and coverage) ~4.3 ms, the marker and ORU ~3.5 ms, the wall
+    ~2 ms drawn and ~1.6 ms upsampled and lit, the sensor ~1.9 ms. On this 2-core VM the rows
+    of one tree swing by +-30 % from run to run (the reference loop with them, 110-200 ms), so
+    a change of a few per cent shows only in an interleaved comparison in one process."""
     import cv2
     from bench.reference_work import reference_loop_seconds
     from spacearm.base.config.board import load_board
@@ -256,9 +261,7 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     def board_frame(distance: float, layers: list | None = None) -> None:
         """A frame with the board drawn anew, or the given layers (an arm at rest: the camera
         service keeps a still board's)."""
-        electrons = cam.renderer.render(cam.scene, view(distance + 0.3, 0.2, 1.0), layers or board_layers(distance),
-                                        gain=cam.sensor.electrons_per_unit)      # as the camera service does
-        cam.sensor.expose_electrons(electrons, cam.rng)
+        cam.image(view(distance + 0.3, 0.2, 1.0), layers or board_layers(distance))     # as the camera service does
 
     def row(name: str, cpu: list[float], ref: float) -> str:
         c = np.array(cpu) * 1e3

@@ -53,32 +53,60 @@ class SensorModel:
                          noise: bool = True) -> np.ndarray:
         """Photo-electrons (H, W) float32 (irradiance times electrons_per_unit, dark offset not
         included) -> 8-bit frame; `signal` is overwritten unless it is read-only."""
-        s = self.sensor
+        exposure = self.exposure(rng, noise)
+        exposure.whole(signal)
+        return exposure.frame
+
+    def exposure(self, rng: np.random.Generator | None, noise: bool = True) -> "Exposure":
+        """One frame's exposure, its noise drawn from `rng` (rng None or noise False: noiseless),
+        to be given the frame's electrons a band of rows at a time (Renderer.render(exposure=...):
+        each band while it is still in the cache) or whole."""
+        return Exposure(self, self._noise_window(rng) if noise and rng is not None else None)
+
+
+class Exposure:
+    """A frame's photo-electrons -> its 8-bit frame (`frame`), band by band, in place."""
+
+    def __init__(self, model: SensorModel, normal: np.ndarray | None):
+        s = model.sensor
         # 12-bit ADC (round, clip at 0 and full scale), then the top 8 bits: floor(rint(e / gain) / 2^k)
         # equals round(e / (gain 2^k) - (2^k - 1) / 2^(k+1)), in one saturating conversion
         # (electrons never go below 0 here: the black level is 10 read-noise sigmas above it)
         k = 2 ** (s.adc_bits - s.output_bits)
-        scale = 1.0 / (self.gain * k)
-        beta = s.dark_offset * scale - (k - 1) / (2.0 * k)
-        if not (noise and rng is not None):
-            return cv2.convertScaleAbs(signal, alpha=scale, beta=beta)
-        normal = self._noise_window(rng)
-        out = np.empty(signal.shape, np.uint8)
-        sd = np.empty((STRIP_ROWS, signal.shape[1]), np.float32)
-        kept = None if signal.flags.writeable else np.empty_like(sd)     # a read-only frame: a band copy
+        self._scale = 1.0 / (model.gain * k)
+        self._beta = s.dark_offset * self._scale - (k - 1) / (2.0 * k)
         # the dark offset is not added to the frame (one pass less): it is in the shot noise's
-        # variance and in the ADC's offset. Done a band of rows at a time, so that the band's
-        # intermediate planes stay in the cache (full-frame passes were memory-bound).
+        # variance and in the ADC's offset
+        self._variance_floor = np.float32(s.dark_offset + s.read_noise ** 2)
+        self._normal = normal
+        self.frame = np.empty((s.height, s.width), np.uint8)
+        self._sd = np.empty((STRIP_ROWS, s.width), np.float32) if normal is not None else None
+
+    def band(self, electrons: np.ndarray, y: int) -> None:
+        """The frame's rows y:y+len(electrons) from their electrons (overwritten with the noisy
+        electrons)."""
+        rows = electrons.shape[0]
+        out = self.frame[y:y + rows]
+        if self._normal is None:
+            cv2.convertScaleAbs(electrons, dst=out, alpha=self._scale, beta=self._beta)
+            return
+        if self._sd.shape[0] < rows:
+            self._sd = np.empty((rows, self._sd.shape[1]), np.float32)
+        dev = self._sd[:rows]
+        # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
+        np.add(electrons, self._variance_floor, out=dev)
+        cv2.sqrt(dev, dst=dev)
+        cv2.accumulateProduct(dev, self._normal[y:y + rows], electrons)                # band += sd * n
+        cv2.convertScaleAbs(electrons, dst=out, alpha=self._scale, beta=self._beta)
+
+    def whole(self, signal: np.ndarray) -> None:
+        """The whole frame from its electrons (H, W), a band of rows at a time so that the band's
+        intermediate planes stay in the cache (full-frame passes were memory-bound); `signal` is
+        overwritten unless it is read-only (then each band is copied first)."""
+        kept = None if signal.flags.writeable or self._normal is None else np.empty_like(self._sd)
         for y in range(0, signal.shape[0], STRIP_ROWS):
             band = signal[y:y + STRIP_ROWS]
-            rows = band.shape[0]
-            dev = sd[:rows]
             if kept is not None:
-                np.copyto(kept[:rows], band)
-                band = kept[:rows]
-            # Poisson shot ~ Gaussian here (NumPy's scalar add is ~3x OpenCV's)
-            np.add(band, np.float32(s.dark_offset + s.read_noise ** 2), out=dev)
-            cv2.sqrt(dev, dst=dev)
-            cv2.accumulateProduct(dev, normal[y:y + STRIP_ROWS], band)                 # band += sd * n
-            cv2.convertScaleAbs(band, dst=out[y:y + STRIP_ROWS], alpha=scale, beta=beta)
-        return out
+                band = kept[:band.shape[0]]
+                np.copyto(band, signal[y:y + STRIP_ROWS])
+            self.band(band, y)

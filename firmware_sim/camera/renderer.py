@@ -40,7 +40,13 @@ layers are composited a band of 128 rows at a time (the wall's and the foregroun
 a sharp foreground's and a flat layer's blur, the lighting), so that each band's planes stay in
 the cache (the full-frame passes were memory-bound); a halved foreground is laid on the halved
 wall and the sum upsampled once; the sensor's noise goes band by band as well; a flat layer is
-a patch over the pixels it covers.
+a patch over the pixels it covers. Since (issue 32, same pixels): each band is exposed (the
+sensor's noise and ADC) as soon as it is composited, so no full-frame electrons image is
+written and read again; where an opaque layer (a board's inside, a sharp foreground's plate)
+covers a band's columns in every row its blur reaches, it is written straight there: its
+coverage is neither blurred nor multiplied there (the wall under it is still upsampled: skipping
+it left the band's memory cold for the writes, which then cost more); the marker's
+polygons are made and lit once per marker (only the culling is per pose).
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
@@ -191,6 +197,15 @@ def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
     return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
 
 
+def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
+    """(c0, c1): the columns a blur reaching `reach` px keeps opaque, given which columns of a
+    block are opaque in every row it reaches (one run of them; else, or too few, None)."""
+    run = np.flatnonzero(opaque)
+    if len(run) == 0 or run[-1] - run[0] + 1 != len(run) or len(run) <= 4 * reach:
+        return None
+    return int(run[0]) + reach, int(run[-1]) + 1 - reach
+
+
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
     """The closed polygons with every edge cut into pieces no longer than `longest`: all their
     vertices in one array and each polygon's vertex count (one NumPy pass for all of them:
@@ -293,6 +308,7 @@ class Renderer:
         self.canvas = ideal_canvas(camera)
         self._lighting_cache: dict = {}
         self._clutter_cache: dict = {}
+        self._marker_cache: tuple | None = None   # ((marker, ORU, lighting), their polygons)
         self._last: tuple | None = None      # (pose and scene key, image) of the last render
 
     # ------------------------------------------------------------------ geometry helpers
@@ -315,54 +331,12 @@ class Renderer:
         """Foreground in output pixels: (albedo*shade premultiplied, transparency) planes of the box
         it covers grown by the reach of its blur (`sigma` px), and the box's top-left pixel."""
         reach = int(np.ceil(4 * sigma))
-        m = scene.marker
-        light = np.asarray(scene.lighting.sun, float)
-        light /= np.linalg.norm(light)
+        faces, circles, (rod_top, hull, rod_end) = self._marker_parts(scene)
         cam_pos_m = -cam_T_m[:3, :3].T @ cam_T_m[:3, 3]          # camera centre in marker frame
-
-        def shade(n: np.ndarray) -> float:
-            return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, float(n @ light))
-
-        items: list[tuple[np.ndarray, float]] = []                # (marker-frame polygon, value)
-        details: list[list[tuple[np.ndarray, float]]] = []         # the measured shapes, each group alone
-
-        def add_box(lo, hi, albedo):
-            for verts, n in box_faces(np.asarray(lo), np.asarray(hi)):
-                if (verts[0] - cam_pos_m) @ n < 0:     # front-facing (any vertex of the face tells)
-                    items.append((verts, albedo * shade(n)))
-
-        if scene.oru is not None:
-            # seated ORU (scene frame: bottom face centre, z up) and its adapter on top; only
-            # faces turned to the camera are drawn (the slot walls hide the sides in reality,
-            # the background wall stands in for the store around it)
-            R, c = m.marker_T_oru[:3, :3], m.marker_T_oru[:3, 3]
-            size, adapter = np.asarray(scene.oru.size), np.asarray(scene.oru.adapter)
-            boxes = [(np.array([-size[0] / 2, -size[1] / 2, 0.0]), np.array([size[0] / 2, size[1] / 2, size[2]])),
-                     (np.array([-adapter[0] / 2, -adapter[1] / 2, size[2]]),
-                      np.array([adapter[0] / 2, adapter[1] / 2, size[2] + adapter[2]]))]
-            for lo, hi in boxes:
-                for verts, n in box_faces(lo, hi):
-                    verts_m = verts @ R.T + c
-                    n_m = R @ n
-                    if (verts_m[0] - cam_pos_m) @ n_m < 0:
-                        items.append((verts_m, m.oru_albedo * shade(n_m)))
-        up = np.array([0.0, 0.0, 1.0])
-        px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
-        add_box((-px, -py, -m.plate_thickness), (px, py, 0.0), m.plate_albedo)
-        front = cam_pos_m[2] > 0
-        rod = m.points[m.rod_index]
-        for p in m.points[:3]:
-            if front:
-                details.append([(circle_points(p, m.circle_radius), m.circle_albedo * shade(up))])
-        # rod: silhouette = convex hull of the projected end discs (exact for a cylinder)
-        rod_base = np.array([rod[0], rod[1], 0.0])
-        hull_pts = np.vstack([circle_points(rod_base, m.rod_radius, 64), circle_points(rod, m.rod_radius, 64)])
-        rod_items = [(hull_pts, -m.plate_albedo * shade(np.array([1.0, 0, 0])))]  # negative: hull
-        if cam_pos_m[2] > rod[2]:
-            rod_items.append((circle_points(rod, m.rod_radius, 64), m.plate_albedo * shade(up)))
-            rod_items.append((circle_points(rod, m.circle_radius), m.circle_albedo * shade(up)))
-        details.append(rod_items)
-
+        # only faces turned to the camera are drawn (any vertex of a face tells)
+        items = [(verts, value) for verts, n, value in faces if (verts[0] - cam_pos_m) @ n < 0]
+        details = [[circle] for circle in circles] if cam_pos_m[2] > 0 else []   # the measured shapes, each group alone
+        details.append([hull, *rod_end] if cam_pos_m[2] > rod_top else [hull])
         body, *groups = self._project([items, *details], cam_T_m)
         groups = [g for g in groups if g]
         if not body and not groups:
@@ -396,6 +370,51 @@ class Renderer:
             self._lay_over(albedo, clear, group, (x0, y0), down)
         return albedo, clear, (x0, y0), down
 
+    def _marker_parts(self, scene: Scene):
+        """The foreground's polygons in the marker frame, lit (they do not move in it: made once
+        per marker, ORU and lighting): the body's faces (vertices, outward normal, value), the
+        circles (vertices, value) and the rod (its top's height, its silhouette's end discs
+        (vertices, negative value: their convex hull), its top (disc, circle))."""
+        key = (scene.marker, scene.oru, scene.lighting)
+        cached = self._marker_cache
+        if cached is not None and all(a is b for a, b in zip(cached[0], key)):
+            return cached[1]
+        m = scene.marker
+        light = np.asarray(scene.lighting.sun, float)
+        light /= np.linalg.norm(light)
+
+        def shade(n: np.ndarray) -> float:
+            return scene.lighting.ambient + (1 - scene.lighting.ambient) * max(0.0, float(n @ light))
+
+        faces: list[tuple[np.ndarray, np.ndarray, float]] = []
+        if scene.oru is not None:
+            # seated ORU (scene frame: bottom face centre, z up) and its adapter on top (the
+            # slot walls hide the sides in reality, the background wall stands in for the store
+            # around it)
+            R, c = m.marker_T_oru[:3, :3], m.marker_T_oru[:3, 3]
+            size, adapter = np.asarray(scene.oru.size), np.asarray(scene.oru.adapter)
+            boxes = [(np.array([-size[0] / 2, -size[1] / 2, 0.0]), np.array([size[0] / 2, size[1] / 2, size[2]])),
+                     (np.array([-adapter[0] / 2, -adapter[1] / 2, size[2]]),
+                      np.array([adapter[0] / 2, adapter[1] / 2, size[2] + adapter[2]]))]
+            for lo, hi in boxes:
+                for verts, n in box_faces(lo, hi):
+                    faces.append((verts @ R.T + c, R @ n, m.oru_albedo * shade(R @ n)))
+        px, py = m.plate_size[0] / 2, m.plate_size[1] / 2
+        faces += [(verts, n, m.plate_albedo * shade(n))
+                  for verts, n in box_faces(np.array([-px, -py, -m.plate_thickness]), np.array([px, py, 0.0]))]
+        up = np.array([0.0, 0.0, 1.0])
+        circles = [(circle_points(p, m.circle_radius), m.circle_albedo * shade(up)) for p in m.points[:3]]
+        # rod: silhouette = convex hull of the projected end discs (exact for a cylinder)
+        rod = m.points[m.rod_index]
+        rod_base = np.array([rod[0], rod[1], 0.0])
+        hull = (np.vstack([circle_points(rod_base, m.rod_radius, 64), circle_points(rod, m.rod_radius, 64)]),
+                -m.plate_albedo * shade(np.array([1.0, 0, 0])))
+        rod_end = [(circle_points(rod, m.rod_radius, 64), m.plate_albedo * shade(up)),
+                   (circle_points(rod, m.circle_radius), m.circle_albedo * shade(up))]
+        parts = faces, circles, (float(rod[2]), hull, rod_end)
+        self._marker_cache = (key, parts)
+        return parts
+
     def _project(self, groups, cam_T_m: np.ndarray) -> list[list[tuple[np.ndarray, float]]]:
         """Groups of marker-frame polygons (all convex) -> the same groups of output-pixel
         polygons, lens distortion included (a negative value: their convex hull), polygons
@@ -412,16 +431,21 @@ class Renderer:
         uv_all = self._ideal(np.where(in_front[:, None], pc, 1.0))
         box = np.array([[0, 0], [cv.width, 0], [cv.width, cv.height], [0, cv.height]], np.float32)
         kept: list[tuple[int, np.ndarray, float]] = []
-        start = 0
-        for g, verts, value in flat:
-            uv, ok = uv_all[start:start + len(verts)], in_front[start:start + len(verts)].all()
-            start += len(verts)
+        ends = np.cumsum([len(verts) for _, verts, _ in flat])
+        starts = ends - [len(verts) for _, verts, _ in flat]
+        # each polygon's bounds in two calls (per polygon, the calls' overhead was most of the time)
+        lo, hi = np.minimum.reduceat(uv_all, starts), np.maximum.reduceat(uv_all, starts)
+        inside = ((lo.min(axis=1) >= 0) & (hi[:, 0] <= cv.width) & (hi[:, 1] <= cv.height)).tolist()
+        for (g, verts, value), start, end, ok, within in zip(flat, starts.tolist(), ends.tolist(),
+                                                             np.logical_and.reduceat(in_front, starts).tolist(), inside):
             if not ok:
                 continue
+            uv = uv_all[start:end]
             if value < 0:
                 uv = cv2.convexHull(uv.astype(np.float32)).reshape(-1, 2).astype(np.float64)
                 value = -value
-            if uv.min() < 0 or uv[:, 0].max() > cv.width or uv[:, 1].max() > cv.height:
+                within = not (uv.min() < 0 or uv[:, 0].max() > cv.width or uv[:, 1].max() > cv.height)
+            if not within:
                 area, cut = cv2.intersectConvexConvex(np.ascontiguousarray(uv, np.float32), box)
                 if cut is None or area <= 0:
                     continue
@@ -595,37 +619,50 @@ class Renderer:
         return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
 
     @staticmethod
-    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid) -> None:
-        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box) over `band` (those
-        rows of the image, unlit) in place: its planes' rows the band's blur reaches are blurred
-        and laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo."""
+    def _flat_rows(laid, b0: int, b1: int):
+        """The rows of a flat layer (Renderer._flat_box) in the image's rows b0:b1: (r0, r1) the
+        rows it covers there, (g0, g1) the rows its blur reaches for them, and (c0, c1) the image's
+        columns where its blurred coverage is 1 in all of them (the inside of an opaque board:
+        what lies under it does not show), or None; None for no rows."""
         albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
         r0, r1 = max(b0, y0), min(b1, y1)
         if r1 <= r0:
+            return None
+        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)
+        covered = _inside(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0, reach)    # (a row-wise reduction: fast)
+        return (r0, r1), (g0, g1), None if covered is None else (x0 + covered[0], x0 + covered[1])
+
+    @staticmethod
+    def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
+        """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box; `rows` its
+        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: its
+        planes' rows the band's blur reaches are blurred and laid while in the cache:
+        band * (1 - blurred coverage) + shade * blurred albedo. Where the blurred coverage is 1
+        (the covered columns) that is shade * blurred albedo, whatever the band held there (it
+        need not hold the wall), and the coverage is blurred only beside them."""
+        if rows is None:
             return
-        g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)             # the rows the band's blur reaches
+        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        (r0, r1), (g0, g1), covered = rows
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
-        cv2.subtract(region, cv2.multiply(region, Renderer._blur_alpha(alpha[g0 - y0:g1 - y0], sigma, reach)[keep]),
-                     dst=region)                                       # in place, into the view
-        cv2.scaleAdd(_blur(albedo[g0 - y0:g1 - y0], sigma)[keep], shade, region, dst=region)
+        lit = _blur(albedo[g0 - y0:g1 - y0], sigma)[keep]
+        alpha = alpha[g0 - y0:g1 - y0]
+        if covered is None:
+            parts = [(np.s_[:], _blur(alpha, sigma)[keep])]
+        else:
+            c0, c1 = covered[0] - x0, covered[1] - x0
+            np.multiply(lit[:, c0:c1], np.float32(shade), out=region[:, c0:c1])
+            parts = [(np.s_[:, :c0], _blur(alpha[:, :c0 + reach], sigma)[keep][:, :c0]),
+                     (np.s_[:, c1:], _blur(alpha[:, c1 - reach:], sigma)[keep][:, reach:])]
+        for part, blurred in parts:
+            under = region[part]
+            cv2.subtract(under, cv2.multiply(under, blurred), dst=under)     # in place, into the view
+            cv2.scaleAdd(lit[part], shade, under, dst=under)
 
     @staticmethod
-    def _blur_alpha(alpha: np.ndarray, sigma: float, reach: int) -> np.ndarray:
-        """_blur(alpha, sigma) of a band of a flat layer's coverage, blurring only the columns
-        within `reach` (>= the kernel's) of a coverage below 1: between, where the band is
-        covered in every row (the inside of an opaque board), the blur is 1 without computing it."""
-        covered = np.flatnonzero(alpha.min(axis=0) >= 1.0)              # (a row-wise reduction: fast)
-        if len(covered) == 0 or covered[-1] - covered[0] + 1 != len(covered) or len(covered) <= 4 * reach:
-            return _blur(alpha, sigma)
-        c0, c1 = covered[0] + reach, covered[-1] + 1 - reach
-        out = np.ones_like(alpha)
-        out[:, :c0] = _blur(alpha[:, :c0 + reach], sigma)[:, :c0]
-        out[:, c1:] = _blur(alpha[:, c1 - reach:], sigma)[:, reach:]
-        return out
-
-    @staticmethod
-    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=()) -> np.ndarray:
+    def _composite(background: tuple[np.ndarray, bool], light: np.ndarray, layer, flats=(),
+                   finish=None) -> np.ndarray | None:
         """The lit wall (the lighting applied in its one float conversion), the flat layers
         (Renderer._flat_box) and the foreground `layer` ((albedo, transparency), origin, down,
         sigma) over it, or None, a band of rows at a time: the half-resolution planes are
@@ -634,16 +671,21 @@ class Renderer:
         (and nothing between) are laid together there and upsampled once (the upsampling of a
         product then stands for the product of upsamplings: they differ only where both the
         wall and the foreground's coverage change within a pixel pair, i.e. at the foreground's
-        outline against the wall's dots, by a fraction of the contrast)."""
+        outline against the wall's dots, by a fraction of the contrast).
+        `finish(band, y)`: given each band of the image (rows y:y+len(band)) as it is made,
+        while in the cache (the sensor's exposure): then no image is kept and None returned."""
         wall, halved = background
-        height = light.shape[0]
-        img = np.empty(light.shape, np.float32)
+        height, width = light.shape
+        img = np.empty((BAND_ROWS, width) if finish else light.shape, np.float32)
+        out = (lambda y0, y1: img[:y1 - y0]) if finish else (lambda y0, y1: img[y0:y1])
         if layer is None and not flats:
             for y in range(0, height, BAND_ROWS):
                 y1 = min(y + BAND_ROWS, height)
                 cv2.multiply(_twice_rows(wall, y, y1) if halved else wall[y:y1], light[y:y1],
-                             dst=img[y:y1], scale=1.0 / 255.0, dtype=cv2.CV_32F)
-            return img
+                             dst=out(y, y1), scale=1.0 / 255.0, dtype=cv2.CV_32F)
+                if finish:
+                    finish(out(y, y1), y)
+            return None if finish else img
         wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
         if layer is not None:
             (albedo, clear), (x0, y0), down, sigma = layer
@@ -655,20 +697,42 @@ class Renderer:
                 layer = None
             elif down == 2:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
+        reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
             band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
             for laid in flats:
-                Renderer._lay_flat_band(band, y, y1, laid)
+                Renderer._lay_flat_band(band, y, y1, laid, Renderer._flat_rows(laid, y, y1))
             f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
             if f1 > f0:
-                a, c = ((_twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1)) if down == 2
-                        else (_blur_rows(albedo, f0, f1, sigma), _blur_rows(clear, f0, f1, sigma)))
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
-                cv2.multiply(region, c, dst=region)        # OpenCV writes into the view, in place
-                cv2.add(region, a, dst=region)
-            cv2.multiply(band, light[y:y1], dst=img[y:y1])
-        return img
+                if down == 2:
+                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1))]
+                else:       # its inside, where its blurred transparency is 0
+                    opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
+                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
+                for part, a, c in parts:
+                    under = region[part]
+                    cv2.multiply(under, c, dst=under)        # OpenCV writes into the view, in place
+                    cv2.add(under, a, dst=under)
+            cv2.multiply(band, light[y:y1], dst=out(y, y1))
+            if finish:
+                finish(out(y, y1), y)
+        return None if finish else img
+
+    @staticmethod
+    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region) -> list:
+        """The foreground's rows f0:f1 blurred, as (columns, albedo, transparency) to lay over
+        `region` (those rows of the image under it); with an opaque inside (c0, c1) (its
+        columns, _inside) that is written into `region` straight (the blurred albedo: what was
+        under it does not show, whatever it was) and the transparency is blurred only beside it."""
+        a = _blur_rows(albedo, f0, f1, sigma)
+        if opaque is None:
+            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma))]
+        c0, c1 = opaque
+        np.copyto(region[:, c0:c1], a[:, c0:c1])
+        return [(np.s_[:, :c0], a[:, :c0], _blur_rows(clear[:, :c0 + reach], f0, f1, sigma)[:, :c0]),
+                (np.s_[:, c1:], a[:, c1:], _blur_rows(clear[:, c1 - reach:], f0, f1, sigma)[:, reach:])]
 
     def _marker_near_view(self, cam_T_m: np.ndarray) -> bool:
         """Skip the (supersampled) foreground when the marker is far outside the field of view
@@ -683,7 +747,8 @@ class Renderer:
 
     # ------------------------------------------------------------------ public
     def render(self, scene: Scene, camera_T_marker: np.ndarray,
-               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None) -> np.ndarray:
+               flat_layers: Sequence[FlatLayer] = (), gain: np.ndarray | None = None,
+               exposure=None) -> np.ndarray | None:
         """Relative irradiance image (H, W) float32 in [0, 1] for the given true pose.
         `gain` (H, W): a per-pixel factor (the sensor's electrons per unit irradiance) applied in
         the lighting's pass, which every layer gets anyway: the sensor's own full-frame multiply
@@ -693,7 +758,10 @@ class Renderer:
         caller's to overwrite (the sensor adds its noise in place); the same pose, scene and flat
         layers (the same FlatLayer objects: a caller keeps a still board's) as the last call (an
         arm at rest) render once more and from then on give that image again, read-only: only
-        the noise moves."""
+        the noise moves. `exposure` (SensorModel.exposure, with `gain` its electrons_per_unit):
+        a new pose's image is exposed a band at a time as it is made, while in the cache, and
+        None returned (the frame is the exposure's); an image to keep is returned whole, for
+        the caller to expose (Exposure.whole)."""
         key = (np.asarray(camera_T_marker, float).tobytes(), id(scene), scene.oru, id(scene.lighting),
                id(scene.marker), id(scene.clutter), scene.wall_depth, scene.wall_albedo,
                None if gain is None else id(gain), tuple(id(flat) for flat in flat_layers))
@@ -718,6 +786,10 @@ class Renderer:
             layer = (albedo, clear), origin, down, sf
         flats = [laid for laid in (self._flat_box(flat, light.shape, self._wall_shade(scene)) for flat in flat_layers)
                  if laid is not None]
+        if exposure is not None and not again:     # not kept: each band exposed as it is made
+            self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats, exposure.band)
+            self._last = (key, None, tuple(flat_layers))
+            return None
         img = self._composite(self._background(scene, camera_T_marker, sb), light, layer, flats)
         if again:             # at rest: kept, read-only, from the second frame of the pose on
             img.flags.writeable = False

@@ -170,10 +170,7 @@ class CameraService:
         camera_T_marker = inv_transform(base_T_camera) @ site.base_T_marker
         stocked = self._stocked() if stocked is None else stocked
         self.camera.scene.oru = self._oru if site.store in stocked else None
-        sensor = self.camera.sensor
-        electrons = self.camera.renderer.render(self.camera.scene, camera_T_marker, self._board_layers(base_T_camera),
-                                                gain=sensor.electrons_per_unit)
-        image = sensor.expose_electrons(electrons, self.camera.rng, self.render_noise)
+        image = self.camera.image(camera_T_marker, self._board_layers(base_T_camera), self.render_noise)
         self.frames += 1
         return self.sink.publish(image, t, camera_T_marker, sync)
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -11,7 +12,7 @@ from spacearm.base.vision.config import CameraConfig, MarkerConfig, MountConfig,
 from spacearm.base.vision.frames import Frame
 from spacearm.base.vision.marker import MarkerModel
 from spacearm.firmware_sim.camera.noise import SensorModel
-from spacearm.firmware_sim.camera.renderer import Renderer
+from spacearm.firmware_sim.camera.renderer import FlatLayer, Renderer
 from spacearm.firmware_sim.camera.scene import Scene
 
 
@@ -39,11 +40,19 @@ class CameraSimulator:
 
     def render(self, camera_T_marker: np.ndarray, timestamp: float = 0.0, noise: bool = True) -> Frame:
         """A frame seen from the given true camera_T_marker (4x4)."""
-        electrons = self.renderer.render(self.scene, camera_T_marker, gain=self.sensor.electrons_per_unit)
-        image = self.sensor.expose_electrons(electrons, self.rng, noise)
+        image = self.image(camera_T_marker, noise=noise)
         self.seq += 1
         return Frame(timestamp=timestamp, seq=self.seq, image=image,
                      true_camera_T_marker=np.asarray(camera_T_marker, float).copy())
+
+    def image(self, camera_T_marker: np.ndarray, flat_layers: Sequence[FlatLayer] = (), noise: bool = True) -> np.ndarray:
+        """The 8-bit image seen from camera_T_marker with `flat_layers` (a calibration board) in view."""
+        exposure = self.sensor.exposure(self.rng, noise)
+        electrons = self.renderer.render(self.scene, camera_T_marker, flat_layers, gain=self.sensor.electrons_per_unit,
+                                         exposure=exposure)
+        if electrons is not None:           # an image the renderer keeps (an arm at rest)
+            exposure.whole(electrons)
+        return exposure.frame
 
     def render_from_plant(self, base_T_end: np.ndarray, base_T_marker: np.ndarray,
                           timestamp: float = 0.0) -> Frame:

@@ -109,16 +109,35 @@ def test_board_patch_is_the_square_by_square_full_frame_drawing():
     assert shown >= 4
 
 
-def test_flat_layer_blur_skipping_the_covered_inside_is_the_whole_blur():
+def test_a_flat_layer_laid_skipping_the_covered_inside_is_the_whole_blur_composite():
+    """A band with an opaque board across it: laid over the wall it is the plain formula
+    wall * (1 - blur(coverage)) + shade * blur(albedo) over the whole band, whatever the band
+    held inside the board."""
     rng = np.random.default_rng(SEED)
+    shade = 0.83
     for sigma in (0.3, 0.67, 1.6):
         reach = int(np.ceil(4 * sigma)) + 2
-        alpha = np.zeros((140, 400), np.float32)
-        left, right = rng.integers(5, 60), rng.integers(300, 395)
-        alpha[:, left:right] = 1.0
-        alpha[:, left - 1] = rng.random(140)         # an anti-aliased edge
-        # inside, the whole blur sums the kernel's weights: 1 within float rounding
-        assert np.allclose(Renderer._blur_alpha(alpha, sigma, reach), _blur(alpha, sigma), rtol=0, atol=1e-6)
+        alpha = np.zeros((400, 400), np.float32)
+        left, right, top = rng.integers(5, 60), rng.integers(300, 395), int(rng.integers(0, 100))
+        alpha[top:, left:right] = 1.0
+        alpha[:, left - 1] = rng.random(400)         # an anti-aliased edge
+        albedo = alpha * np.where(rng.random((400, 400)) < 0.5, 0.9, 0.1).astype(np.float32)
+        laid = (albedo, alpha, sigma, reach, shade, (30, 0, 430, 400))           # a patch 30 px in
+        wall = rng.random((400, 460), dtype=np.float32)
+        expected = wall.copy()
+        expected[:, 30:430] = wall[:, 30:430] * (1 - _blur(alpha, sigma)) + shade * _blur(albedo, sigma)
+        covered = 0
+        for y in range(0, 400, 128):
+            rows = Renderer._flat_rows(laid, y, y + 128)
+            band = wall[y:y + 128].copy()
+            if rows[2] is not None:
+                band[:, rows[2][0]:rows[2][1]] = np.nan      # the inside: not the wall's to show
+                covered += 1
+            Renderer._lay_flat_band(band, y, y + 128, laid, rows)
+            # float rounding of the same sum in another order (the whole blur of an opaque
+            # inside sums the kernel's weights to 1 within 1e-7)
+            assert np.allclose(band, expected[y:y + 128], rtol=0, atol=1e-6), (sigma, y)
+        assert covered >= 2
 
 
 def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
@@ -144,3 +163,53 @@ def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
     assert moved.flags.writeable and np.abs(moved - first).max() > 0.1 * first.max()
     # the same pose, the board drawn anew (new layers): rendered anew, the same image
     assert np.array_equal(sim.renderer.render(sim.scene, marker, layers(0.4), gain=gain), first)
+
+
+def test_frames_exposed_band_by_band_as_rendered_are_the_whole_image_exposed():
+    """The camera's frames (each band exposed as it is composited) against the renderer's whole irradiance image exposed whole, on poses the
+    renderer's shortcuts were not written for: near and far, tilted, off centre, a board in view
+    or not, the marker out of view, and an arm at rest (the kept image)."""
+    from spacearm.firmware_sim.camera.renderer import FlatLayer
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+
+    fused, whole = (CameraSimulator.from_configs(scene_seed=2, noise_seed=SEED) for _ in range(2))
+    board, cam = load_board(), fused.camera
+    rng = np.random.default_rng(SEED + 7)
+    for i in range(10):
+        pose = view(rng.uniform(0.15, 1.3), np.radians(rng.uniform(0, 35)), rng.uniform(0, 2 * np.pi),
+                    tuple(rng.uniform(-0.06, 0.06, 2)) if i != 6 else (1.5, 0.0))     # 6: the marker out of view
+        layers = []
+        if i % 2:
+            d = rng.uniform(0.25, 0.7)
+            T = xyz_rpy_to_transform(list(rng.uniform([-0.25, -0.2, d], [0.05, 0.05, d])), list(rng.uniform(-0.4, 0.4, 3)))
+            margin = fused.renderer.flat_margin(d)
+            patch = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
+            layers = [] if patch is None else [FlatLayer(patch[0], patch[1], d, patch[2], margin)]
+        for _ in range(3 if i == 4 else 1):          # once: the same pose thrice (rendered, kept, given again)
+            got = fused.image(pose, layers)
+            electrons = whole.renderer.render(whole.scene, pose, layers, gain=whole.sensor.electrons_per_unit)
+            assert np.array_equal(got, whole.sensor.expose_electrons(electrons, whole.rng)), i
+
+
+def test_a_foreground_laid_skipping_its_opaque_inside_is_the_whole_blur_composite():
+    """A sharp foreground (full resolution) over a half-resolution wall: the composite, which
+    neither blurs the transparency nor lays it inside the opaque plate, is the plain
+    formula light * (wall * blur(transparency) + blur(albedo)) of whole-image operations."""
+    rng = np.random.default_rng(SEED + 1)
+    height, width = 512, 640
+    wall = (rng.random((height // 2, width // 2)) * 255).astype(np.uint8)
+    light = (1 + rng.random((height, width))).astype(np.float32)
+    for sigma in (0.3, 0.9):
+        clear = np.ones((420, 500), np.float32)
+        top, left = int(rng.integers(5, 40)), int(rng.integers(5, 40))
+        clear[top:400, left:480] = 0.0                           # the opaque plate
+        clear[top - 1, left:480] = rng.random(480 - left)          # an anti-aliased edge
+        clear[300:330, 100:140] = 0.5                             # a see-through detail inside
+        albedo = (1 - clear) * rng.random((420, 500)).astype(np.float32)
+        x0, y0 = 60, 40
+        got = Renderer._composite((wall, True), light, ((albedo, clear), (x0, y0), 1, sigma))
+        under = _twice(np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32))
+        region = under[y0:y0 + 420, x0:x0 + 500]
+        region[:] = region * _blur(clear, sigma) + _blur(albedo, sigma)
+        assert np.array_equal(got, under * light), sigma
