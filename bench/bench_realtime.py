@@ -4,6 +4,7 @@
     .venv/bin/python bench/bench_realtime.py render [--frames 20]       # simulated camera CPU per frame
     .venv/bin/python bench/bench_realtime.py changeout [--runs 5]       # separate processes, stage 1, real time
     .venv/bin/python bench/bench_realtime.py mainjob                    # `spacearm demo`, real time, camera
+    .venv/bin/python bench/bench_realtime.py idle [--minutes 10]        # an idle arm: banners, false stops
 
 Every section runs beside two CPU-bound processes (hil_tests/cpu_load.py, nice 0; `render` also
 alone first) and prints the load average and the CPU steal of its own interval beside each figure.
@@ -415,6 +416,98 @@ def _enable_and_fly(client, ready_q) -> dict:
     return oru
 
 
+def idle(minutes: float, steal: CpuSteal) -> list[str]:
+    """An idle arm beside two CPU-bound processes for `minutes`: hub and sim at --rt-priority 50,
+    the daemon on the realtime clock, the arm enabled and holding (supervision fully armed). Its
+    `status` is read every POLL as a console and the web page read it: every reading where a
+    lateness warning would show (the nodes' level, the cycle statistics' level once settled)
+    counts, and every stop, with the vCPU steal measured around it (hil_tests/harness.py: a
+    stop inside a ~100 ms host stall is the machine's); after a stop the arm is reset and
+    enabled again, so the figure is a rate over the whole time. Target (issue 32): none in 10
+    minutes at load ~3."""
+    import tempfile
+    from spacearm.base.transport.hub import HubProcess
+    from spacearm.console.client import ApiClient
+    from spacearm.console.status_view import STATS_SETTLED
+    from hil_tests.harness import HOST_STALL, StealTimeline, free_port, host_stall_around_stop
+    poll = 0.5
+    readings = nodes_late = stats_late = episodes = 0
+    stops: list[str] = []
+    worst_sim, messages = 0.0, set()
+    hub, timeline = HubProcess(rt_priority=50, ready_timeout=60.0), StealTimeline()
+    with tempfile.TemporaryDirectory() as work, CpuLoad(2):
+        try:
+            steal.fraction()
+            bus, api = hub.spec(f"rt-idle-{os.getpid()}"), f"tcp:127.0.0.1:{free_port()}"
+            sim = _spawn(["sim", "--bus", bus, "--plant", "configs/oru/plant_cell.toml", "--rt-priority", "50"],
+                         "nodes ready", Path(work) / "sim.log")
+            daemon = None
+            try:
+                daemon = _spawn(["daemon", "--bus", bus, "--clock", "realtime", "--rt-priority", "50", "--api", api,
+                                 "--no-record"], "spacearm daemon:", Path(work) / "daemon.log")
+                client = ApiClient(api, timeout=10.0)
+                lease = client.call("control.take", holder="bench_realtime")["lease"]
+                client.call("enable", lease=lease)
+                end, was_late = time.monotonic() + 60.0 * minutes, False
+                while time.monotonic() < end:
+                    status = client.call("status")
+                    readings += 1
+                    nodes, stats = status.get("nodes") or {}, status.get("stats") or {}
+                    late = nodes.get("level") not in (None, "ok")
+                    nodes_late += late
+                    episodes += late and not was_late
+                    was_late = late
+                    if late:
+                        messages.add(nodes.get("message", ""))
+                    stats_late += stats.get("cycles", 0) >= STATS_SETTLED and stats.get("level") not in (None, "ok")
+                    sim_view = (nodes.get("peers") or {}).get("simulator") or {}
+                    worst_sim = max(worst_sim, sim_view.get("max_lateness") or 0.0)
+                    if status.get("stop"):
+                        stall = host_stall_around_stop(status, timeline)
+                        stops.append(f"{status['stop']['code']} at {status['time']:.0f} s"
+                                     + (f", host held a vCPU {1e3 * stall[0]:.0f} ms of {1e3 * stall[1]:.0f} ms "
+                                        f"around it" if stall else ""))
+                        stops[-1] += " (the host's)" if stall and stall[0] >= HOST_STALL else ""
+                        _reset_and_enable(client, lease)
+                    time.sleep(poll)
+                final = client.call("status")
+            finally:
+                if daemon is not None:
+                    _end(daemon)
+                _end(sim)
+        finally:
+            hub.stop()
+            timeline.stop()
+    stats = final.get("stats") or {}
+    hosts = sum(s.endswith("(the host's)") for s in stops)
+    met = nodes_late == 0 and stats_late == 0 and not stops
+    rows = [f"  idle arm (enabled, holding), real time, beside 2 CPU-bound, {minutes:g} min | {episodes} lateness "
+            f"banners ({nodes_late} of {readings} readings), {stats_late} readings with the cycle statistics "
+            f"not ok, {len(stops)} stops ({hosts} inside a host stall) | 0 banners, 0 stops | "
+            f"{'met' if met else 'MISSED'} | {conditions(steal)}",
+            f"  idle arm: skipped {stats.get('skipped_cycles', '-')} of {stats.get('cycles', '-')} cycles since the "
+            f"last enable, period error p99 {1e3 * stats.get('period_error_p99', float('nan')):.2f} ms; the "
+            f"simulator's worst late wake {1e3 * worst_sim:.1f} ms"]
+    rows += [f"  idle arm stop: {s}" for s in stops[:10]]
+    rows += [f"  idle arm banner: {m}" for m in sorted(messages)[:3]]
+    return rows
+
+
+def _reset_and_enable(client, lease: str) -> None:
+    """After a protective stop: reset once the arm is at rest (the daemon refuses before), enable."""
+    from spacearm.console.errors import CommandFailed
+    deadline = time.monotonic() + 30.0
+    while True:
+        try:
+            client.call("reset", lease=lease)
+            break
+        except CommandFailed:
+            if time.monotonic() > deadline:
+                raise
+            time.sleep(0.2)
+    client.call("enable", lease=lease)
+
+
 def mainjob(stages: str, steal: CpuSteal) -> list[str]:
     """`spacearm demo` (real time, camera) beside two CPU-bound processes: its summary's figures."""
     import re
@@ -447,11 +540,12 @@ def mainjob(stages: str, steal: CpuSteal) -> list[str]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "all"))
+    ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "idle", "all"))
     ap.add_argument("--seconds", type=float, default=20.0, help="gil: probe time per neighbour")
     ap.add_argument("--frames", type=int, default=20, help="render: frames per distance band")
     ap.add_argument("--runs", type=int, default=5, help="changeout: runs")
     ap.add_argument("--stages", default="", help="mainjob: stages, e.g. 1 (default: all four)")
+    ap.add_argument("--minutes", type=float, default=10.0, help="idle: how long the arm idles")
     args = ap.parse_args()
     t0, steal = time.monotonic(), CpuSteal()
     rows: list[str] = []
@@ -463,6 +557,8 @@ def main() -> None:
         rows += changeout(args.runs, steal)
     if args.section in ("mainjob", "all"):
         rows += mainjob(args.stages, steal)
+    if args.section in ("idle", "all"):
+        rows += idle(args.minutes, steal)
     print("\n".join(rows))
     print(f"\nbench_realtime on {platform.node()} ({os.cpu_count()} cores, load {os.getloadavg()[0]:.1f}), "
           f"Python {platform.python_version()}, switch interval {1e3 * sys.getswitchinterval():.1f} ms, "

@@ -93,6 +93,22 @@ class StealTimeline:
         return max((b - a for a, b in zip(before[0], after[0])), default=0) / os.sysconf("SC_CLK_TCK")
 
 
+def host_stall_around_stop(status: dict, steal: StealTimeline) -> tuple[float, float] | None:
+    """(s of steal of the most-stolen vCPU, s of the window) around a stop for missing data or a
+    lost heartbeat; None for any other stop, or none. The stall that silenced the nodes for the
+    stop's reach may still be on at the stop, and the guest counts steal when its vCPU runs
+    again: the window reaches past the stop too."""
+    stop = status.get("stop") or {}
+    if stop.get("code") not in ("pdo_missing", "heartbeat_lost"):
+        return None
+    at = [e["t"] for e in status.get("events", ()) if e.get("kind") == "protective_stop"]
+    if not at:
+        return None
+    stopped = status["woke_at"] - (status["time"] - at[-1])      # the stop's cycle, monotonic
+    before, after = 0.1 + 2 * status["period"], 0.12
+    return steal.worst_cpu(stopped - before, stopped + after), before + after
+
+
 def xfail_if_the_host_stalled_a_vcpu(status: dict, steal: StealTimeline, peers: dict | None = None) -> None:
     """A stop for missing data or a lost heartbeat while the hypervisor held a vCPU for most of
     the stop's reach (5 cycles: 100 ms) just before it is the machine's, not the stack's: every
@@ -102,24 +118,15 @@ def xfail_if_the_host_stalled_a_vcpu(status: dict, steal: StealTimeline, peers: 
     Traced on the hub (issue 32): such stops came with ~100 ms without a forwarded frame, ending
     within 1 ms of a pinned SCHED_FIFO 99 probe's 100 ms late wake on one vCPU, and 100 ms of
     steal on that vCPU (the host's CPU quota period)."""
-    stop = status.get("stop") or {}
-    if stop.get("code") not in ("pdo_missing", "heartbeat_lost"):
-        return
-    at = [e["t"] for e in status.get("events", ()) if e.get("kind") == "protective_stop"]
-    if not at:
-        return
-    stopped = status["woke_at"] - (status["time"] - at[-1])      # the stop's cycle, monotonic
-    # the stall that silenced the nodes for the stop's reach may still be on at the stop, and
-    # the guest counts steal when its vCPU runs again: the window reaches past the stop too
-    before, after = 0.1 + 2 * status["period"], 0.12
-    stolen = steal.worst_cpu(stopped - before, stopped + after)
-    if stolen >= HOST_STALL:
+    stall = host_stall_around_stop(status, steal)
+    if stall is not None and stall[0] >= HOST_STALL:
         import pytest
+        stolen, window = stall
         peers = peers if peers is not None else (status.get("nodes") or {}).get("peers") or {}
         reports = ", ".join(f"{name} {1e3 * p['max_lateness']:.0f} ms ({p.get('cause') or '-'})"
                             for name, p in peers.items()) or "-"
-        pytest.xfail(f"{stop['code']} while the host held one vCPU for {1e3 * stolen:.0f} ms of the "
-                     f"{1e3 * (before + after):.0f} ms around it (CPU steal); peers' worst wakes: {reports}")
+        pytest.xfail(f"{status['stop']['code']} while the host held one vCPU for {1e3 * stolen:.0f} ms of the "
+                     f"{1e3 * window:.0f} ms around it (CPU steal); peers' worst wakes: {reports}")
 
 
 # s of steal on one vCPU within the stop's reach that stalls the processes on it for most of it

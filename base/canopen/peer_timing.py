@@ -15,19 +15,25 @@ Frame (8 bytes, little endian), COB-ID TPDO1 of the diagnostics node (0x180 + ID
     2-3  worst lateness since the last report   UNSIGNED16, 100 us (saturates at 6.5535 s)
     4-5  wakes since the last report            UNSIGNED16 (saturates)
     6    bits 0-1 scheduling policy: 0 normal, 1 SCHED_FIFO, 2 SCHED_RR
-         bits 2-3 what the worst late wake waited for: 0 none (no late wake), 1 a core,
-         2 the GIL, 3 nothing ran (stopped)
+         bits 2-4 what the worst late wake waited for: 0 none (no late wake), 1 a core,
+         2 the GIL, 3 nothing ran (stopped), 4 the host (CPU steal)
     7    real-time priority (0 for normal)
 
 What a late wake waited for, measured in the producer at each wake over the interval since the
-last one (Linux schedstat of every thread of the process, /proc/self/task/*/schedstat):
+last one (Linux schedstat of every thread of the process, /proc/self/task/*/schedstat, and the
+host's steal of each vCPU, /proc/stat):
+- the host: a vCPU of this machine was not run by the hypervisor (steal) for at least half of
+  the lateness. Inside the guest that looks like a wait for a core or like nothing running, so
+  it is asked first: on a machine at its host CPU quota every process on the vCPU, at any
+  real-time priority, stands still ~100 ms. The guest counts steal once its vCPU runs again, so
+  a late wake's report waits STEAL_SETTLE before it is judged and sent;
 - a core: the timer thread itself was runnable but not running (run-queue delay) for at least
   half of its lateness - other processes (or higher real-time priorities) had the cores;
 - the GIL: the process's other threads ran or waited to run for at least half of it - one of
   them held the GIL the timer thread needed (a preempted holder counts: it waits for a core
   while holding it, the priority inversion bench/bench_realtime.py measures);
-- stopped: neither - no thread of the process ran or was waiting to run: SIGSTOP, a debugger,
-  or the host did not run the machine (CPU steal).
+- stopped: none of these - no thread of the process ran or was waiting to run: SIGSTOP, a
+  debugger.
 """
 from __future__ import annotations
 
@@ -52,9 +58,11 @@ LATE_WAKE = 0.005         # s past its due time: a wake that counts as late (a q
 TICK = 0.010              # s: the hub's timer tick (the simulator's scheduler wakes at least this often)
 
 _FRAME = struct.Struct("<HHHBB")
+_CLK_TCK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 _LSB = 1e-4               # s per unit of the lateness field
 _POLICIES = {0: "normal", 1: "SCHED_FIFO", 2: "SCHED_RR"}
-CAUSES = ("", "core", "gil", "stopped")      # what the worst late wake waited for ("": no late wake)
+CAUSES = ("", "core", "gil", "stopped", "host")   # what the worst late wake waited for ("": no late wake)
+STEAL_SETTLE = 0.03       # s after a late wake before its report: the guest's steal count catches up
 
 
 @dataclass(frozen=True)
@@ -77,7 +85,7 @@ def decode(data: bytes) -> TimingReport | None:
         return None
     late, lateness, wakes, flags, priority = _FRAME.unpack(data)
     return TimingReport(late, lateness * _LSB, wakes, _POLICIES.get(flags & 3, "unknown"), priority,
-                        CAUSES[(flags >> 2) & 3])
+                        CAUSES[(flags >> 2) & 7] if (flags >> 2) & 7 < len(CAUSES) else "")
 
 
 def _calling_thread_scheduling() -> tuple[int, int]:
@@ -147,9 +155,33 @@ def _task_times() -> tuple[int, int, int]:
     return cpu, queue, own
 
 
-def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float) -> str:
+_stat_fd: int | None = None
+
+
+def host_steal() -> tuple[int, ...]:
+    """Steal of each vCPU so far (/proc/stat, USER_HZ ticks); () where /proc cannot say. The
+    file stays open (one pread per wake)."""
+    global _stat_fd
+    try:
+        if _stat_fd is None:
+            _stat_fd = os.open("/proc/stat", os.O_RDONLY)
+        head = os.pread(_stat_fd, 4096, 0).split(b"\n")
+        return tuple(int(line.split()[8]) for line in head if line[:3] == b"cpu" and line[3:4] != b" ")
+    except (OSError, ValueError, IndexError):
+        return ()
+
+
+def stolen_since(before: tuple[int, ...], after: tuple[int, ...]) -> float:
+    """s the host held the most-stolen vCPU between two host_steal() readings."""
+    return max((b - a for a, b in zip(before, after)), default=0) / _CLK_TCK
+
+
+def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float, stolen: float = 0.0) -> str:
     """What a late wake waited for (module doc): own_queue s runnable without a core, own_cpu s
-    it ran, all_busy s the whole process ran or waited for a core, over the same interval."""
+    it ran, all_busy s the whole process ran or waited for a core, stolen s the host held the
+    most-stolen vCPU, over the same interval."""
+    if stolen >= lateness / 2:
+        return "host"
     if own_queue >= lateness / 2:
         return "core"
     if all_busy - own_queue - own_cpu >= lateness / 2:
@@ -170,6 +202,9 @@ class LatenessMeter:
         self._worst_cause = ""
         # (process CPU + run-queue ns, own run-queue ns, own CPU s) at the last wake
         self._times: tuple[int, int, float] | None = None
+        self._steal: tuple[int, ...] = ()          # host_steal() at the last wake
+        self._worst_steal: tuple[int, ...] = ()    # ... before the worst late wake
+        self._worst_at = float("-inf")
         self.measure_causes = measure_causes
         self._last_sent: float | None = None
         self._event = False
@@ -182,9 +217,13 @@ class LatenessMeter:
         if lateness > self.late_wake:
             self._late += 1
             self._event = True
+        steal_before = self._steal
+        if self.measure_causes:
+            self._steal = host_steal()
         if lateness > self._worst:
             self._worst = lateness
             self._worst_cause = cause if lateness > self.late_wake else ""
+            self._worst_steal, self._worst_at = steal_before, now
         if self._last_sent is None:
             self._last_sent = now        # first report one period after start
         return cause
@@ -202,19 +241,25 @@ class LatenessMeter:
         """Monotonic time of the next report (event: after the inhibit time; else the event timer)."""
         if self._last_sent is None:
             return float("inf")
-        return self._last_sent + (self.inhibit if self._event else self.period)
+        if self._event:
+            return max(self._last_sent + self.inhibit, self._worst_at + STEAL_SETTLE)
+        return self._last_sent + self.period
 
     def due(self, now: float) -> bool:
         return now >= self.next_due()
 
     def report(self, now: float) -> bytes:
         policy, priority = _calling_thread_scheduling()
+        if self._worst_cause and self._worst_steal and \
+                stolen_since(self._worst_steal, host_steal()) >= self._worst / 2:
+            self._worst_cause = "host"
         lateness = min(round(self._worst / _LSB), 0xFFFF)
         flags = policy | CAUSES.index(self._worst_cause) << 2
         data = _FRAME.pack(min(self._late, 0xFFFF), lateness, min(self._wakes, 0xFFFF), flags, priority)
         self._late = self._wakes = 0
         self._worst = 0.0
         self._worst_cause = ""
+        self._worst_steal, self._worst_at = (), float("-inf")
         self._event = False
         self._last_sent = now
         return data

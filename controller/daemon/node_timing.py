@@ -41,7 +41,8 @@ PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's re
 PEER_SILENT = 3.5      # s without a report from a peer that reported before: it is not running
 ADVICE = "run `spacearm sim` and `spacearm hub` with --rt-priority 50 (or lower the machine's load)"
 CAUSE_TEXT = {"core": "waited for a core", "gil": "waited for the GIL (another of its threads held it)",
-              "stopped": "stopped (none of its threads ran)"}
+              "stopped": "stopped (none of its threads ran)",
+              "host": "the host did not run its vCPU (CPU steal)"}
 
 
 @dataclass(frozen=True)
@@ -51,7 +52,7 @@ class PeerTimingSummary:
     late_cycles: int              # its timer wakes later than peer_timing.LATE_WAKE
     cycles: int                   # its timer wakes
     max_lateness: float           # s, worst wake
-    cause: str                    # what its worst late wake waited for: "core" | "gil" | "stopped" | ""
+    cause: str                    # what its worst late wake waited for: "core" | "gil" | "stopped" | "host" | ""
     scheduling: str               # "normal" | "SCHED_FIFO 50" ...
     window: float                 # s the numbers cover
     last_report_age: float        # s
@@ -93,8 +94,11 @@ def _peer_advice(name: str, peer: PeerTimingSummary) -> str:
     if peer.cause == "gil":
         return (f"a thread of `{command}` below its real-time priority held the GIL (it must run at the "
                 "nodes' priority or in its own process)")
+    if peer.cause == "host":
+        return ("the machine's host did not run it (CPU steal, ~100 ms at the host's CPU quota): no priority "
+                "helps; a machine with reserved CPUs does")
     if peer.cause == "stopped":
-        return f"`{command}` did not run at all: a debugger, SIGSTOP, or the host (CPU steal)"
+        return f"`{command}` did not run at all: a debugger or SIGSTOP"
     if peer.scheduling == "normal":
         return f"run `{command}` with --rt-priority 50 (or lower the machine's load)"
     if peer.cause == "core":

@@ -104,6 +104,37 @@ def test_wake_cause_splits_lateness_by_what_the_process_did_meanwhile():
     assert wake_cause(0.040, own_queue=0.001, own_cpu=0.0001, all_busy=0.002) == "stopped"
 
 
+def test_a_late_wake_inside_host_steal_is_the_hosts_whatever_the_guest_saw(monkeypatch):
+    """The hypervisor held a vCPU: inside the guest that reads as a wait for a core. The report
+    waits for the guest's steal count to catch up, then names the host; a late wake with no
+    steal keeps what schedstat said."""
+    from spacearm.base.canopen.peer_timing import wake_cause
+    assert wake_cause(0.100, own_queue=0.100, own_cpu=0.0, all_busy=0.1, stolen=0.100) == "host"
+    assert wake_cause(0.100, own_queue=0.100, own_cpu=0.0, all_busy=0.1, stolen=0.030) == "core"
+    steal = [(5, 7)]
+    monkeypatch.setattr(peer_timing, "host_steal", lambda: steal[0])
+    meter = LatenessMeter(period=1.0, inhibit=0.1, late_wake=0.005)
+    meter.woke(0.001, 0.0)
+    meter.report(0.0)
+    meter.woke(0.001, 1.00)
+    meter._cause = lambda lateness: "core"        # what schedstat says of the stalled vCPU
+    meter.woke(0.100, 1.11)                       # ... 100 ms late
+    assert not meter.due(1.11) and meter.due(1.11 + peer_timing.STEAL_SETTLE)
+    steal[0] = (5, 17)                            # 10 ticks (100 ms) stolen on vCPU 1, counted late
+    assert decode(meter.report(1.15)).cause == "host"
+    meter.woke(0.001, 1.20)
+    meter.woke(0.100, 1.40)                       # late again, no steal this time
+    assert decode(meter.report(1.5)).cause == "core"
+
+
+def test_the_host_cause_round_trips_and_an_unknown_one_is_none():
+    frame = bytearray(LatenessMeter(measure_causes=False).report(0.0))
+    frame[6] = (frame[6] & 3) | 4 << 2
+    assert decode(bytes(frame)).cause == "host"
+    frame[6] = (frame[6] & 3) | 7 << 2
+    assert decode(bytes(frame)).cause == ""
+
+
 def test_a_thread_holding_the_gil_is_measured_as_the_gil():
     """A timer thread whose wakes wait for another thread of its process that keeps the GIL
     (a long switch interval stands in for a holder that is preempted): its late wakes say gil."""

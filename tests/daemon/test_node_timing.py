@@ -113,7 +113,8 @@ def test_a_wake_that_could_stop_the_arm_is_late_at_once():
 @pytest.mark.parametrize("cause, says, advises", [
     ("core", "waited for a core", "higher real-time priority took its core"),
     ("gil", "waited for the GIL", "held the GIL"),
-    ("stopped", "stopped (none of its threads ran)", "a debugger, SIGSTOP, or the host"),
+    ("stopped", "stopped (none of its threads ran)", "a debugger or SIGSTOP"),
+    ("host", "the host did not run its vCPU (CPU steal)", "no priority helps"),
 ])
 def test_the_advice_names_the_measured_cause_and_never_rt_priority_to_a_fifo_process(cause, says, advises):
     timing = NodeTiming(BUDGET)
