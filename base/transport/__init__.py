@@ -217,7 +217,6 @@ class _FastVirtual:
         if not all_sent:
             raise can.CanOperationError("Could not send message to one or more recipients")
 
-
     def _tap_message(self, msg: can.Message, timestamp: float, data: bytes) -> None:
         seen = can.Message(timestamp=timestamp, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
                            is_remote_frame=msg.is_remote_frame, is_error_frame=msg.is_error_frame,
