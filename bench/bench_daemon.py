@@ -48,9 +48,11 @@ the velocity offsets 4), the tap ~0.05 us per frame (0.5-0.9 us as one more rece
 the /stats summary 0.08 ms once a second (0.6 ms before); the trace's batching thread
 ~0.01 ms per cycle; the garbage collector no longer runs more often with recording on.
 
-How the share is measured: the judged figure switches recording off and on every 100 cycles
+How the share is measured: the judged figure switches recording off and on every 25 cycles
 inside one recording run (`interleaved_recording`: the recorder out of the cycle, the tap off
-the bus, the helper processes idle), so both states see the same machine. Separate on and
+the bus, the helper processes idle), so both states see the same machine: on this shared
+machine consecutive 100-cycle segments in one state differ by up to 2x in CPU per cycle, so
+segments are short and the share is a median over blocks (on, off, off, on). Separate on and
 off runs (the pairs row) compare different moments of a shared machine: identical off runs
 differ by up to 50 % in CPU per cycle there (2026-11-27, load 3.3: 1.25-1.87 ms), and an off
 run has no helper processes at all; its share is printed for information.
@@ -284,7 +286,7 @@ def run(bus_kind: str, clock: str, period: float, duration: float, poll_hz: floa
         stop_sim()
 
 
-def interleaved_recording(cycles: int, segment: int = 100) -> dict:
+def interleaved_recording(cycles: int, segment: int = 25) -> dict:
     """What recording costs the cycle, measured inside one recording run (8 nodes, virtual):
     recording is switched off and on every `segment` cycles (on, off, off, on, ...), so what
     the machine does meanwhile (other processes, the host) falls on both alike. Off takes the
