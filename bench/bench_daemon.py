@@ -52,7 +52,14 @@ How the share is measured: the judged figure switches recording off and on every
 inside one recording run (`interleaved_recording`: the recorder out of the cycle, the tap off
 the bus, the helper processes idle), so both states see the same machine: on this shared
 machine consecutive 100-cycle segments in one state differ by up to 2x in CPU per cycle, so
-segments are short and the share is a median over blocks (on, off, off, on). Separate on and
+segments are short and the share is a median over blocks (on, off, off, on). What it leaves
+out: the helper processes drain with a lag of up to 0.2 s, so their work (and whatever it
+costs this process on a 2-core machine) falls on on and off segments alike, as does the
+trace's batching thread (~0.01 ms per cycle, ~0.5 %); the helpers' CPU has its own row.
+Measured 2026-11-27 (`--lockstep-only --lockstep-cycles 4000`, 3 runs each, alternating with
+the tree before the changes above; load 1.1-3.6, steal 0.0-2.8 %): interleaved 3.8 % (runs
+4.2, 3.6, 3.8) against 7.0 % before (9.4, 7.0, 6.6); the separate-runs row 4.0 % (4.0, -3.5,
+16.1) against 13.1 % (37.5, 9.6, 13.1). Separate on and
 off runs (the pairs row) compare different moments of a shared machine: identical off runs
 differ by up to 50 % in CPU per cycle there (2026-11-27, load 3.3: 1.25-1.87 ms), and an off
 run has no helper processes at all; its share is printed for information.
