@@ -167,7 +167,8 @@ def _open_stream_tap(bus_spec: str, path: Path, limit: TraceLimit) -> tuple[can.
     """The in-process bus's tap: frames collected here, formatted by a child (trace_stream.py)."""
     tap = open_bus(bus_spec)
     stream = StreamTap(path, limit.max_bytes, limit.keep, str(tap.channel_id), getattr(tap, "line_channels", None))
-    tap.add_inline_listener(stream)
+    # a plain in-process bus takes it as a tap (no receiver queue, seen first); a pair inline
+    getattr(tap, "add_tap", tap.add_inline_listener)(stream)
     return tap, can.Notifier(tap, [stream], timeout=0.1), stream
 
 

@@ -2,7 +2,7 @@
 
 The cycle must not serialise MCAP (JSON per message, chunk compression, fsync): that cost
 was ~25 % of a lockstep cycle's process CPU (issue 35). Instead it packs one fixed-size
-binary record per cycle (numbers only, precompiled struct over one numpy concatenation) and
+binary record per cycle (numbers only, one precompiled struct into a reused buffer) and
 writes it to a pipe; the writer process (writer_process.py) turns the records back into the
 same /cycle JSON messages as before and writes the MCAP file in batches.
 
@@ -30,6 +30,13 @@ MESSAGE_HEAD = struct.Struct("<dH")
 SETUP, LABELS, CYCLE, MESSAGE, CLOSE = range(5)
 _COMPACT = (",", ":")
 _doubles: dict[int, struct.Struct] = {}
+
+
+def cycle_layout(joints: int, wrench: int) -> tuple[bytes, struct.Struct]:
+    """The daemon's side of a CYCLE record for an arm: its FRAME (the same for every cycle) and
+    one struct for CYCLE_HEAD and all 5n + w doubles, packed in one call."""
+    body = struct.Struct(CYCLE_HEAD.format + f"{5 * joints + wrench}d")
+    return FRAME.pack(body.size, CYCLE), body
 
 
 def _frame(kind: int, payload: bytes) -> bytes:

@@ -43,12 +43,15 @@ class StreamTap(can.Listener):
     def __init__(self, path: Path, max_bytes: int, keep: int, channel: str,
                  line_channels: tuple[str, str] | None = None):
         self.line_channels = line_channels
-        self._frames: list = []          # one list for the tap's life: the hot path binds its append
-        append = self._frames.append
+        # One flat list for the tap's life (the hot path binds its extend): 3 values a frame (4 on a pair),
+        # not a tuple a frame, so nothing the garbage collector tracks piles up between batches.
+        self._frames: list = []
+        extend = self._frames.extend
         if line_channels is None:
-            self.on_frame = lambda can_id, data, timestamp: append((timestamp, can_id, data))
+            self.on_frame = lambda can_id, data, timestamp: extend((timestamp, can_id, data))
         else:
-            self.on_frame = lambda can_id, data, timestamp: append((timestamp, can_id, data, rx_state.line))
+            self.on_frame = lambda can_id, data, timestamp: extend((timestamp, can_id, data, rx_state.line))
+        self._stride = _stride(line_channels)
         self._stop = threading.Event()
         self._send_lock = threading.Lock()
         self._child = subprocess.Popen(
@@ -62,13 +65,14 @@ class StreamTap(can.Listener):
     def pid(self) -> int:
         return self._child.pid
 
-    # hot path: on_frame (bound in __init__) runs in the sender's thread, one list append
-    # (atomic under the GIL): (timestamp, can_id, data[, line])
+    # hot path: on_frame (bound in __init__) runs in the sender's thread, one list extend
+    # (atomic under the GIL): timestamp, can_id, data[, line]
 
     def on_message_received(self, msg: can.Message) -> None:
+        """Any other frame: its data slot holds everything the child needs to rebuild it."""
         line = getattr(rx_state, "line", None) if self.line_channels else None
-        self._frames.append((msg.timestamp, msg.arbitration_id, bytes(msg.data), line, msg.dlc,
-                             msg.channel, tuple(bool(getattr(msg, name)) for name in _FLAGS)))
+        full = (bytes(msg.data), line, msg.dlc, msg.channel, tuple(bool(getattr(msg, name)) for name in _FLAGS))
+        self._frames.extend((msg.timestamp, msg.arbitration_id, full, line)[:self._stride])
 
     def _run(self) -> None:
         while not self._stop.wait(FLUSH_PERIOD):
@@ -77,7 +81,7 @@ class StreamTap(can.Listener):
     def _send(self) -> None:
         with self._send_lock:
             frames = self._frames[:]       # frames appended meanwhile stay for the next batch
-            del self._frames[:len(frames)]
+            del self._frames[:len(frames)]     # (whole frames: one extend is atomic under the GIL)
             if not frames or self._child.stdin.closed:
                 return
             batch = marshal.dumps(frames)
@@ -106,17 +110,24 @@ class StreamTap(can.Listener):
             self._child.wait()
 
 
-def _deliver(buffered, frames: list) -> None:
+def _stride(line_channels) -> int:
+    """Values a frame takes in a batch: timestamp, can_id, data, and on a pair its line."""
+    return 3 if not line_channels else 4
+
+
+def _deliver(buffered, frames: list, stride: int) -> None:
     """Feed a batch to the child's BufferedTap as the bus would have: each frame on its line."""
-    for frame in frames:
-        rx_state.line = frame[3] if len(frame) > 3 else None
-        if len(frame) <= 4:
-            buffered.on_frame(frame[1], frame[2], frame[0])
-        else:
-            timestamp, can_id, data, _, dlc, channel, flags = frame
+    for i in range(0, len(frames), stride):
+        timestamp, can_id, data = frames[i:i + 3]
+        if type(data) is tuple:        # a frame that is not a plain standard data frame
+            data, line, dlc, channel, flags = data
+            rx_state.line = line
             buffered.on_message_received(can.Message(timestamp=timestamp, arbitration_id=can_id, data=data,
                                                      dlc=dlc, channel=channel, check=False,
                                                      **dict(zip(_FLAGS, flags))))
+        else:
+            rx_state.line = frames[i + 3] if stride == 4 else None
+            buffered.on_frame(can_id, data, timestamp)
     rx_state.line = None
 
 
@@ -136,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
             batch = stream.read(size)
             if len(batch) < size:
                 break        # the daemon died mid-batch
-            _deliver(buffered, marshal.loads(batch))
+            _deliver(buffered, marshal.loads(batch), _stride(lines))
             buffered.flush()
     finally:
         buffered.stop()

@@ -75,3 +75,22 @@ def test_compute_time_is_execution_without_the_wait_for_tpdos():
     summary = stats.summary()
     assert summary.execution_median == pytest.approx(0.004)
     assert summary.compute_median == pytest.approx(0.001) and summary.compute_p99 == pytest.approx(0.001)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 100, 101, 2999, 3000])
+def test_summary_medians_and_p99s_are_numpys_to_the_last_bit(n):
+    """The summary's one-partition statistics against numpy's own median and percentile, on
+    windows of odd and even length, with ties and values spread over ten decades."""
+    import numpy as np
+
+    rng = np.random.default_rng(n)
+    stats = CycleStats(window=n)
+    for k in range(n + n // 3):      # wrapped once when long enough
+        pe, ex = rng.exponential(1e-4) * 10.0 ** rng.integers(-5, 3), round(rng.exponential(1e-3), 6)
+        stats.add(pe if k % 2 else -pe, ex, 0, min(ex, rng.exponential(5e-4)))
+    pe, ex, co = (np.array(column) for column in zip(*stats._window.T.tolist()))
+    s = stats.summary()
+    assert (s.period_error_median, s.execution_median, s.compute_median) == \
+        (np.median(pe), np.median(ex), np.median(co))
+    assert (s.period_error_p99, s.execution_p99, s.compute_p99) == \
+        (np.percentile(pe, 99), np.percentile(ex, 99), np.percentile(co, 99))

@@ -42,6 +42,37 @@ def test_trace_has_every_frame_in_order(kind, tmp_path):
     assert [(m.arbitration_id, bytes(m.data)) for m in logged] == [(m.arbitration_id, bytes(m.data)) for m in sent]
 
 
+def test_in_process_trace_is_in_wire_order_when_a_receiver_answers_inline(tmp_path):
+    """A simulated node answers a SYNC inside the sender's call (lockstep): the trace still has
+    the SYNC first and its answers after it, with times that never go back, as candump on a
+    real bus would (a tap that was one more receiver logged the answers first)."""
+    spec = f"virtual:order-{time.monotonic_ns()}"
+    node, master = open_bus(spec), open_bus(spec)
+
+    class Answers(can.Listener):
+        def on_frame(self, can_id, data, timestamp):
+            if can_id == 0x080:
+                for k in range(3):
+                    node.send_frame(0x181 + k, data)
+
+        def on_message_received(self, msg):
+            pass
+    node.add_inline_listener(Answers())
+    trace = CanTrace(spec, tmp_path / "order.can.log")
+    try:
+        for i in range(5):
+            master.send_frame(0x080, bytes([i]))
+        time.sleep(0.5)
+    finally:
+        trace.stop()
+        node.shutdown()
+        master.shutdown()
+    logged = list(can.CanutilsLogReader(str(tmp_path / "order.can.log")))
+    assert [(m.arbitration_id, m.data[0]) for m in logged] == \
+        [(can_id, i) for i in range(5) for can_id in (0x080, 0x181, 0x182, 0x183)]
+    assert [m.timestamp for m in logged] == sorted(m.timestamp for m in logged)
+
+
 def test_bus_the_child_cannot_open_is_a_clear_error(tmp_path):
     # no such SocketCAN interface (or no SocketCAN at all): the child says why and exits
     with pytest.raises(RuntimeError, match="CAN trace did not start: can_trace: cannot open socketcan:nosuchcan7"):
