@@ -96,6 +96,7 @@ class FaultyHub:
         self.reorder_prob = 0.0
         self.blackout_until = 0.0
         self.dropped = 0
+        self.dropped_heartbeats: set[int] = set()   # node IDs whose heartbeat a random loss took
         self.reordered = 0
         self._held: dict[str, bytes] = {}
         self._lock = threading.Lock()
@@ -115,6 +116,9 @@ class FaultyHub:
             for rec in records:
                 if self.drop_prob and self.rng.random() < self.drop_prob:
                     self.dropped += 1
+                    can_id = int.from_bytes(rec[3:7], "big")     # record: length, type, flags, ID
+                    if can_id & 0x780 == 0x700:
+                        self.dropped_heartbeats.add(can_id & 0x7F)
                     continue
                 held = self._held.pop(channel, None)
                 if held is None and self.reorder_prob and self.rng.random() < self.reorder_prob:
