@@ -176,12 +176,10 @@ def stolen_since(before: tuple[int, ...], after: tuple[int, ...]) -> float:
     return max((b - a for a, b in zip(before, after)), default=0) / _CLK_TCK
 
 
-def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float, stolen: float = 0.0) -> str:
-    """What a late wake waited for (module doc): own_queue s runnable without a core, own_cpu s
-    it ran, all_busy s the whole process ran or waited for a core, stolen s the host held the
-    most-stolen vCPU, over the same interval."""
-    if stolen >= lateness / 2:
-        return "host"
+def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float) -> str:
+    """What a late wake waited for inside the guest (module doc): own_queue s runnable without a
+    core, own_cpu s it ran, all_busy s the whole process ran or waited for a core, over the same
+    interval. The host's part is judged at the report (LatenessMeter.report), once counted."""
     if own_queue >= lateness / 2:
         return "core"
     if all_busy - own_queue - own_cpu >= lateness / 2:
