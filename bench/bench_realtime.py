@@ -485,8 +485,8 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
             f"banners ({nodes_late} of {readings} readings), {stats_late} readings with the cycle statistics "
             f"not ok, {len(stops)} stops ({hosts} inside a host stall) | 0 banners, 0 stops | "
             f"{'met' if met else 'MISSED'} | {conditions(steal)}",
-            f"  idle arm: skipped {stats.get('skipped_cycles', '-')} of {stats.get('cycles', '-')} cycles since the "
-            f"last enable, period error p99 {1e3 * stats.get('period_error_p99', float('nan')):.2f} ms; the "
+            f"  idle arm: skipped {stats.get('skipped_cycles', '-')} of {stats.get('cycles', '-')} cycles in all, "
+            f"period error p99 {1e3 * stats.get('period_error_p99', float('nan')):.2f} ms; the "
             f"simulator's worst late wake {1e3 * worst_sim:.1f} ms"]
     rows += [f"  idle arm stop: {s}" for s in stops[:10]]
     rows += [f"  idle arm banner: {m}" for m in sorted(messages)[:3]]
