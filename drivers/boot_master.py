@@ -50,7 +50,10 @@ class BootMaster:
                 raise BootError(f"boot failed: no boot-up message within {timeout:.1f} s from "
                                 + ", ".join(d.label for d in missing))
             self._monitoring = True
-            wait = 3.0 * max(n.heartbeat_period for n in self.config.nodes) + 0.2
+            # three heartbeat periods on time, else what is left of the boot's time: a starved
+            # process's heartbeats come late, and a node late within boot_timeout is no fault
+            wait = max(3.0 * max(n.heartbeat_period for n in self.config.nodes) + 0.2,
+                       deadline - time.monotonic())
             with self._cv:
                 self._cv.wait_for(lambda: all(h.nmt_state == od.NMT_STATE_OPERATIONAL
                                               for h in self.health.values()), timeout=wait)
