@@ -18,6 +18,7 @@ from spacearm.controller.recording.csv_export import export_csv
 from spacearm.controller.recording.mcap_reader import read_recording
 from hil_tests.conftest import ROOT, child_env
 from hil_tests.harness import free_port
+from hil_tests.vm.runner import descendants
 
 pytestmark = pytest.mark.hil
 READY = [-0.28806419791259463, 1.5707963267948966, -3.294079780986511, 1.9521648103310305,
@@ -145,20 +146,6 @@ net.close()
     assert status["state"] == "stopped"
     assert "joint_4" in (status["stop"]["node"], status["stop"]["joint"]), status["stop"]
     assert alice.run("enable", check=False).stderr.startswith("error[protective_stop]:")
-
-
-def descendants(pid: int) -> list[int]:
-    found, todo = [], [pid]
-    while todo:
-        parent = todo.pop()
-        for task in Path(f"/proc/{parent}/task").glob("*"):
-            try:
-                children = [int(c) for c in (task / "children").read_text().split()]
-            except OSError:
-                continue
-            found += children
-            todo += children
-    return found
 
 
 def cmdline(pid: int) -> str:

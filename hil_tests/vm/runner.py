@@ -177,7 +177,7 @@ def _pytest_cmd(junit: Path, extra: list[str], paths: list[str] | None = None) -
             f"--junitxml={junit}", *extra]
 
 
-def _descendants(pid: int) -> list[int]:
+def descendants(pid: int) -> list[int]:
     """All live descendants of pid (children first found via /proc)."""
     children: dict[int, list[int]] = {}
     for stat in glob.glob("/proc/[0-9]*/stat"):
@@ -196,7 +196,7 @@ def _descendants(pid: int) -> list[int]:
 
 
 def _kill_tree(pid: int) -> None:
-    for p in [pid] + _descendants(pid):
+    for p in [pid] + descendants(pid):
         try:
             os.kill(p, 9)
         except (ProcessLookupError, PermissionError):
