@@ -47,6 +47,8 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -333,6 +335,25 @@ def _end(proc: subprocess.Popen) -> None:
             proc.wait()
 
 
+@contextmanager
+def _realtime_stack(bus: str, work: str, tag: str) -> Iterator[str]:
+    """`spacearm sim` (the ORU cell) and a realtime `spacearm daemon`, both at --rt-priority 50,
+    on `bus`; yields the daemon's API address and ends both processes after."""
+    from hil_tests.harness import free_port
+    api = f"tcp:127.0.0.1:{free_port()}"
+    sim = _spawn(["sim", "--bus", bus, "--plant", "configs/oru/plant_cell.toml", "--rt-priority", "50"],
+                 "nodes ready", Path(work) / f"sim{tag}.log")
+    daemon = None
+    try:
+        daemon = _spawn(["daemon", "--bus", bus, "--clock", "realtime", "--rt-priority", "50", "--api", api,
+                         "--no-record"], "spacearm daemon:", Path(work) / f"daemon{tag}.log")
+        yield api
+    finally:
+        if daemon is not None:
+            _end(daemon)
+        _end(sim)
+
+
 def changeout(runs: int, steal: CpuSteal) -> list[str]:
     """The issue's separate-process run: hub and sim at --rt-priority 50 (configs/oru/plant_cell.toml),
     daemon on the realtime clock (SCHED_FIFO 50), `oru run --stages 1`, `runs` times.
@@ -346,7 +367,6 @@ def changeout(runs: int, steal: CpuSteal) -> list[str]:
     from spacearm.base.config.arm import load_arm_config
     from spacearm.base.transport.hub import HubProcess
     from spacearm.console.client import ApiClient
-    from hil_tests.harness import free_port
     rows, done = [], 0
     ready_q = load_arm_config("configs/arm/oru_testbed_6dof.toml").postures["ready"]
     hub = HubProcess(rt_priority=50, ready_timeout=60.0)     # before the neighbours: its start-up is not measured
@@ -354,18 +374,8 @@ def changeout(runs: int, steal: CpuSteal) -> list[str]:
         try:
             for run in range(runs):
                 steal.fraction()
-                bus, api = hub.spec(f"rt-bench-{os.getpid()}-{run}"), f"tcp:127.0.0.1:{free_port()}"
-                sim = _spawn(["sim", "--bus", bus, "--plant", "configs/oru/plant_cell.toml", "--rt-priority", "50"],
-                             "nodes ready", Path(work) / f"sim{run}.log")
-                daemon = None
-                try:
-                    daemon = _spawn(["daemon", "--bus", bus, "--clock", "realtime", "--rt-priority", "50", "--api", api,
-                                     "--no-record"], "spacearm daemon:", Path(work) / f"daemon{run}.log")
+                with _realtime_stack(hub.spec(f"rt-bench-{os.getpid()}-{run}"), work, str(run)) as api:
                     outcome, status = _fly_stage_1(ApiClient(api, timeout=10.0), ready_q)
-                finally:
-                    if daemon is not None:
-                        _end(daemon)
-                    _end(sim)
                 stats, peers = status["stats"], (status.get("nodes") or {}).get("peers") or {}
                 done += outcome == "done"
                 sim_view = peers.get("simulator") or {}
@@ -429,22 +439,16 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
     from spacearm.base.transport.hub import HubProcess
     from spacearm.console.client import ApiClient
     from spacearm.console.status_view import STATS_SETTLED
-    from hil_tests.harness import HOST_STALL, StealTimeline, free_port, host_stall_around_stop
+    from hil_tests.harness import HOST_STALL, StealTimeline, host_stall_around_stop
     poll = 0.5
-    readings = nodes_late = stats_late = episodes = 0
+    readings = nodes_late = stats_late = episodes = hosts = 0
     stops: list[str] = []
     worst_sim, messages = 0.0, set()
     hub, timeline = HubProcess(rt_priority=50, ready_timeout=60.0), StealTimeline()
     with tempfile.TemporaryDirectory() as work, CpuLoad(2):
         try:
             steal.fraction()
-            bus, api = hub.spec(f"rt-idle-{os.getpid()}"), f"tcp:127.0.0.1:{free_port()}"
-            sim = _spawn(["sim", "--bus", bus, "--plant", "configs/oru/plant_cell.toml", "--rt-priority", "50"],
-                         "nodes ready", Path(work) / "sim.log")
-            daemon = None
-            try:
-                daemon = _spawn(["daemon", "--bus", bus, "--clock", "realtime", "--rt-priority", "50", "--api", api,
-                                 "--no-record"], "spacearm daemon:", Path(work) / "daemon.log")
+            with _realtime_stack(hub.spec(f"rt-idle-{os.getpid()}"), work, "") as api:
                 client = ApiClient(api, timeout=10.0)
                 lease = client.call("control.take", holder="bench_realtime")["lease"]
                 client.call("enable", lease=lease)
@@ -467,19 +471,15 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
                         stops.append(f"{status['stop']['code']} at {status['time']:.0f} s"
                                      + (f", host held a vCPU {1e3 * stall[0]:.0f} ms of {1e3 * stall[1]:.0f} ms "
                                         f"around it" if stall else ""))
+                        hosts += bool(stall and stall[0] >= HOST_STALL)
                         stops[-1] += " (the host's)" if stall and stall[0] >= HOST_STALL else ""
                         _reset_and_enable(client, lease)
                     time.sleep(poll)
                 final = client.call("status")
-            finally:
-                if daemon is not None:
-                    _end(daemon)
-                _end(sim)
         finally:
             hub.stop()
             timeline.stop()
     stats = final.get("stats") or {}
-    hosts = sum(s.endswith("(the host's)") for s in stops)
     met = nodes_late == 0 and stats_late == 0 and not stops
     rows = [f"  idle arm (enabled, holding), real time, beside 2 CPU-bound, {minutes:g} min | {episodes} lateness "
             f"banners ({nodes_late} of {readings} readings), {stats_late} readings with the cycle statistics "
