@@ -443,7 +443,7 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
     poll = 0.5
     readings = nodes_late = stats_late = episodes = hosts = 0
     stops: list[str] = []
-    worst_sim, messages = 0.0, set()
+    worst_sim, messages, answer_p99 = 0.0, set(), []
     hub, timeline = HubProcess(rt_priority=50, ready_timeout=60.0), StealTimeline()
     with tempfile.TemporaryDirectory() as work, CpuLoad(2):
         try:
@@ -464,6 +464,7 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
                     if late:
                         messages.add(nodes.get("message", ""))
                     stats_late += stats.get("cycles", 0) >= STATS_SETTLED and stats.get("level") not in (None, "ok")
+                    answer_p99.append(nodes.get("io_wait_p99") or 0.0)
                     sim_view = (nodes.get("peers") or {}).get("simulator") or {}
                     worst_sim = max(worst_sim, sim_view.get("max_lateness") or 0.0)
                     if status.get("stop"):
@@ -487,7 +488,10 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
             f"{'met' if met else 'MISSED'} | {conditions(steal)}",
             f"  idle arm: skipped {stats.get('skipped_cycles', '-')} of {stats.get('cycles', '-')} cycles in all, "
             f"period error p99 {1e3 * stats.get('period_error_p99', float('nan')):.2f} ms; the "
-            f"simulator's worst late wake {1e3 * worst_sim:.1f} ms"]
+            f"simulator's worst late wake {1e3 * worst_sim:.1f} ms; cycles with missing data while the host held a "
+            f"vCPU {(final.get('network') or {}).get('host_stalled_cycles', '-')}; the nodes' answer p99 (last 250 "
+            f"cycles) median {1e3 * float(np.median(answer_p99 or [np.nan])):.1f} ms, worst "
+            f"{1e3 * max(answer_p99, default=np.nan):.1f} ms of the 8 ms wait"]
     rows += [f"  idle arm stop: {s}" for s in stops[:10]]
     rows += [f"  idle arm banner: {m}" for m in sorted(messages)[:3]]
     return rows

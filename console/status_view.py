@@ -45,6 +45,8 @@ def status_lines(status: dict[str, Any]) -> list[str]:
     if nodes.get("level") not in (None, "ok"):
         lines.append(f"WARNING {nodes['message']} (answer p99 {1e3 * nodes['io_wait_p99']:.1f} ms of "
                      f"{1e3 * nodes['budget']:.1f} ms)")
+    elif nodes.get("host_stalled_cycles"):
+        lines.append(f"note: {nodes['message']}")
     peers = nodes.get("peers") or {}
     if peers:       # the simulator's and the hub's own view of their timing, beside the daemon's
         lines.append("their own timing: " + "; ".join(p["message"] for p in peers.values()))

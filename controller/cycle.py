@@ -64,6 +64,7 @@ class FindingCode(str, Enum):
     BOOTUP = "bootup"                      # a node restarted
     PDO_MISSING = "pdo_missing"
     LATE_CYCLE = "late_cycle"              # not a stop: the controller itself was starved (event only)
+    HOST_STALL = "host_stall"              # not a stop: the host held a vCPU the nodes run on (event only)
     LINE_SWITCH = "line_switch"            # not a stop: the bus moved to its other line (event only)
     LINE_SWITCH_COMPLETE = "line_switch_complete"   # every node heard on the new line (event only)
     BUS_LINES_LOST = "bus_lines_lost"      # both lines of a redundant pair silent
@@ -102,7 +103,8 @@ class FindingCode(str, Enum):
 
 
 # codes recorded as events with their code, never a stop
-EVENT_ONLY = frozenset({FindingCode.LATE_CYCLE, FindingCode.LINE_SWITCH, FindingCode.LINE_SWITCH_COMPLETE})
+EVENT_ONLY = frozenset({FindingCode.LATE_CYCLE, FindingCode.HOST_STALL, FindingCode.LINE_SWITCH,
+                        FindingCode.LINE_SWITCH_COMPLETE})
 
 # codes a node's own report or silence produces: watched even while the arm is disabled
 NODE_FINDINGS = frozenset({FindingCode.HEARTBEAT_LOST, FindingCode.EMCY, FindingCode.BOOTUP,
@@ -154,6 +156,9 @@ class Measurement:
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
     late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
     bridged: bool = False           # missing data of a bus line switch under way (bounded): not node loss
+    # missing data while the host held one of this machine's vCPUs (base/runtime/host_cpus.py):
+    # the nodes' host process stood still, counted against them only after a bounded excuse
+    host_stalled: bool = False
     # nodes missing at the last cycle's read whose data came later in that period: slow, not silent
     answered_late: tuple[str, ...] = ()
     # bool per joint: drive powered (operation enabled, quick stop or fault reaction active);

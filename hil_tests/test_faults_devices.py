@@ -59,7 +59,7 @@ def check_stopped(stack, safe, codes: tuple[str, ...], bound_cycles: float, conc
     assert stop is not None and stop["code"] in codes, status["stop_reason"]
     if concerns is not None:
         assert concerns in (stop["node"], stop["joint"]), stop
-    assert safe.stop_cycles <= bound_cycles, f"{safe.fault}: {safe.stop_cycles:.1f} cycles > {bound_cycles}"
+    safe.assert_stopped_within(bound_cycles)
     assert_stays_still(stack)
     assert_motion_refused(stack)
     # the recorder flushes about once a second: give it time to reach the file

@@ -47,7 +47,7 @@ def stack(hub, shared):
 def stopped_with(stack, safe, codes: tuple[str, ...], bound_cycles: float, still: bool = True) -> None:
     stop = safe.status["stop"]
     assert stop is not None and stop["code"] in codes, safe.status["stop_reason"]
-    assert safe.stop_cycles <= bound_cycles, f"{safe.fault}: {safe.stop_cycles:.1f} cycles > {bound_cycles}"
+    safe.assert_stopped_within(bound_cycles)
     if still:
         assert_stays_still(stack)
     assert_motion_refused(stack)

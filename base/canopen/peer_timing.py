@@ -44,6 +44,7 @@ import time
 from dataclasses import dataclass
 
 from spacearm.base.canopen.codes import TPDO_BASE
+from spacearm.base.runtime.host_cpus import host_steal, stolen_since
 from spacearm.base.runtime.priority import current as priority_of_thread
 
 SIMULATOR_DIAG_NODE = 125     # node IDs below the fault-injection unit (126) and the master (127)
@@ -58,7 +59,6 @@ LATE_WAKE = 0.005         # s past its due time: a wake that counts as late (a q
 TICK = 0.010              # s: the hub's timer tick (the simulator's scheduler wakes at least this often)
 
 _FRAME = struct.Struct("<HHHBB")
-_CLK_TCK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 _LSB = 1e-4               # s per unit of the lateness field
 _POLICIES = {0: "normal", 1: "SCHED_FIFO", 2: "SCHED_RR"}
 CAUSES = ("", "core", "gil", "stopped", "host")   # what the worst late wake waited for ("": no late wake)
@@ -153,27 +153,6 @@ def _task_times() -> tuple[int, int, int]:
     except (OSError, ValueError, IndexError):
         return 0, 0, 0
     return cpu, queue, own
-
-
-_stat_fd: int | None = None
-
-
-def host_steal() -> tuple[int, ...]:
-    """Steal of each vCPU so far (/proc/stat, USER_HZ ticks); () where /proc cannot say. The
-    file stays open (one pread per wake)."""
-    global _stat_fd
-    try:
-        if _stat_fd is None:
-            _stat_fd = os.open("/proc/stat", os.O_RDONLY)
-        head = os.pread(_stat_fd, 4096, 0).split(b"\n")
-        return tuple(int(line.split()[8]) for line in head if line[:3] == b"cpu" and line[3:4] != b" ")
-    except (OSError, ValueError, IndexError):
-        return ()
-
-
-def stolen_since(before: tuple[int, ...], after: tuple[int, ...]) -> float:
-    """s the host held the most-stolen vCPU between two host_steal() readings."""
-    return max((b - a for a, b in zip(before, after)), default=0) / _CLK_TCK
 
 
 def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float) -> str:

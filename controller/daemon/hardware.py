@@ -18,6 +18,7 @@ from spacearm.base.canopen.codes import TPDO_BASE
 from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
+from spacearm.base.runtime.host_cpus import HostStallWatch
 from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
 from spacearm.controller.daemon.stops import DriveRequest
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
@@ -97,6 +98,8 @@ class CanopenHardware:
         self._last_read: float | None = None
         self.late_cycles = 0       # cycles whose missing data was excused as the controller's own lateness
         self.late_answers = 0      # nodes' answers that came after the TPDO wait, within their period
+        self.host_stalled_cycles = 0   # cycles whose missing data came while the host held a vCPU
+        self.host_watch = HostStallWatch()   # tests give it their own /proc/stat
         self._missing_at_read: tuple[str, ...] = ()   # nodes missing at the last read
 
     @property
@@ -124,6 +127,7 @@ class CanopenHardware:
     def statistics(self) -> dict:
         lines = self.network.line_redundancy
         return {**vars(self.network.stats), "late_cycles": self.late_cycles, "late_answers": self.late_answers,
+                "host_stalled_cycles": self.host_stalled_cycles,
                 **({"bus_lines": lines.status()} if lines is not None else {})}
 
     def bringup_report(self) -> dict:
@@ -138,7 +142,9 @@ class CanopenHardware:
         done = time_module.monotonic()
         self.last_io_wait = done - started
         late = 0.0
+        host_stalled = False
         if not self.lockstep:
+            host_stalled = self.host_watch.sample(started)
             # How late this cycle's I/O ran: a read more than a period after the last one, or
             # a TPDO wait that overshot its budget, means this process did not get the CPU.
             if self._last_read is not None:
@@ -157,7 +163,8 @@ class CanopenHardware:
             else:
                 events.append(DeviceEvent(event.node, kind, event.message))
         starved = late > LATE_CYCLE_SLACK * self.period
-        measurement = self._measurement(time, sync, state, tuple(events), late if starved else 0.0)
+        measurement = self._measurement(time, sync, state, tuple(events), late if starved else 0.0,
+                                        host_stalled)
         self._missing_at_read = measurement.missing
         if answered_late:
             measurement = replace(measurement, answered_late=answered_late)
@@ -168,7 +175,8 @@ class CanopenHardware:
         return measurement
 
     def _measurement(self, time: float, sync: int, state: ArmState,
-                     events: tuple[DeviceEvent, ...], late: float = 0.0) -> Measurement:
+                     events: tuple[DeviceEvent, ...], late: float = 0.0,
+                     host_stalled: bool = False) -> Measurement:
         joints = state.joints
         missing: tuple[str, ...] = ()
         if not state.complete:
@@ -179,6 +187,11 @@ class CanopenHardware:
                 events += (DeviceEvent(missing[0] if missing else "", FindingCode.LATE_CYCLE,
                                        f"late cycle: I/O {1e3 * late:.1f} ms late; missing process data of "
                                        f"{', '.join(missing)} not counted as node loss"),)
+            elif host_stalled:
+                self.host_stalled_cycles += 1
+                events += (DeviceEvent(missing[0] if missing else "", FindingCode.HOST_STALL,
+                                       f"host stall: {self.host_watch.held}; missing process data of "
+                                       f"{', '.join(missing)} counted only after the stall"),)
         ft = state.ft
         wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
         return Measurement(
@@ -192,7 +205,8 @@ class CanopenHardware:
             wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
             end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
                           else EndEffectorState.NONE),
-            events=events, missing=missing, late=late > 0.0 and bool(missing))
+            events=events, missing=missing, late=late > 0.0 and bool(missing),
+            host_stalled=host_stalled and late <= 0.0 and bool(missing))
 
     def write(self, command: Command, stop: DriveRequest | None = None) -> None:
         """`stop`: what a protective stop asks of drives the command no longer enables (None:

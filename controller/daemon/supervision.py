@@ -32,6 +32,10 @@ class SupervisionLimits:
 # Late cycles not counted against one gap in a node's process data: with missing_pdo_cycles = 5
 # a real loss stops within 8 cycles, inside the fault tests' bound of 12.
 LATE_CYCLES_EXCUSED = 3
+# Cycles of one gap not counted while the host holds the vCPU the nodes' process runs on
+# (Measurement.host_stalled): the ~100 ms stalls seen at a VM's CPU quota twice over. A node
+# lost during such a stall still stops, at most this much later.
+HOST_CYCLES_EXCUSED = 10
 
 EVENT_LABELS = {FindingCode.HEARTBEAT_LOST: "heartbeat lost", FindingCode.EMCY: "emergency message",
                 FindingCode.FAULT: "drive fault", FindingCode.BOOTUP: "unexpected boot-up (node restarted)",
@@ -44,7 +48,9 @@ class Supervisor:
         self.names = joint_names
         self._missing_count: dict[str, int] = {}
         self._excused: dict[str, int] = {}     # node -> late cycles not counted in its current gap
+        self._host_excused: dict[str, int] = {}   # node -> host-stall cycles not counted in its gap
         self.late_cycles_excused = 0
+        self.host_cycles_excused = 0
         self._last_wrench: np.ndarray | None = None
         self._wrench_changes = 0
         self._wrench_same = 0
@@ -58,12 +64,14 @@ class Supervisor:
             if label is not None:
                 detail = f": {event.detail}" if event.detail else ""
                 findings.append(Finding(event.kind, f"{event.node}: {label}{detail}", node=event.node))
-        for node in list(self._missing_count):
+        for node in {*self._missing_count, *self._excused, *self._host_excused}:
             # a node whose last missing data came after all, before this SYNC, answered: the gap
-            # ended there (it, the bus or this process was slow; a silent node never answers)
+            # ended there (it, the bus or this process was slow; a silent node never answers),
+            # also a gap whose every cycle was excused
             if node not in m.missing or node in m.answered_late:
-                del self._missing_count[node]
+                self._missing_count.pop(node, None)
                 self._excused.pop(node, None)
+                self._host_excused.pop(node, None)
         counted = []
         for node in m.missing if not m.bridged else ():   # a line switch under way (bounded)
             if m.late and self._excused.get(node, 0) < LATE_CYCLES_EXCUSED:
@@ -72,6 +80,12 @@ class Supervisor:
                 # reset, and only a few times per gap, so a real loss still stops.
                 self._excused[node] = self._excused.get(node, 0) + 1
                 self.late_cycles_excused += 1
+                continue
+            if m.host_stalled and self._host_excused.get(node, 0) < HOST_CYCLES_EXCUSED:
+                # the host held the vCPU of the node's process: silence of its host, not of the
+                # node; held like a late cycle, for longer (the stall outlasts a late wake)
+                self._host_excused[node] = self._host_excused.get(node, 0) + 1
+                self.host_cycles_excused += 1
                 continue
             self._missing_count[node] = self._missing_count.get(node, 0) + 1
             counted.append(node)

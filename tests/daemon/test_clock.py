@@ -77,6 +77,16 @@ def test_compute_time_is_execution_without_the_wait_for_tpdos():
     assert summary.compute_median == pytest.approx(0.001) and summary.compute_p99 == pytest.approx(0.001)
 
 
+def test_the_level_judges_the_controllers_own_time_not_the_nodes_answer_time():
+    """Nodes answering 6 ms into an 8 ms wait are on time (node_timing judges them); 4 ms of the
+    controller's own compute is not."""
+    waiting, computing = CycleStats(window=100), CycleStats(window=100)
+    for _ in range(100):
+        assert waiting.add(0.0001, execution=0.0065, io_wait=0.006) == "ok"
+        assert computing.add(0.0001, execution=0.0065, io_wait=0.0025) == "warn"
+    assert waiting.summary().level == "ok" and computing.summary().level == "warn"
+
+
 @pytest.mark.parametrize("n", [1, 2, 3, 4, 7, 100, 101, 2999, 3000])
 def test_summary_medians_and_p99s_are_numpys_to_the_last_bit(n):
     """The summary's one-partition statistics against numpy's own median and percentile, on

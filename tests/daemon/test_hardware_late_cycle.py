@@ -5,6 +5,7 @@ from __future__ import annotations
 import uuid
 
 from spacearm.base.config.bus import load_bus_config
+from spacearm.base.runtime.host_cpus import HostStallWatch
 from spacearm.controller.cycle import FindingCode
 from spacearm.controller.daemon.hardware import CanopenHardware
 from spacearm.drivers.network import ArmState, NodeHealth
@@ -34,6 +35,7 @@ def _hardware(monkeypatch, clock: _Clock, wait: float) -> CanopenHardware:
     monkeypatch.setattr(net, "poll_events", lambda: [])
     monkeypatch.setattr(net, "nodes_missing_tpdos", lambda: ["ft_sensor"])
     monkeypatch.setattr("spacearm.controller.daemon.hardware.time_module.monotonic", clock)
+    hw.host_watch = HostStallWatch(lambda: ((clock.t * 100, 0), (clock.t * 100, 0)))   # both vCPUs run
     return hw
 
 
@@ -64,3 +66,18 @@ def test_tpdo_wait_far_past_its_budget_is_late(monkeypatch):
     hw = _hardware(monkeypatch, clock, wait=0.05)   # asked for 5 ms, woke after 50 ms
     m = hw.read(0.0)
     assert m.late and hw.late_cycles == 1
+
+
+def test_missing_data_while_the_host_holds_a_vcpu_is_a_coded_host_stall_event(monkeypatch):
+    clock = _Clock()
+    hw = _hardware(monkeypatch, clock, wait=0.005)
+    hw.host_watch = HostStallWatch(lambda: ((int(clock.t * 100), 0), (10_000, 0)))   # vCPU 1 held
+    stalls = []
+    for _ in range(4):
+        m = hw.read(0.0)
+        clock.t += hw.period - 0.005     # this process on time
+        stalls.append(m.host_stalled)
+    assert stalls == [False, False, True, True] and not m.late
+    event = [e for e in m.events if e.kind is FindingCode.HOST_STALL]
+    assert len(event) == 1 and "vCPU 1" in event[0].detail and "ft_sensor" in event[0].detail
+    assert hw.statistics()["host_stalled_cycles"] == 2
