@@ -18,7 +18,8 @@ show a banner for it. A peer is late only for what could stop the arm or keeps r
 wake PEER_SERIOUS late, PEER_LATE_REPORTS reports in its window with a wake PEER_LATE late, or
 late wakes in more than LATE_CYCLES of its cycles; once late it stays so while any such report
 is in the window. The daemon's own heartbeat view likewise: one gap of HEARTBEAT_SERIOUS
-periods, or HEARTBEAT_GAPS gaps over HEARTBEAT_GAP in its window.
+periods, or HEARTBEAT_GAPS gaps over HEARTBEAT_GAP in its window. Missing data: one cycle
+alone is said, MISSING_RUN in a row or MISSING_CYCLES in the window are "starved".
 
 The host is not a node: on a virtual machine at its host's CPU quota the hypervisor holds a vCPU
 for ~100 ms now and then (base/runtime/host_cpus.py), and whatever ran on it stands still. Data
@@ -44,6 +45,8 @@ LATE_CYCLES = 0.05     # share of late cycles in the window that makes the nodes
 HEARTBEAT_GAP = 1.5    # heartbeat periods between two heartbeats of one node: late ...
 HEARTBEAT_GAPS = 3     # ... when it happens this often in the window
 HEARTBEAT_SERIOUS = 2.0   # periods: once is enough (the stop comes at 2.5)
+MISSING_CYCLES = 3     # cycles without all process data in the window: "starved" ...
+MISSING_RUN = 2        # ... or this many in a row (one alone, on a loaded machine, is said, not a banner)
 PEER_LATE = 0.020      # s: a wake this late (a whole 20 ms cycle) ...
 PEER_LATE_REPORTS = 3  # ... in this many of a peer's reports in its window makes it late
 PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's reach)
@@ -66,6 +69,14 @@ class PeerTimingSummary:
     window: float                 # s the numbers cover
     last_report_age: float        # s
     message: str
+
+
+def longest_run(flags: list[bool]) -> int:
+    longest = current = 0
+    for flag in flags:
+        current = current + 1 if flag else 0
+        longest = max(longest, current)
+    return longest
 
 
 def peer_summary(name: str, reports: list, now: float, was_late: bool = False) -> PeerTimingSummary | None:
@@ -189,17 +200,20 @@ class NodeTiming:
         stalled = np.array(stalled_cycles[-n:], bool) if n else np.zeros(1, bool)
         late = int(np.sum((waits > LATE_SHARE * self.budget) & ~stalled)) if self.budget > 0 else 0
         missing = int(sum(missing_cycles))
+        run = longest_run(missing_cycles)
         gap, node = max(heartbeat_gaps, default=(0.0, ""))
         gaps = sum(g > HEARTBEAT_GAP for g, _ in heartbeat_gaps)
-        if missing:
+        if missing >= MISSING_CYCLES or run >= MISSING_RUN:
             level, what = "starved", f"{missing} of the last {n} cycles missed process data"
-        elif n and (late > LATE_CYCLES * n or gap >= HEARTBEAT_SERIOUS or gaps >= HEARTBEAT_GAPS):
+        elif n and late > LATE_CYCLES * n:
             level = "late"
             what = (f"{late} of the last {n} cycles answered after {100 * LATE_SHARE:.0f} % of the "
-                    f"{1e3 * self.budget:.1f} ms wait" if late > LATE_CYCLES * n
-                    else f"heartbeats of {node} {gap:.1f} periods apart")
+                    f"{1e3 * self.budget:.1f} ms wait")
+        elif gap >= HEARTBEAT_SERIOUS or gaps >= HEARTBEAT_GAPS:
+            level, what = "late", f"heartbeats of {node} {gap:.1f} periods apart"
         else:
-            level, what = "ok", "nodes answer in time"
+            level, what = "ok", "nodes answer in time" + (
+                f"; {missing} of the last {n} cycles missed process data" if missing else "")
         if host_stalled:
             what += (f"; the host held a vCPU in {host_stalled} of the last {n} cycles (CPU steal): their "
                      "missing data is the host's, not the nodes'")

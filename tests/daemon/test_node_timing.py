@@ -163,8 +163,28 @@ def test_data_missing_while_the_host_held_a_vcpu_is_said_not_starved():
     summary = timing.summary()
     assert summary.level == "ok" and summary.missing_cycles == 0 and summary.host_stalled_cycles == 7
     assert "the host held a vCPU in 7 of the last 247 cycles" in summary.message and summary.late_cycles == 0
-    timing.add(BUDGET, False, {})                   # one missing without a stall: the nodes'
+    timing.add(BUDGET, False, {})                   # missing without a stall: the nodes'
+    timing.add(BUDGET, False, {})
     assert timing.summary().level == "starved"
+
+
+def test_one_missed_cycle_is_said_two_in_a_row_or_three_in_the_window_are_a_banner():
+    timing = NodeTiming(BUDGET)
+    feed(timing, 240, 0.001)
+    timing.add(BUDGET, False, {})
+    feed(timing, 5, 0.001)
+    summary = timing.summary()
+    assert summary.level == "ok" and summary.missing_cycles == 1 and "1 of the last 246 cycles missed" in summary.message
+    timing.add(BUDGET, False, {})
+    feed(timing, 5, 0.001)
+    assert timing.summary().level == "ok"
+    timing.add(BUDGET, False, {})
+    assert timing.summary().level == "starved"
+    again = NodeTiming(BUDGET)
+    feed(again, 240, 0.001)
+    again.add(BUDGET, False, {})
+    again.add(BUDGET, False, {})
+    assert again.summary().level == "starved"
 
 
 def test_the_first_cycles_of_a_gap_before_the_held_vcpu_showed_are_the_hosts_too():
