@@ -7,9 +7,13 @@
                 its own base-parameter QR) and ours (`calibrate fit --register --validate`; the
                 target row adds `--select-groups`: D-H groups by k-fold CV on 2021-11-30 only), in
                 this run, on the same files; every figure is the RMS over postures of the norm
-                of marker 1's position error (mm), FIGAROH's published definition.
+                of marker 1's position error (mm), FIGAROH's published definition. When the target
+                is missed: the identification postures measured again on the validation day (the
+                data's repeatability, a diagnostic that reads both days, never a figure).
   FR3           held-out RMS position error, median of 10 random 80/34 splits (dedicated study
-                and the general pipeline of `calibrate fit`).
+                and the general pipeline of `calibrate fit`); beside it the option depth_scale
+                (the camera's focal length error, CameraPoseModel) in both, and the views taken
+                twice at one posture (the pose estimate's repeatability) when the target is missed.
   draw-wire     realistic_setups.draw_wire_case on the held-out seeds 1000-1004: validation RMS
                 against the truth-parameter floor (target within 10 %).
   random        `--setups` random realistic set-ups (range, point, plane, pose; 6-8 joints,
@@ -200,6 +204,21 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
             print(f"  and the motion-capture frame moved between the days: the validation day's mean error is "
                   f"({', '.join(f'{v * 1e3:+.2f}' for v in mean)}) mm; re-registering the frame on that day alone "
                   f"(6 parameters fitted on the validation data: a diagnostic, not a figure) leaves {rereg * 1e3:.2f} mm")
+            from spacearm.controller.calibration.tiago_mocap import day_to_day_repeatability
+            rows, raw, rigid = day_to_day_repeatability()
+            again = np.array([h.after for h in rep.held_out if h.index in set(rows.tolist())])
+            new = np.array([h.after for h in rep.held_out if h.index not in set(rows.tolist())])
+            rms = lambda v: float(np.sqrt(np.mean(v ** 2)))  # noqa: E731
+            print(f"  repeatability (diagnostic, both days' data): the {len(rows)} identification postures were measured again "
+                  f"on the validation day; marker 1 differs by {raw * 1e3:.2f} mm RMS between the days, {rigid * 1e3:.2f} mm after "
+                  f"the best rigid transform between the days' frames. The fit validates at {rms(again) * 1e3:.2f} mm on those "
+                  f"{len(again)} postures and {rms(new) * 1e3:.2f} mm on the {len(new)} others, and leaves "
+                  f"{ours['train'] * 1e3:.2f} mm on its own training postures: the error left is repeatable, not noise")
+            print("  tried on top of this row in the session of 2026-11-28 (not re-run here; issue 30 report): single physical terms - joint "
+                  "compliance, tilt compliance across the axis, the base leaning on its wheel suspension, backlash under "
+                  "the gravity torque's sign, a once-per-turn joint error - lower the 37-posture leave-one-out by up to 17 % "
+                  "but validate from 2.82 to 3.37 mm with no order between the two; leave-one-out on one day does not "
+                  "pick a term the other day confirms, so none is the default")
 
 
 def per_joint(ours: dict | None) -> None:
@@ -218,7 +237,7 @@ def per_joint(ours: dict | None) -> None:
 
 
 def bench_fr3(steal: CpuSteal) -> None:
-    from spacearm.controller.calibration.fr3 import fr3_floor, fr3_study, fr3_trusted_study
+    from spacearm.controller.calibration.fr3 import fr3_floor, fr3_repeatability, fr3_study, fr3_trusted_study
     t0 = time.perf_counter()
     _, med = fr3_study()
     _, gen = fr3_trusted_study()
@@ -229,13 +248,26 @@ def bench_fr3(steal: CpuSteal) -> None:
           f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
     print("  dedicated study, held-out position RMS per board axis (x, y, z), median of the splits: "
           + ", ".join(f"{v * 1e3:.3f}" for v in med["full_pos_axes"]) + " mm")
+    # The camera's depth scale (a focal length error: CameraPoseModel), an option of both studies.
+    t1 = time.perf_counter()
+    _, med_d = fr3_study(depth_scale=True)
+    _, gen_d = fr3_trusted_study(depth_scale=True)
+    print(f"  with the camera's depth scale estimated (option depth_scale): dedicated study {med_d['full_pos'] * 1e3:.3f} mm "
+          f"(scale per split {', '.join(f'{100 * v:+.2f}' for v in med_d['depth_scale'])} %), general pipeline "
+          f"{gen_d['full_pos'] * 1e3:.3f} mm (scale {', '.join(f'{100 * v:+.2f}' for v in gen_d['depth_scale'])} %); "
+          f"not the default: the two weightings disagree on the scale, so the data do not show a focal length error "
+          f"({time.perf_counter() - t1:.0f} s, {conditions(steal)})")
     if min(pos, gen["full_pos"] * 1e3) > FR3_TARGET_MM:
         floor = fr3_floor() * 1e3
+        pairs, repeat = fr3_repeatability()
         print(f"  floor: a fit of all 114 views (it has seen every held-out view) minimising the position error "
-              f"itself scores {floor:.3f} mm on the same splits' held-out views (median): the checkerboard pose "
-              f"noise plus what a rigid D-H + frames model cannot describe; the target is "
-              f"{'below' if floor > FR3_TARGET_MM else 'above'} it "
-              f"({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
+              f"itself scores {floor:.3f} mm on the same splits' held-out views (median): what a rigid D-H + frames "
+              f"model cannot describe, plus the pose estimate's noise; the target is "
+              f"{'below' if floor > FR3_TARGET_MM else 'above'} it ({time.perf_counter() - t0:.0f} s, {conditions(steal)})")
+        print(f"  the noise is not it: {pairs} pairs of views taken twice at one posture differ by {repeat * 1e3:.3f} mm RMS "
+              f"(one view ~{repeat / np.sqrt(2) * 1e3:.2f} mm), so the {floor:.2f} mm left is systematic and repeatable "
+              "(the checkerboard pose estimate's bias with view geometry: the two 55-degree views at 0.63 m are both ~7 mm off; "
+              "or the arm), a model this bench does not have")
         print(f"  why: registration only leaves {med['registration_pos'] * 1e3:.2f} mm and the D-H terms take it to the "
               "figure above; two further models were tried on this data in an earlier session (not re-run by this bench; "
               "figures from that session's issue 30 report) and did not lower the median: "

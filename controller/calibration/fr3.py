@@ -11,6 +11,7 @@ with a weak prior on the D-H errors (MAP) so that 80 postures do not overfit.
 from __future__ import annotations
 
 import csv
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -18,9 +19,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spacearm.base.paths import SHARED_DATA
+from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.datafile import DataFileError
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import find_identifiable
+from spacearm.controller.calibration.measurement_models import CameraPoseModel, PoseModel
 from spacearm.controller.calibration.residuals import Problem
 from spacearm.controller.calibration.solvers import CalibrationResult, lm
 from spacearm.controller.calibration.validation import compare_poses
@@ -142,7 +145,9 @@ def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
 
 
 def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.radians(0.5),
-              prior_length: float = 5e-3) -> SplitResult:
+              prior_length: float = 5e-3, depth_scale: bool = False) -> SplitResult:
+    """`depth_scale`: the full fit also estimates the camera's depth scale (CameraPoseModel: a
+    focal length error scales every view's depth), a term of the camera, not of the arm."""
     kin = fr3_kinematics()
     W0, cam0 = initial_frames(kin, data, train)
     em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board",
@@ -159,13 +164,17 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     free = ident.kept
     prior = np.array([np.inf if n in frames else (prior_length if n.split("_")[0] in ("a", "d")
                       else prior_angle) for n in free])
-    full = reg
+    camera = CameraPoseModel() if depth_scale else PoseModel()
+    full = dataclasses.replace(reg, x=np.concatenate([reg.x, camera.extra_nominal]))
+    free, prior = free + list(camera.extra_names), np.concatenate([prior, np.full(len(camera.extra_names), np.inf)])
     for _ in range(3):
-        full = lm(Problem(em, "pose", Qt, meas, free, cov=camera_covariances(full, em, Qt),
-                          x0=full.x), x_prior=em.nominal, sigma_prior=prior)
+        block = Block(camera, Qt, meas, cov=camera_covariances(full, em, Qt))
+        problem = CompositeProblem(em, [block], free, x0=full.x)
+        full = lm(problem, x_prior=problem.nominal(), sigma_prior=prior)
+        full = dataclasses.replace(full, residuals=problem.block_residuals(full.x, jacobian=False)[0][0])
     pos, rot, axes = {}, {}, {}
-    for name, res in (("registration", reg), ("full", full)):
-        T = em.poses(res.x[: em.n_params], data.Q[test])
+    for name, res, model in (("registration", reg, PoseModel()), ("full", full, camera)):
+        T = model.predict(em.poses(res.x[: em.n_params], data.Q[test]), res.x[em.n_params:])
         st = compare_poses(data.board_T_cam[test], T)
         pos[name] = float(np.sqrt(np.mean(st.pos_norm ** 2)))
         rot[name] = float(np.sqrt(np.mean(np.sum(st.rot ** 2, axis=1))))
@@ -178,7 +187,7 @@ def _count_dh(names: list[str]) -> int:
 
 
 def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
-              path: Path = DATA) -> tuple[str, dict]:
+              path: Path = DATA, depth_scale: bool = False) -> tuple[str, dict]:
     data = load_fr3(path)
     kin = fr3_kinematics()
     em = ErrorModel.from_kinematics(kin)
@@ -188,7 +197,7 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
     results = []
     for _ in range(splits):
         perm = rng.permutation(N)
-        results.append(fit_split(data, perm[:n_train], perm[n_train:]))
+        results.append(fit_split(data, perm[:n_train], perm[n_train:], depth_scale=depth_scale))
     lines = [f"FR3 eye-in-hand real data: {N} postures, {splits} random {n_train}/{N - n_train} splits",
              f"nominal model vs controller FK of the flange: max {chk.pos_norm.max() * 1e3:.4f} mm",
              f"full fit estimates {len(results[0].full.free)} parameters: "
@@ -203,6 +212,7 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
     med = {f"{w}_{q}": float(np.median([getattr(r, f'held_{q}_rms')[w] for r in results]))
            for w in ("registration", "full") for q in ("pos", "rot")}
     med["full_pos_axes"] = np.median([r.held_pos_axes["full"] for r in results], axis=0)
+    med["depth_scale"] = np.array([r.full.estimate.get("camera_depth_scale", np.nan) for r in results])
     lines.append(f"{'median':<7}{med['registration_pos'] * 1e3:>12.3f}{np.degrees(med['registration_rot']):>13.3f}"
                  f"{med['full_pos'] * 1e3:>13.3f}{np.degrees(med['full_rot']):>14.3f}")
     lines.append("(held-out RMS of the position error norm and of the rotation angle)")
@@ -230,38 +240,59 @@ def fr3_floor(splits: int = 10, n_train: int = 80, seed: int = 0, path: Path = D
                             for _ in range(splits)]))
 
 
+def fr3_repeatability(path: Path = DATA, tol: float = 0.01) -> tuple[int, float]:
+    """Views taken twice at the same posture (every joint within `tol` rad): how many pairs, and
+    the RMS over them of the difference of the two measured camera positions beyond what the
+    nominal arm (with the frames' starting estimates) predicts for the posture difference (m). The repeatability of the pose estimate
+    at one view: held-out error above it is systematic (the pose estimate's bias with the view
+    geometry, or the arm), not noise."""
+    data = load_fr3(path)
+    kin = fr3_kinematics()
+    W0, cam0 = initial_frames(kin, data, np.arange(len(data.Q)))
+    em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0)
+    T = em.poses(em.nominal, data.Q)
+    gap = np.abs(data.Q[:, None, :] - data.Q[None, :, :]).max(axis=2)
+    pairs = [(i, j) for i in range(len(gap)) for j in range(i + 1, len(gap)) if gap[i, j] <= tol]
+    if not pairs:
+        return 0, float("nan")
+    d = [(data.board_T_cam[i, :3, 3] - data.board_T_cam[j, :3, 3]) - (T[i, :3, 3] - T[j, :3, 3]) for i, j in pairs]
+    return len(pairs), float(np.sqrt(np.mean(np.sum(np.square(d), axis=1))))
+
+
 def fr3_trusted_study(splits: int = 10, n_train: int = 80, seed: int = 0, path: Path = DATA,
-                      method: str = "lm") -> tuple[str, dict]:
+                      method: str = "lm", depth_scale: bool = False) -> tuple[str, dict]:
     """The same data through the general pipeline (`calibrate fit`'s trusted fit): a pose block,
     candidates = 28 D-H + both frames, identifiability on the training postures, weak D-H prior,
-    plausibility verdict. Registration-only (frames) vs full, per split; held-out position RMS."""
+    plausibility verdict. Registration-only (frames) vs full, per split; held-out position RMS.
+    `depth_scale`: the camera's depth scale among the full fit's candidates (CameraPoseModel)."""
     from spacearm.controller.calibration.composite import Block
     from spacearm.controller.calibration.fit_checks import Priors
-    from spacearm.controller.calibration.measurement_models import PoseModel
     from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
     data = load_fr3(path)
     kin = fr3_kinematics()
     N = len(data.Q)
     sigma = [1e-3] * 3 + [np.radians(0.3)] * 3
     priors = Priors(joint_angle=np.radians(0.5), joint_length=5e-3)
-    rows, verdicts = [], []
+    rows, verdicts, scales = [], [], []
     for k in range(splits):
         W0, cam0 = initial_frames(kin, data, np.random.default_rng(seed + k).permutation(N)[:n_train])
         em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board", tool_prefix="cam")
         frames = em.frame_names("world") + em.frame_names("tool")
-        block = Block(PoseModel(), data.Q, data.board_T_cam, sigma, label="fr3")
+        block = Block(CameraPoseModel() if depth_scale else PoseModel(), data.Q, data.board_T_cam, sigma, label="fr3")
         # Same split for both fits: the options' seed draws it.
         opts = dict(holdout=(N - n_train) / N, seed=seed + k, method=method)
         reg = fit_blocks(em, [block], FitOptions(**opts), candidates=frames)
         full = fit_blocks(em, [block], FitOptions(priors=priors, **opts),
-                          candidates=em.dh_names(with_beta=False) + frames)
+                          candidates=em.dh_names(with_beta=False) + frames + list(block.model.extra_names))
         rows.append((reg.held_rms("after"), full.held_rms("after"), len(full.result.free), full.noise_ratio))
+        scales.append(full.estimate.get("camera_depth_scale", np.nan))
         verdicts.append(full.verdict.message())
     lines = [f"FR3 eye-in-hand, general pipeline ({method}): {splits} random {n_train}/{N - n_train} splits,",
              "pose model, identifiability on the training postures, prior 0.5 deg / 5 mm on D-H, stated noise 1 mm / 0.3 deg",
              "", f"{'split':<7}{'frames only mm':>16}{'full mm':>10}{'params':>8}{'resid/noise':>13}  verdict"]
     for k, (r, f, n, q) in enumerate(rows):
         lines.append(f"{k:<7}{r * 1e3:>16.3f}{f * 1e3:>10.3f}{n:>8d}{q:>13.2f}  {verdicts[k]}")
-    med = {"registration_pos": float(np.median([r[0] for r in rows])), "full_pos": float(np.median([r[1] for r in rows]))}
+    med = {"registration_pos": float(np.median([r[0] for r in rows])), "full_pos": float(np.median([r[1] for r in rows])),
+           "depth_scale": np.array(scales)}
     lines.append(f"{'median':<7}{med['registration_pos'] * 1e3:>16.3f}{med['full_pos'] * 1e3:>10.3f}")
     return "\n".join(lines), med

@@ -6,6 +6,9 @@ residual r = measured - predicted and the Jacobians of the prediction with respe
 arm parameters and to the model's own extra parameters (anchor, plane, tool point):
 
   PoseModel    6 rows  full pose (camera/PnP): (p_meas - p; log(R_meas R^T)), measurement frame
+  CameraPoseModel  6 rows  the camera's pose from its own view of a target (board_T_cam), with the
+                       camera's depth scale: a focal length off by a fraction s scales the target's
+                       depth along the optical axis by 1 + s; extra: <prefix>_depth_scale
   PointModel   3 rows  a point on the tool, p + R t (motion-capture marker, laser-tracker SMR);
                        extra: tool point t = (<prefix>_tx, _ty, _tz) in the tool frame
   RangeModel   1 row   distance from a fixed anchor to a point on the tool plus a length offset,
@@ -58,6 +61,57 @@ class PoseModel:
 
     def as_rows(self, measured_or_predicted: Array) -> Array:
         """Position part of readings (N, 3): what validation errors are measured in."""
+        return measured_or_predicted[:, :3, 3]
+
+
+@dataclass(frozen=True)
+class CameraPoseModel:
+    """The camera's pose in the target's frame from its own image of the target (PnP), whose
+    distance along the optical axis is off by the fraction s of the focal length error.
+
+    A focal length f(1 + s) in the intrinsics makes PnP place the target (1 + s) times as deep
+    along the optical axis with the same lateral image position: in the target frame the camera
+    sits at p - s (z . p) z, z the optical axis and z . p = -depth. A principal-point error is a
+    tilt of the camera and already a tool-frame parameter; a wrong target size is a scale of every
+    length, which the D-H and frame lengths carry; the depth scale is neither.
+    """
+    prefix: str = "camera"
+    name: str = "pose"
+    rows: int = 6
+    position_rows: tuple[int, ...] = (0, 1, 2)
+
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        return (f"{self.prefix}_depth_scale",)
+
+    @property
+    def extra_nominal(self) -> Array:
+        return np.zeros(1)
+
+    def predict(self, T: Array, e: Array) -> Array:
+        out = T.copy()
+        z = T[:, :3, 2]
+        out[:, :3, 3] = T[:, :3, 3] + e[0] * np.einsum("ni,ni->n", z, T[:, :3, 3])[:, None] * z
+        return out
+
+    def residual(self, T: Array, Jt: Array, e: Array, measured: Array) -> tuple[Array, Array, Array]:
+        s = e[0]
+        p, z = T[:, :3, 3], T[:, :3, 2]
+        zp = np.einsum("ni,ni->n", z, p)
+        r = np.empty((len(T), 6))
+        r[:, :3] = measured[:, :3, 3] - (p + s * zp[:, None] * z)
+        r[:, 3:] = rotvec_batch(measured[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2))
+        # d(zp z) = (z.dp + (w x z).p) z + zp (w x z), with (w x z).p = w.(z x p) and w x z = -[z]x w
+        dp, w = Jt[:, :3], Jt[:, 3:]
+        dzp = np.einsum("ni,nip->np", z, dp) + np.einsum("ni,nip->np", np.cross(z, p), w)
+        wz = -np.cross(z[:, :, None], w, axisa=1, axisb=1, axisc=1)
+        A = Jt.copy()
+        A[:, :3] += s * (z[:, :, None] * dzp[:, None, :] + zp[:, None, None] * wz)
+        A_e = np.zeros((len(T), 6, 1))
+        A_e[:, :3, 0] = zp[:, None] * z
+        return r, A, A_e
+
+    def as_rows(self, measured_or_predicted: Array) -> Array:
         return measured_or_predicted[:, :3, 3]
 
 
@@ -173,4 +227,4 @@ class PlaneModel:
         return np.reshape(values, (-1, 1))
 
 
-MeasurementModel = PoseModel | PointModel | RangeModel | PlaneModel
+MeasurementModel = PoseModel | CameraPoseModel | PointModel | RangeModel | PlaneModel

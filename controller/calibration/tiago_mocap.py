@@ -85,6 +85,26 @@ def validation_day_registration(fit: TiagoFit, sigma: float = SIGMA) -> tuple[fl
     return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))), mean
 
 
+def day_to_day_repeatability(tol: float = 1e-3) -> tuple[Array, float, float]:
+    """Diagnostic (it reads both days; never a reported figure): the validation day's rows that
+    repeat an identification-day posture (every joint within `tol`, rad or m), and marker 1's RMS
+    position difference between the two measurements of those postures (m), raw and after the
+    best rigid transform between the two days' motion-capture frames. What is left after that
+    transform is what the robot, the markers and the cameras do not repeat: no model of the arm
+    predicts the other day better at those postures."""
+    from spacearm.controller.calibration.instrument_start import kabsch
+    Qt, Pt = load_session(TRAINING)
+    Qv, Pv = load_session(VALIDATION)
+    gap = np.abs(Qt[:, None, :] - Qv[None, :, :]).max(axis=2)
+    hit = gap.min(axis=1) <= tol
+    rows = gap.argmin(axis=1)[hit]
+    A, B = Pt[hit], Pv[rows]
+    T = kabsch(A, B)
+    moved = A @ T[:3, :3].T + T[:3, 3]
+    rms = lambda e: float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))  # noqa: E731
+    return rows, rms(B - A), rms(B - moved)
+
+
 def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0),
               opts: FitOptions = FitOptions(), sigma: float = SIGMA, elastic: bool = False) -> TiagoFit:
     """Identify on the training day, score every posture of the validation day; `elastic`: with a
