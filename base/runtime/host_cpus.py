@@ -43,11 +43,12 @@ def stolen_since(before: tuple[int, ...], after: tuple[int, ...]) -> float:
 
 
 class HostStallWatch:
-    """Sampled once a cycle: is the host holding one of the vCPUs, or did it a moment ago?
+    """Sampled once a cycle while something is amiss: is the host holding one of the vCPUs, or
+    did it a moment ago? The first sample after reset() is the baseline.
 
     HELD: a vCPU that counted no time for this long while another did (three USER_HZ ticks:
-    sampled every 20 ms, two samples in a row). RECENT: how long after a steal jump of at least
-    HELD the stall still counts - the processes it held need a cycle to catch up."""
+    sampled every 20 ms, two samples after the baseline). RECENT: how long after a steal jump of
+    at least HELD the stall still counts - the processes it held need a cycle to catch up."""
     HELD = 0.030      # s
     RECENT = 0.060    # s
 
@@ -58,13 +59,16 @@ class HostStallWatch:
         self._stolen_at = float("-inf")
         self.held = ""              # the last sample's finding, for an event's text
 
+    def reset(self) -> None:
+        self._last = ()
+
     def sample(self, now: float) -> bool:
         times = self._read()
         if len(times) != len(self._last) or len(times) < 2:
             # first sample, a vCPU added or removed, or one vCPU (then a held vCPU is our own:
             # this process was late, which the cycle measures itself)
-            self._last, self._moved_at, self.held = times, [now] * len(times), ""
-            return False
+            self._last, self._moved_at = times, [now] * len(times)
+            return self._just_stolen(now)
         jump = 0
         for i, ((total, steal), (was_total, was_steal)) in enumerate(zip(times, self._last)):
             if total != was_total:
@@ -80,6 +84,9 @@ class HostStallWatch:
             self.held = (f"the host is holding vCPU {held[0]} (no CPU time counted for "
                          f"{1e3 * (now - self._moved_at[held[0]]):.0f} ms)")
             return True
+        return self._just_stolen(now)
+
+    def _just_stolen(self, now: float) -> bool:
         if now - self._stolen_at <= self.RECENT:
             return True
         self.held = ""

@@ -144,7 +144,12 @@ class CanopenHardware:
         late = 0.0
         host_stalled = False
         if not self.lockstep:
-            host_stalled = self.host_watch.sample(started)
+            # /proc/stat costs ~0.2 ms to read: only while data is missing (the watch's baseline
+            # is the gap's first cycle)
+            if complete:
+                self.host_watch.reset()
+            else:
+                host_stalled = self.host_watch.sample(done)
             # How late this cycle's I/O ran: a read more than a period after the last one, or
             # a TPDO wait that overshot its budget, means this process did not get the CPU.
             if self._last_read is not None:

@@ -54,6 +54,13 @@ def test_a_vcpu_that_counts_no_time_while_another_does_is_held_by_the_host():
     assert watch.sample(0.36)
     stat.run(0.02)
     assert not watch.sample(0.40) and watch.held == ""
+    watch.reset()                                # data came: the next gap starts a new baseline
+    stat.run(0.02, held=0)
+    assert not watch.sample(0.42)
+    stat.run(0.02, held=0)
+    assert not watch.sample(0.44)                # 20 ms still since the baseline: one tick's doubt
+    stat.run(0.02, held=0)
+    assert watch.sample(0.46) and "vCPU 0" in watch.held
 
 
 def test_every_vcpu_still_is_this_process_paused_not_the_host_holding_one():
