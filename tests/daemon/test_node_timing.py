@@ -168,6 +168,22 @@ def test_data_missing_while_the_host_held_a_vcpu_is_said_not_starved():
     assert timing.summary().level == "starved"
 
 
+def test_a_heartbeat_gap_the_host_stall_made_is_no_banner():
+    """The held vCPU held the simulator's heartbeats too: the gap that ends right after the
+    stall is the host's; the same gap with no stall is the node's."""
+    def run(stalled: bool) -> str:
+        timing = NodeTiming(BUDGET)
+        beats = [0.1 * k for k in range(30)] + [3.11]              # one beat 2.1 periods late
+        t = 0.0
+        for k in range(160):
+            t += 0.02
+            last = max(b for b in beats if b <= t + 1e-9)
+            stall = stalled and 2.92 < t < 3.02
+            timing.add(BUDGET if stall else 0.001, not stall, {"joint_1": (last, HB)}, host_stalled=stall)
+        return timing.summary().level
+    assert run(stalled=False) == "late" and run(stalled=True) == "ok"
+
+
 def test_one_missed_cycle_is_said_two_in_a_row_or_three_in_the_window_are_a_banner():
     timing = NodeTiming(BUDGET)
     feed(timing, 240, 0.001)
