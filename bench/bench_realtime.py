@@ -258,8 +258,8 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
         margin = cam.renderer.flat_margin(distance)
-        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
-        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+        labels, levels, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
+        return [FlatLayer(labels, levels, distance, origin, margin)]
 
     def board_frame(distance: float, layers: list | None = None) -> None:
         """A frame with the board drawn anew, or the given layers (an arm at rest: the camera

@@ -79,13 +79,16 @@ BAND_ROWS = 128   # rows per band of the compositing passes (the band's planes s
 
 @dataclass(frozen=True)
 class FlatLayer:
-    """A flat object drawn straight into the output (distorted) image, parallel to the wall:
-    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at; the planes
-    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it),
-    with `margin` px of zero coverage inside the patch on every side not at the image's edge
-    (Renderer.flat_margin(depth) of them: laid as it is, else grown first)."""
-    albedo: np.ndarray     # float32 (h, w)
-    alpha: np.ndarray      # float32 (h, w)
+    """A flat object drawn straight into the output (distorted) image, parallel to the wall,
+    with no partial coverage (a board: calibration_board.board_patch): a uint8 label per pixel
+    and each label's albedo (label 0 covers nothing, every other one covers its pixel), and the
+    depth (m) it is defocused at; the labels cover the image from `origin` (x, y) on (a patch
+    inside the image; nothing around it), with `margin` px of label 0 inside the patch on every
+    side not at the image's edge (Renderer.flat_margin(depth) of them: laid as it is, else
+    grown first). Why labels, not albedo and coverage planes: one byte a pixel to draw and to
+    read, not eight (the planes were ~2 ms of a board frame)."""
+    labels: np.ndarray     # uint8 (h, w)
+    levels: np.ndarray     # float32 (n,): albedo of label k
     depth: float
     origin: tuple[int, int] = (0, 0)
     margin: int = 0
@@ -600,23 +603,27 @@ class Renderer:
         return int(np.ceil(4 * min(self.coc_sigma_px(max(depth, 0.01)), MAX_BLUR))) + 2
 
     def _flat_box(self, flat: FlatLayer, shape: tuple[int, int], shade: float):
-        """(albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s planes over the box
-        they are laid over (grown by zeros to its blur's reach unless its margin has it: beyond
-        the patch its planes are 0, so the box's border reflects zeros as the whole frame's blur
-        would see them), its blur (sigma px) and the wall's `shade` (parallel to the wall: lit
-        alike); None for an empty patch."""
+        """(labels, albedo and coverage tables, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s
+        labels over the box they are laid over (grown by label 0 to its blur's reach unless its
+        margin has it: beyond the patch nothing is covered, so the box's border reflects zeros
+        as the whole frame's blur would see them), 256-entry float32 tables of each label's
+        albedo and coverage (cv2.LUT makes a band's planes from them), its blur (sigma px) and
+        the wall's `shade` (parallel to the wall: lit alike); None for an empty patch."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-        (x, y), (h, w) = flat.origin, flat.alpha.shape
+        (x, y), (h, w) = flat.origin, flat.labels.shape
         if w == 0 or h == 0:
             return None
+        albedo, coverage = np.zeros(256, np.float32), np.ones(256, np.float32)
+        albedo[:len(flat.levels)] = flat.levels
+        albedo[0] = coverage[0] = 0.0
+        tables = (albedo, coverage)
         reach = self.flat_margin(flat.depth)
         if flat.margin >= reach:
-            return flat.albedo, flat.alpha, sigma, reach, shade, (x, y, x + w, y + h)
+            return flat.labels, tables, sigma, reach, shade, (x, y, x + w, y + h)
         H, W = shape
         x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
-                 for plane in (flat.albedo, flat.alpha)]
-        return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
+        grown = cv2.copyMakeBorder(flat.labels, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0)
+        return grown, tables, sigma, reach, shade, (x0, y0, x1, y1)
 
     @staticmethod
     def _flat_rows(laid, b0: int, b1: int):
@@ -624,37 +631,38 @@ class Renderer:
         rows it covers there, (g0, g1) the rows its blur reaches for them, and (c0, c1) the image's
         columns where its blurred coverage is 1 in all of them (the inside of an opaque board:
         what lies under it does not show), or None; None for no rows."""
-        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        labels, tables, sigma, reach, shade, (x0, y0, x1, y1) = laid
         r0, r1 = max(b0, y0), min(b1, y1)
         if r1 <= r0:
             return None
         g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)
-        covered = _inside(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0, reach)    # (a row-wise reduction: fast)
+        covered = _inside(labels[g0 - y0:g1 - y0].min(axis=0) > 0, reach)    # (a row-wise reduction: fast)
         return (r0, r1), (g0, g1), None if covered is None else (x0 + covered[0], x0 + covered[1])
 
     @staticmethod
     def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
         """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box; `rows` its
-        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: its
-        planes' rows the band's blur reaches are blurred and laid while in the cache:
-        band * (1 - blurred coverage) + shade * blurred albedo. Where the blurred coverage is 1
-        (the covered columns) that is shade * blurred albedo, whatever the band held there (it
-        need not hold the wall), and the coverage is blurred only beside them."""
+        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: the
+        albedo and coverage of the rows the band's blur reaches are looked up from its labels,
+        blurred and laid while in the cache: band * (1 - blurred coverage) + shade * blurred
+        albedo. Where the blurred coverage is 1 (the covered columns) that is shade * blurred
+        albedo, whatever the band held there (it need not hold the wall), and the coverage is
+        looked up and blurred only beside them."""
         if rows is None:
             return
-        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        labels, (albedo, coverage), sigma, reach, shade, (x0, y0, x1, y1) = laid
         (r0, r1), (g0, g1), covered = rows
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
-        lit = _blur(albedo[g0 - y0:g1 - y0], sigma)[keep]
-        alpha = alpha[g0 - y0:g1 - y0]
+        labels = labels[g0 - y0:g1 - y0]
+        lit = _blur(cv2.LUT(labels, albedo), sigma)[keep]
         if covered is None:
-            parts = [(np.s_[:], _blur(alpha, sigma)[keep])]
+            parts = [(np.s_[:], _blur(cv2.LUT(labels, coverage), sigma)[keep])]
         else:
             c0, c1 = covered[0] - x0, covered[1] - x0
             np.multiply(lit[:, c0:c1], np.float32(shade), out=region[:, c0:c1])
-            parts = [(np.s_[:, :c0], _blur(alpha[:, :c0 + reach], sigma)[keep][:, :c0]),
-                     (np.s_[:, c1:], _blur(alpha[:, c1 - reach:], sigma)[keep][:, reach:])]
+            parts = [(np.s_[:, :c0], _blur(cv2.LUT(labels[:, :c0 + reach], coverage), sigma)[keep][:, :c0]),
+                     (np.s_[:, c1:], _blur(cv2.LUT(labels[:, c1 - reach:], coverage), sigma)[keep][:, reach:])]
         for part, blurred in parts:
             under = region[part]
             cv2.subtract(under, cv2.multiply(under, blurred), dst=under)     # in place, into the view
