@@ -5,8 +5,8 @@ bends them as it bends real edges; polygons are filled with 1/16 px vertex preci
 edges 8-connected (no partial coverage: OpenCV smooths LINE_AA edges only in 8-bit images,
 and the board used to be drawn LINE_AA into float planes, which gave these very pixels). Real
 projective geometry through cv2.projectPoints with the camera's intrinsics and distortion.
-`board_patch` gives the board alone as a label per pixel (0 outside, 1 light, 2 dark: its
-albedo and coverage through `board_levels`) for the camera simulator to composite into its
+`board_patch` gives the board alone as a label per pixel (0 outside, one for the light and one
+for the dark squares: its albedo and coverage through `board_levels`) for the camera simulator to composite into its
 scene (firmware_sim/camera/service.py: defocus, lighting and sensor noise of the marker
 scene); `render_board` puts it on a plain background with a simple blur and noise for
 offline tests.
@@ -48,18 +48,38 @@ def _polygons(s: float, squares: tuple[int, int], m: float) -> tuple[np.ndarray,
     return vertices, np.array([len(p) for p in polys])
 
 
-LIGHT, DARK = 1, 2         # board_patch's labels (0: not the board)
+@lru_cache(maxsize=8)
+def _codes(light: float, dark: float) -> tuple[int, int, float]:
+    """board_patch's labels for the light and the dark squares and the step that makes each
+    label's albedo label * step, exactly in float32 (0.85 and 0.05: 17 and 1 steps of 0.05),
+    so that the renderer converts labels to albedo in one multiply (its table look-up is ~2x
+    slower); (1, 2, 0.0) when no such labels exist (then its table is not a scale)."""
+    L, D = np.float32(light), np.float32(dark)
+    for dark_code in range(1, 256):
+        step = np.float32(D / np.float32(dark_code))
+        light_code = int(round(float(L / step))) if step > 0 else 0
+        if (np.float32(dark_code) * step == D and 0 < light_code < 256 and light_code != dark_code
+                and np.float32(light_code) * step == L):
+            return light_code, dark_code, float(step)
+    return 1, 2, 0.0
 
 
 def board_levels(board: BoardConfig) -> np.ndarray:
-    """The albedo of each of board_patch's labels (float32; label 0 covers nothing)."""
-    return np.array([0.0, board.light, board.dark], np.float32)
+    """The albedo of each of board_patch's labels, indexed by label (float32; label 0 covers
+    nothing, labels no square has are never drawn)."""
+    light, dark, step = _codes(board.light, board.dark)
+    if step > 0:
+        return np.arange(max(light, dark) + 1, dtype=np.float32) * np.float32(step)
+    levels = np.zeros(3, np.float32)
+    levels[light], levels[dark] = board.light, board.dark
+    return levels
 
 
 def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, dist: np.ndarray,
                 size: tuple[int, int], margin: int = 2) -> tuple[np.ndarray, np.ndarray, tuple[int, int]] | None:
     """The board alone in the (distorted) image, only over the pixels it covers: a uint8 label
-    per pixel (LIGHT, DARK, 0 where it is not), its labels' albedos (board_levels) and the
+    per pixel (the light or the dark squares', 0 where it is not), its labels' albedos
+    (board_levels) and the
     patch's top-left pixel (x, y) in the image of `size` (w, h), with `margin` px of zeros
     around the pixels the vertices fall in (within the image); None when the camera sees its
     back, it is behind the camera or out of view. All vertices go through one
@@ -85,11 +105,12 @@ def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, d
     if (hi <= lo).any():
         return None
     pts = (pts - (lo << SHIFT)).astype(np.int32)
+    light, dark, _ = _codes(board.light, board.dark)
     labels = np.zeros((int(hi[1] - lo[1]), int(hi[0] - lo[0])), np.uint8)
-    cv2.fillPoly(labels, [pts[:ends[0]]], LIGHT, lineType=cv2.LINE_8, shift=SHIFT)
+    cv2.fillPoly(labels, [pts[:ends[0]]], light, lineType=cv2.LINE_8, shift=SHIFT)
     squares = [pts[start:end] for start, end, ok in zip(ends[:-1], ends[1:], drawn[1:]) if ok]
     if squares:
-        cv2.fillPoly(labels, squares, DARK, lineType=cv2.LINE_8, shift=SHIFT)
+        cv2.fillPoly(labels, squares, dark, lineType=cv2.LINE_8, shift=SHIFT)
     return labels, board_levels(board), (int(lo[0]), int(lo[1]))
 
 

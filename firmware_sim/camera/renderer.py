@@ -209,6 +209,17 @@ def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
     return int(run[0]) + reach, int(run[-1]) + 1 - reach
 
 
+def _scale_of(levels: np.ndarray) -> np.float32 | None:
+    """The step s when a flat layer's albedo table is label * s (float32, as NumPy multiplies a
+    uint8 label by it), else None: then its labels are converted by multiplying (OpenCV's
+    look-up into float is ~2x slower)."""
+    levels = np.asarray(levels, np.float32)
+    if len(levels) < 2 or levels[1] <= 0:
+        return None
+    step = levels[1]
+    return step if np.array_equal(levels, np.arange(len(levels), dtype=np.float32) * step) else None
+
+
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
     """The closed polygons with every edge cut into pieces no longer than `longest`: all their
     vertices in one array and each polygon's vertex count (one NumPy pass for all of them:
@@ -616,14 +627,16 @@ class Renderer:
         albedo, coverage = np.zeros(256, np.float32), np.ones(256, np.float32)
         albedo[:len(flat.levels)] = flat.levels
         albedo[0] = coverage[0] = 0.0
-        tables = (albedo, coverage)
         reach = self.flat_margin(flat.depth)
-        if flat.margin >= reach:
-            return flat.labels, tables, sigma, reach, shade, (x, y, x + w, y + h)
-        H, W = shape
-        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        grown = cv2.copyMakeBorder(flat.labels, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0)
-        return grown, tables, sigma, reach, shade, (x0, y0, x1, y1)
+        labels, box = flat.labels, (x, y, x + w, y + h)
+        if flat.margin < reach:
+            H, W = shape
+            box = x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+            labels = cv2.copyMakeBorder(labels, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0)
+        # a band's looked-up albedo and its blur written into the same two buffers band after
+        # band (they stay in the cache: new ones each band were as much again as the work)
+        scratch = [np.empty((BAND_ROWS + 2 * reach, labels.shape[1]), np.float32) for _ in range(2)]
+        return labels, (albedo, coverage, scratch, _scale_of(flat.levels)), sigma, reach, shade, box
 
     @staticmethod
     def _flat_rows(laid, b0: int, b1: int):
@@ -650,12 +663,18 @@ class Renderer:
         looked up and blurred only beside them."""
         if rows is None:
             return
-        labels, (albedo, coverage), sigma, reach, shade, (x0, y0, x1, y1) = laid
+        labels, (albedo, coverage, (looked_up, blurred), step), sigma, reach, shade, (x0, y0, x1, y1) = laid
         (r0, r1), (g0, g1), covered = rows
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
         labels = labels[g0 - y0:g1 - y0]
-        lit = _blur(cv2.LUT(labels, albedo), sigma)[keep]
+        if step is not None:        # the same floats as the table's, in a multiply
+            lit = np.multiply(labels, step, out=looked_up[:g1 - g0])
+        else:
+            lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
+        if sigma >= 0.1:       # (_blur's)
+            lit = cv2.GaussianBlur(lit, (0, 0), sigma, dst=blurred[:g1 - g0])
+        lit = lit[keep]
         if covered is None:
             parts = [(np.s_[:], _blur(cv2.LUT(labels, coverage), sigma)[keep])]
         else:

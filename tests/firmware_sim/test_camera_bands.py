@@ -15,7 +15,7 @@ from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import load_camera
 from spacearm.firmware_sim.calibration_board import EDGE_STEPS, SHIFT, board_patch
 from spacearm.firmware_sim.camera.noise import SensorModel
-from spacearm.firmware_sim.camera.renderer import Renderer, _blur, _blur_rows, _twice, _twice_rows
+from spacearm.firmware_sim.camera.renderer import Renderer, _blur, _blur_rows, _scale_of, _twice, _twice_rows
 
 SEED = 3207           # this file's draws
 
@@ -128,8 +128,13 @@ def test_a_flat_layer_laid_skipping_the_covered_inside_is_the_whole_blur_composi
         levels = rng.random(4).astype(np.float32)
         albedo_table, coverage_table = np.zeros(256, np.float32), np.ones(256, np.float32)
         albedo_table[1:4], albedo_table[0], coverage_table[0] = levels[1:], 0.0, 0.0
-        laid = (labels, (albedo_table, coverage_table), sigma, reach, shade, (30, 0, 430, 400))   # a patch 30 px in
+        if sigma == 0.67:     # levels a scale of the labels (the board's): multiplied, not looked up
+            albedo_table[:4] = np.arange(4, dtype=np.float32) * levels[1]
+        step = _scale_of(albedo_table[:4])
+        assert (step is not None) == (sigma == 0.67)
         albedo, alpha = albedo_table[labels], (labels > 0).astype(np.float32)
+        scratch = [np.empty((128 + 2 * reach, 400), np.float32) for _ in range(2)]
+        laid = (labels, (albedo_table, coverage_table, scratch, step), sigma, reach, shade, (30, 0, 430, 400))   # a patch 30 px in
         wall = rng.random((400, 460), dtype=np.float32)
         expected = wall.copy()
         expected[:, 30:430] = wall[:, 30:430] * (1 - _blur(alpha, sigma)) + shade * _blur(albedo, sigma)
