@@ -179,14 +179,35 @@ def _twice(small: np.ndarray) -> np.ndarray:
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
+def _twice_rows(small: np.ndarray, y0: int, y1: int, into: np.ndarray | None = None) -> np.ndarray:
     """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
     weighs the two source rows nearest to each output row with weights set by its position
     alone, so a band cut out of the source with a row to spare on each side gives the same
-    pixels as the whole image's upsampling."""
+    pixels as the whole image's upsampling. `into`: a buffer of at least y1 - y0 + 6 rows to
+    write them in (one reused band after band stays in the cache)."""
     a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
-    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    size = (small.shape[1] * 2, (b - a) * 2)
+    band = cv2.resize(small[a:b], size, dst=None if into is None else into[:size[1]], interpolation=cv2.INTER_LINEAR)
     return band[y0 - 2 * a:y1 - 2 * a]
+
+
+def _twice_rows_beside(small: np.ndarray, y0: int, y1: int, into: np.ndarray, hidden: tuple[int, int]) -> np.ndarray:
+    """_twice_rows(small, y0, y1, into) but for its columns hidden[0]:hidden[1] (even bounds),
+    which are left as `into` held them (what lies there is covered): the columns beside them
+    are upsampled from the source columns they reach with one to spare (as the rows), so they
+    are the whole image's pixels."""
+    a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
+    rows = (b - a) * 2
+    xa, xb = hidden
+    if xa > 0:
+        left = small[a:b, :min(xa // 2 + 1, small.shape[1])]
+        part = cv2.resize(left, (left.shape[1] * 2, rows), interpolation=cv2.INTER_LINEAR)
+        into[:rows, :xa] = part[:, :xa]
+    cs = xb // 2 - 1
+    if cs + 1 < small.shape[1]:
+        right = small[a:b, max(cs, 0):]
+        into[:rows, xb:] = cv2.resize(right, (right.shape[1] * 2, rows), interpolation=cv2.INTER_LINEAR)[:, xb - 2 * max(cs, 0):]
+    return into[y0 - 2 * a:y1 - 2 * a]
 
 
 def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
@@ -725,11 +746,19 @@ class Renderer:
             elif down == 2:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
+        upsampled = np.empty((BAND_ROWS + 6, width), np.float32) if halved else None
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
-            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
-            for laid in flats:
-                Renderer._lay_flat_band(band, y, y1, laid, Renderer._flat_rows(laid, y, y1))
+            rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
+            # the wall is not upsampled under the first flat layer's opaque inside where it
+            # covers every row of the band (its laying writes there whatever the band held)
+            hidden = bool(rows) and rows[0] is not None and rows[0][0] == (y, y1) and rows[0][2]
+            if hidden and halved and hidden[1] - hidden[0] > 64:
+                band = _twice_rows_beside(wall, y, y1, upsampled, (hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2))
+            else:
+                band = _twice_rows(wall, y, y1, upsampled) if halved else wall[y:y1]
+            for laid, at in zip(flats, rows):
+                Renderer._lay_flat_band(band, y, y1, laid, at)
             f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
             if f1 > f0:
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]

@@ -15,7 +15,8 @@ from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import load_camera
 from spacearm.firmware_sim.calibration_board import EDGE_STEPS, SHIFT, board_patch
 from spacearm.firmware_sim.camera.noise import SensorModel
-from spacearm.firmware_sim.camera.renderer import Renderer, _blur, _blur_rows, _scale_of, _twice, _twice_rows
+from spacearm.firmware_sim.camera.renderer import (Renderer, _blur, _blur_rows, _scale_of, _twice, _twice_rows,
+                                                   _twice_rows_beside)
 
 SEED = 3207           # this file's draws
 
@@ -35,6 +36,20 @@ def test_band_upsampling_and_blur_are_the_whole_image_operations(rows):
         whole = cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
         bands = [_blur_rows(image, y, min(y + 128, rows), sigma) for y in range(0, rows, 128)]
         assert np.array_equal(np.vstack(bands), whole), sigma
+
+
+def test_band_upsampling_beside_a_hidden_span_is_the_whole_image_operation():
+    """The wall upsampled only beside the columns a board hides: those beside are the whole
+    image's upsampling, at any even span (at the image's edges too)."""
+    rng = np.random.default_rng(SEED + 5)
+    small = rng.random((150, 181)).astype(np.float32)
+    whole = cv2.resize(small, (362, 300), interpolation=cv2.INTER_LINEAR)
+    into = np.full((128 + 6, 362), np.nan, np.float32)
+    for xa, xb in [(0, 200), (2, 360), (100, 362), (64, 66), *(sorted(rng.integers(0, 182, 2) * 2) for _ in range(6))]:
+        for y in (0, 128, 256):
+            band = _twice_rows_beside(small, y, min(y + 128, 300), into, (int(xa), int(xb)))
+            beside = np.r_[0:xa, xb:362]
+            assert np.array_equal(band[:, beside], whole[y:y + 128][:, beside]), (xa, xb, y)
 
 
 def test_banded_sensor_noise_is_the_whole_frame_physics():
