@@ -689,12 +689,17 @@ class Renderer:
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
         labels = labels[g0 - y0:g1 - y0]
-        if step is not None:        # the same floats as the table's, in a multiply
-            lit = np.multiply(labels, step, out=looked_up[:g1 - g0])
+        if step is not None and sigma >= 0.1:
+            kernel = cv2.getGaussianKernel(int(round(sigma * 8 + 1)) | 1, sigma, cv2.CV_32F)
+            lit = cv2.sepFilter2D(labels, cv2.CV_32F, kernel, kernel * step, dst=blurred[:g1 - g0],
+                                  borderType=cv2.BORDER_REFLECT_101)
         else:
-            lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
-        if sigma >= 0.1:       # (_blur's)
-            lit = cv2.GaussianBlur(lit, (0, 0), sigma, dst=blurred[:g1 - g0])
+            if step is not None:        # the same floats as the table's, in a multiply
+                lit = np.multiply(labels, step, out=looked_up[:g1 - g0])
+            else:
+                lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
+            if sigma >= 0.1:       # (_blur's)
+                lit = cv2.GaussianBlur(lit, (0, 0), sigma, dst=blurred[:g1 - g0])
         lit = lit[keep]
         if covered is None:
             parts = [(np.s_[:], _blur(cv2.LUT(labels, coverage), sigma)[keep])]
