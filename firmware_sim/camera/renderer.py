@@ -192,21 +192,20 @@ def _twice_rows(small: np.ndarray, y0: int, y1: int, into: np.ndarray | None = N
 
 
 def _twice_rows_beside(small: np.ndarray, y0: int, y1: int, into: np.ndarray, hidden: tuple[int, int]) -> np.ndarray:
-    """_twice_rows(small, y0, y1, into) but for its columns hidden[0]:hidden[1] (even bounds),
-    which are left as `into` held them (what lies there is covered): the columns beside them
+    """_twice_rows(small, y0, y1, into) but for its columns hidden[0]:hidden[1] (even bounds, 2 px
+    or more from the image's edges unless at them), which are left as `into` held them (what
+    lies there is covered), all but their outer pixels: the columns beside them
     are upsampled from the source columns they reach with one to spare (as the rows), so they
     are the whole image's pixels."""
     a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
-    rows = (b - a) * 2
-    xa, xb = hidden
+    rows, (xa, xb) = (b - a) * 2, hidden
+    # each side written straight into `into` with its spare column's 2 px (inside the hidden span)
     if xa > 0:
-        left = small[a:b, :min(xa // 2 + 1, small.shape[1])]
-        part = cv2.resize(left, (left.shape[1] * 2, rows), interpolation=cv2.INTER_LINEAR)
-        into[:rows, :xa] = part[:, :xa]
-    cs = xb // 2 - 1
-    if cs + 1 < small.shape[1]:
-        right = small[a:b, max(cs, 0):]
-        into[:rows, xb:] = cv2.resize(right, (right.shape[1] * 2, rows), interpolation=cv2.INTER_LINEAR)[:, xb - 2 * max(cs, 0):]
+        left = small[a:b, :xa // 2 + 1]
+        cv2.resize(left, (left.shape[1] * 2, rows), dst=into[:rows, :left.shape[1] * 2], interpolation=cv2.INTER_LINEAR)
+    if xb < small.shape[1] * 2:
+        right = small[a:b, xb // 2 - 1:]
+        cv2.resize(right, (right.shape[1] * 2, rows), dst=into[:rows, xb - 2:], interpolation=cv2.INTER_LINEAR)
     return into[y0 - 2 * a:y1 - 2 * a]
 
 

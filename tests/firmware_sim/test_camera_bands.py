@@ -45,7 +45,9 @@ def test_band_upsampling_beside_a_hidden_span_is_the_whole_image_operation():
     small = rng.random((150, 181)).astype(np.float32)
     whole = cv2.resize(small, (362, 300), interpolation=cv2.INTER_LINEAR)
     into = np.full((128 + 6, 362), np.nan, np.float32)
-    for xa, xb in [(0, 200), (2, 360), (100, 362), (64, 66), *(sorted(rng.integers(0, 182, 2) * 2) for _ in range(6))]:
+    spans = [(0, 200), (2, 360), (100, 362), (64, 68)]
+    spans += [(int(xa), int(xa + 2 * rng.integers(2, (362 - xa) // 2 + 1))) for xa in rng.integers(0, 170, 6) * 2]
+    for xa, xb in spans:
         for y in (0, 128, 256):
             band = _twice_rows_beside(small, y, min(y + 128, 300), into, (int(xa), int(xb)))
             beside = np.r_[0:xa, xb:362]
