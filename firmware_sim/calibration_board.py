@@ -94,7 +94,7 @@ def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, d
     vertices, counts = _polygons(board.square, tuple(board.squares), board.margin)
     ends = np.cumsum(counts)
     near = (vertices @ R.T + t)[:, 2] > 0.01
-    drawn = [bool(near[e - n:e].all()) for n, e in zip(counts, ends)]
+    drawn = np.logical_and.reduceat(near, ends - counts).tolist()      # each polygon's vertices all in front
     if not drawn[0]:
         return None
     px, _ = cv2.projectPoints(vertices, cv2.Rodrigues(R)[0], t, K, dist)

@@ -44,9 +44,13 @@ a patch over the pixels it covers. Since (issue 32, same pixels): each band is e
 sensor's noise and ADC) as soon as it is composited, so no full-frame electrons image is
 written and read again; where an opaque layer (a board's inside, a sharp foreground's plate)
 covers a band's columns in every row its blur reaches, it is written straight there: its
-coverage is neither blurred nor multiplied there (the wall under it is still upsampled: skipping
-it left the band's memory cold for the writes, which then cost more); the marker's
-polygons are made and lit once per marker (only the culling is per pose).
+coverage is neither blurred nor multiplied there; the marker's polygons are made and lit once
+per marker (only the culling is per pose). Since (issue 32, the board frame ~13% less CPU,
+old and new alternating in one process): a flat layer is one uint8 label a pixel (a board's
+coverage was 0 or 1 anyway), its albedo blurred by one separable filter on the labels (the
+only change of pixels: float rounding, <= 1 DN in a few px of a board frame); the wall is
+upsampled into one reused band buffer and not under an opaque board inside that spans the band
+(with the buffer reused, the band stays in the cache for the board's writes).
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
