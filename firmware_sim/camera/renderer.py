@@ -755,6 +755,8 @@ class Renderer:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
         upsampled = np.empty((BAND_ROWS + 6, width), np.float32) if halved else None
+        fg_upsampled = [np.empty((BAND_ROWS + 6, w), np.float32) for _ in range(2)] \
+            if layer is not None and down == 2 else (None, None)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
             rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
@@ -771,7 +773,8 @@ class Renderer:
             if f1 > f0:
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
                 if down == 2:
-                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1))]
+                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1, fg_upsampled[0]),
+                              _twice_rows(clear, f0, f1, fg_upsampled[1]))]
                 else:       # its inside, where its blurred transparency is 0
                     opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
                     parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
