@@ -213,15 +213,17 @@ def _twice_rows_beside(small: np.ndarray, y0: int, y1: int, into: np.ndarray, hi
     return into[y0 - 2 * a:y1 - 2 * a]
 
 
-def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
+def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float, into: np.ndarray | None = None) -> np.ndarray:
     """Rows y0:y1 of _blur(image, sigma) (no halving), from the rows the kernel reaches: OpenCV's
     float kernel reaches round(8 sigma + 1) // 2 rows, so a band cut with that many to spare on
-    each side (the image's own border where it has none) gives the whole image's pixels."""
+    each side (the image's own border where it has none) gives the whole image's pixels. `into`:
+    a buffer at least as wide as `image` and y1 - y0 + 2 (ceil(4 sigma) + 1) rows to write in."""
     if sigma < 0.1:
         return image[y0:y1]
     reach = int(np.ceil(4 * sigma)) + 1
     a, b = max(y0 - reach, 0), min(y1 + reach, image.shape[0])
-    return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
+    dst = None if into is None else into[:b - a, :image.shape[1]]
+    return cv2.GaussianBlur(image[a:b], (0, 0), sigma, dst=dst)[y0 - a:y1 - a]
 
 
 def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
@@ -757,6 +759,8 @@ class Renderer:
         upsampled = np.empty((BAND_ROWS + 6, width), np.float32) if halved else None
         fg_upsampled = [np.empty((BAND_ROWS + 6, w), np.float32) for _ in range(2)] \
             if layer is not None and down == 2 else (None, None)
+        fg_blurred = [np.empty((BAND_ROWS + 2 * reach, w), np.float32) for _ in range(2)] \
+            if layer is not None and down == 1 else (None, None)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
             rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
@@ -777,7 +781,7 @@ class Renderer:
                               _twice_rows(clear, f0, f1, fg_upsampled[1]))]
                 else:       # its inside, where its blurred transparency is 0
                     opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
-                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
+                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region, fg_blurred)
                 for part, a, c in parts:
                     under = region[part]
                     cv2.multiply(under, c, dst=under)        # OpenCV writes into the view, in place
@@ -788,14 +792,16 @@ class Renderer:
         return None if finish else img
 
     @staticmethod
-    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region) -> list:
+    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region,
+                          into=(None, None)) -> list:
         """The foreground's rows f0:f1 blurred, as (columns, albedo, transparency) to lay over
         `region` (those rows of the image under it); with an opaque inside (c0, c1) (its
         columns, _inside) that is written into `region` straight (the blurred albedo: what was
-        under it does not show, whatever it was) and the transparency is blurred only beside it."""
-        a = _blur_rows(albedo, f0, f1, sigma)
+        under it does not show, whatever it was) and the transparency is blurred only beside it.
+        `into`: two buffers (_blur_rows's) for the albedo's and the transparency's blur."""
+        a = _blur_rows(albedo, f0, f1, sigma, into[0])
         if opaque is None:
-            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma))]
+            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma, into[1]))]
         c0, c1 = opaque
         np.copyto(region[:, c0:c1], a[:, c0:c1])
         return [(np.s_[:, :c0], a[:, :c0], _blur_rows(clear[:, :c0 + reach], f0, f1, sigma)[:, :c0]),
