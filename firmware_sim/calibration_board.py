@@ -5,11 +5,11 @@ bends them as it bends real edges; polygons are filled with 1/16 px vertex preci
 edges 8-connected (no partial coverage: OpenCV smooths LINE_AA edges only in 8-bit images,
 and the board used to be drawn LINE_AA into float planes, which gave these very pixels). Real
 projective geometry through cv2.projectPoints with the camera's intrinsics and distortion.
-`board_patch` gives the board alone as a label per pixel (0 outside, one for the light and one
-for the dark squares: its albedo and coverage through `board_levels`) for the camera simulator to composite into its
-scene (firmware_sim/camera/service.py: defocus, lighting and sensor noise of the marker
-scene); `render_board` puts it on a plain background with a simple blur and noise for
-offline tests.
+`board_patch` gives the board alone as a label per pixel (0 outside, one for the light and
+one for the dark squares: albedo and coverage through `board_levels`) for the camera
+simulator to composite into its scene (firmware_sim/camera/service.py: defocus, lighting
+and sensor noise of the marker scene); `render_board` puts it on a plain background with a
+simple blur and noise for offline tests.
 """
 from __future__ import annotations
 
@@ -52,8 +52,9 @@ def _polygons(s: float, squares: tuple[int, int], m: float) -> tuple[np.ndarray,
 def _codes(light: float, dark: float) -> tuple[int, int, float]:
     """board_patch's labels for the light and the dark squares and the step that makes each
     label's albedo label * step, exactly in float32 (0.85 and 0.05: 17 and 1 steps of 0.05),
-    so that the renderer converts labels to albedo in one multiply (its table look-up is ~2x
-    slower); (1, 2, 0.0) when no such labels exist (then its table is not a scale)."""
+    so that the renderer blurs the labels with the step in its filter (no float albedo plane:
+    renderer._scale_of); (1, 2, 0.0) when no such labels exist (then the renderer looks the
+    albedo up in its table)."""
     L, D = np.float32(light), np.float32(dark)
     for dark_code in range(1, 256):
         step = np.float32(D / np.float32(dark_code))
@@ -79,10 +80,9 @@ def board_patch(camera_T_board: np.ndarray, board: BoardConfig, K: np.ndarray, d
                 size: tuple[int, int], margin: int = 2) -> tuple[np.ndarray, np.ndarray, tuple[int, int]] | None:
     """The board alone in the (distorted) image, only over the pixels it covers: a uint8 label
     per pixel (the light or the dark squares', 0 where it is not), its labels' albedos
-    (board_levels) and the
-    patch's top-left pixel (x, y) in the image of `size` (w, h), with `margin` px of zeros
-    around the pixels the vertices fall in (within the image); None when the camera sees its
-    back, it is behind the camera or out of view. All vertices go through one
+    (board_levels) and the patch's top-left pixel (x, y) in the image of `size` (w, h), with
+    `margin` px of zeros around the pixels the vertices fall in (within the image); None when
+    the camera sees its back, it is behind the camera or out of view. All vertices go through one
     cv2.projectPoints call and the polygons are drawn into the patch (why: per square, the
     calls and full-frame planes cost ~12 ms a frame; two float planes of the patch, ~2 ms); a
     vertex shift by whole pixels moves the rasterisation exactly, so the patch is the

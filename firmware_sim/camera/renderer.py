@@ -237,8 +237,9 @@ def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
 
 def _scale_of(levels: np.ndarray) -> np.float32 | None:
     """The step s when a flat layer's albedo table is label * s (float32, as NumPy multiplies a
-    uint8 label by it), else None: then its labels are converted by multiplying (OpenCV's
-    look-up into float is ~2x slower)."""
+    uint8 label by it), else None. With a step its albedo is blurred straight from the labels,
+    the step in the filter's kernel (half the float work of a looked-up plane and its blur;
+    the sums' rounding differs, by a float's last bit); else looked up, then blurred."""
     levels = np.asarray(levels, np.float32)
     if len(levels) < 2 or levels[1] <= 0:
         return None
@@ -682,11 +683,12 @@ class Renderer:
     def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
         """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box; `rows` its
         Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: the
-        albedo and coverage of the rows the band's blur reaches are looked up from its labels,
-        blurred and laid while in the cache: band * (1 - blurred coverage) + shade * blurred
-        albedo. Where the blurred coverage is 1 (the covered columns) that is shade * blurred
-        albedo, whatever the band held there (it need not hold the wall), and the coverage is
-        looked up and blurred only beside them."""
+        rows the band's blur reaches are blurred from its labels (the albedo straight from them
+        when its table is a scale, _scale_of; else looked up first; the coverage looked up) and
+        laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo. Where
+        the blurred coverage is 1 (the covered columns) that is shade * blurred albedo, whatever
+        the band held there (it need not hold the wall), and the coverage is looked up and
+        blurred only beside them."""
         if rows is None:
             return
         labels, (albedo, coverage, (looked_up, blurred), step), sigma, reach, shade, (x0, y0, x1, y1) = laid
@@ -694,16 +696,13 @@ class Renderer:
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
         labels = labels[g0 - y0:g1 - y0]
-        if step is not None and sigma >= 0.1:
-            kernel = cv2.getGaussianKernel(int(round(sigma * 8 + 1)) | 1, sigma, cv2.CV_32F)
+        if step is not None and sigma >= 0.1:       # (_blur's no-op below 0.1 px)
+            kernel = cv2.getGaussianKernel(int(round(sigma * 8 + 1)) | 1, sigma, cv2.CV_32F)   # GaussianBlur's
             lit = cv2.sepFilter2D(labels, cv2.CV_32F, kernel, kernel * step, dst=blurred[:g1 - g0],
                                   borderType=cv2.BORDER_REFLECT_101)
         else:
-            if step is not None:        # the same floats as the table's, in a multiply
-                lit = np.multiply(labels, step, out=looked_up[:g1 - g0])
-            else:
-                lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
-            if sigma >= 0.1:       # (_blur's)
+            lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
+            if sigma >= 0.1:
                 lit = cv2.GaussianBlur(lit, (0, 0), sigma, dst=blurred[:g1 - g0])
         lit = lit[keep]
         if covered is None:
@@ -713,9 +712,9 @@ class Renderer:
             np.multiply(lit[:, c0:c1], np.float32(shade), out=region[:, c0:c1])
             parts = [(np.s_[:, :c0], _blur(cv2.LUT(labels[:, :c0 + reach], coverage), sigma)[keep][:, :c0]),
                      (np.s_[:, c1:], _blur(cv2.LUT(labels[:, c1 - reach:], coverage), sigma)[keep][:, reach:])]
-        for part, blurred in parts:
+        for part, cover in parts:
             under = region[part]
-            cv2.subtract(under, cv2.multiply(under, blurred), dst=under)     # in place, into the view
+            cv2.subtract(under, cv2.multiply(under, cover), dst=under)     # in place, into the view
             cv2.scaleAdd(lit[part], shade, under, dst=under)
 
     @staticmethod
@@ -768,7 +767,8 @@ class Renderer:
             # covers every row of the band (its laying writes there whatever the band held)
             hidden = bool(rows) and rows[0] is not None and rows[0][0] == (y, y1) and rows[0][2]
             if hidden and halved and hidden[1] - hidden[0] > 64:
-                band = _twice_rows_beside(wall, y, y1, upsampled, (hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2))
+                even = (hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2)
+                band = _twice_rows_beside(wall, y, y1, upsampled, even)
             else:
                 band = _twice_rows(wall, y, y1, upsampled) if halved else wall[y:y1]
             for laid, at in zip(flats, rows):
