@@ -237,9 +237,13 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     the machine-independent figure (a ~3x slower machine takes ~3x as long for both).
     Where a board frame's CPU goes (thread CPU per stage, load ~4, issue 32): the board drawn
     anew ~2.3 ms and laid (its blur and coverage) ~4.3 ms, the marker and ORU ~3.5 ms, the wall
-    ~2 ms drawn and ~1.6 ms upsampled and lit, the sensor ~1.9 ms. On this 2-core VM the rows
+    ~2 ms drawn and ~1.6 ms upsampled and lit, the sensor ~1.9 ms. Since (the board as uint8
+    labels blurred by one filter, the wall not upsampled under its inside, reused band buffers)
+    the board's drawing is ~0.5 ms and its laying ~2 ms, the frame ~15-20 % less than before
+    (`--against`, load 5-7). On this 2-core VM the rows
     of one tree swing by +-30 % from run to run (the reference loop with them, 110-200 ms), so
-    a change of a few per cent shows only in an interleaved comparison in one process."""
+    a change of a few per cent shows only in an interleaved comparison in one process
+    (`--against REV`)."""
     import cv2
     from bench.reference_work import reference_loop_seconds
     from spacearm.base.config.board import load_board
