@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/bench_realtime.py gil [--seconds 20]         # what delays a FIFO 50 thread
     .venv/bin/python bench/bench_realtime.py render [--frames 20]       # simulated camera CPU per frame
+    .venv/bin/python bench/bench_realtime.py render --against REV        # ... and against git REV's renderer
     .venv/bin/python bench/bench_realtime.py changeout [--runs 5]       # separate processes, stage 1, real time
     .venv/bin/python bench/bench_realtime.py mainjob                    # `spacearm demo`, real time, camera
     .venv/bin/python bench/bench_realtime.py idle [--minutes 10]        # an idle arm: banners, false stops
@@ -236,9 +237,13 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     the machine-independent figure (a ~3x slower machine takes ~3x as long for both).
     Where a board frame's CPU goes (thread CPU per stage, load ~4, issue 32): the board drawn
     anew ~2.3 ms and laid (its blur and coverage) ~4.3 ms, the marker and ORU ~3.5 ms, the wall
-    ~2 ms drawn and ~1.6 ms upsampled and lit, the sensor ~1.9 ms. On this 2-core VM the rows
+    ~2 ms drawn and ~1.6 ms upsampled and lit, the sensor ~1.9 ms. Since (the board as uint8
+    labels blurred by one filter, the wall not upsampled under its inside, reused band buffers)
+    the board's drawing is ~0.5 ms and its laying ~2 ms, the frame ~15-20 % less than before
+    (`--against`, load 5-7). On this 2-core VM the rows
     of one tree swing by +-30 % from run to run (the reference loop with them, 110-200 ms), so
-    a change of a few per cent shows only in an interleaved comparison in one process."""
+    a change of a few per cent shows only in an interleaved comparison in one process
+    (`--against REV`)."""
     import cv2
     from bench.reference_work import reference_loop_seconds
     from spacearm.base.config.board import load_board
@@ -258,8 +263,8 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
         camera_T_board[:3, 3] = (-centre[0], -centre[1], distance)
         c = cam.camera
         margin = cam.renderer.flat_margin(distance)
-        albedo, alpha, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
-        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+        labels, levels, origin = board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
+        return [FlatLayer(labels, levels, distance, origin, margin)]
 
     def board_frame(distance: float, layers: list | None = None) -> None:
         """A frame with the board drawn anew, or the given layers (an arm at rest: the camera
@@ -309,6 +314,85 @@ def render(frames: int, steal: CpuSteal) -> list[str]:
     with CpuLoad(2):                                    # and beside two CPU-bound processes (cache, memory)
         rows += measure("beside 2 CPU-bound")
     return ["  figure | measured | ratio to the reference loop | target | status | reference | conditions"] + rows
+
+
+def _renderer_at(rev: str) -> dict:
+    """The board drawing, the renderer and the sensor model as they were at git revision `rev`
+    (one since frames are exposed band by band), as modules beside this tree's."""
+    import importlib.util
+    import tempfile
+    folder = Path(tempfile.mkdtemp(prefix="renderer-at-"))
+    modules = {}
+    for name, path in (("board", "firmware_sim/calibration_board.py"), ("renderer", "firmware_sim/camera/renderer.py"),
+                       ("noise", "firmware_sim/camera/noise.py")):
+        source = subprocess.run(["git", "show", f"{rev}:{path}"], cwd=ROOT, capture_output=True, text=True, check=True)
+        (folder / f"{name}.py").write_text(source.stdout)
+        spec = importlib.util.spec_from_file_location(f"_at_{rev}_{name}", folder / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = module           # (its dataclasses look their module up)
+        spec.loader.exec_module(module)
+        modules[name] = module
+    return modules
+
+
+def render_against(rev: str, frames: int, steal: CpuSteal) -> list[str]:
+    """This tree's camera frames against git `rev`'s, alternating frame by frame in one process
+    (the machine's speed drifts by +-30 % between runs, so a change of 10 % shows only so):
+    per row the two medians of process CPU, the median of the frame-by-frame ratios, and how
+    many frames' pixels differ (the same noise seed each). Rows: the render section's board
+    frame (drawn anew) and a marker frame per distance band."""
+    import cv2
+    from spacearm.base.config.board import load_board
+    from spacearm.firmware_sim import calibration_board
+    from spacearm.firmware_sim.camera import noise, renderer
+    from spacearm.firmware_sim.camera.render_process import RENDER_OPENCV_THREADS
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+    cv2.setNumThreads(RENDER_OPENCV_THREADS)
+    trees = {"this tree": {"board": calibration_board, "renderer": renderer, "noise": noise}, rev: _renderer_at(rev)}
+    cams = {}
+    for name, modules in trees.items():
+        cam = CameraSimulator.from_configs(scene_seed=0, noise_seed=1)
+        cam.renderer = modules["renderer"].Renderer(cam.camera, cam.renderer.optics)
+        cam.sensor = modules["noise"].SensorModel(cam.sensor.sensor)
+        cams[name] = cam
+    board = load_board()
+    centre = np.array([(board.inner[0] - 1) * board.square / 2, (board.inner[1] - 1) * board.square / 2])
+    camera_T_board = np.eye(4)
+    camera_T_board[:3, 3] = (-centre[0], -centre[1], 0.40)
+
+    # both simulators draw their noise from the same seed in the same order: the same noise
+    def board_frame(name: str) -> np.ndarray:
+        cam, modules = cams[name], trees[name]
+        c, margin = cam.camera, cam.renderer.flat_margin(0.40)
+        patch = modules["board"].board_patch(camera_T_board, board, c.K, c.dist, (c.width, c.height), margin)
+        return cam.image(view(0.70, 0.2, 1.0), [modules["renderer"].FlatLayer(patch[0], patch[1], 0.40, patch[2], margin)])
+
+    rng = np.random.default_rng(11)
+    cases = [("calibration board at 0.40 m, drawn anew", lambda name, k: board_frame(name))]
+    for band in ((0.15, 0.25), (0.25, 0.5), (0.5, 1.5)):
+        poses = [view(rng.uniform(*band), np.radians(rng.uniform(0, 30)), rng.uniform(0, 2 * np.pi)) for _ in range(frames)]
+        cases.append((f"marker {band[0]:.2f}-{band[1]:.2f} m", lambda name, k, poses=poses: cams[name].image(poses[k])))
+    for name in cams:
+        board_frame(name)                       # lazy set-up (lighting, noise field) not counted
+    out = ["  frame (old vs new alternating) | this tree | " + rev + " | ratio | frames with other pixels | conditions"]
+    for label, make in cases:
+        steal.fraction()
+        cpu, differ, pixels, most = {name: [] for name in cams}, 0, 0, 0
+        for k in range(frames):
+            images = {}
+            for name in (list(cams) if k % 2 else list(cams)[::-1]):
+                t0 = time.process_time()
+                images[name] = make(name, k).copy()
+                cpu[name].append(time.process_time() - t0)
+            a, b = (image.astype(int) for image in images.values())
+            differ, pixels = differ + int(not np.array_equal(a, b)), pixels + np.count_nonzero(a != b)
+            most = max(most, int(np.abs(a - b).max()))
+        mine, theirs = (np.array(cpu[name]) * 1e3 for name in cams)
+        out.append(f"  {label:42s} | CPU median {np.median(mine):5.1f} ms | {np.median(theirs):5.1f} ms | "
+                   f"{np.median(mine / theirs):.3f} | {differ} of {frames} ({pixels} px, <= {most} DN) | "
+                   f"{conditions(steal)}")
+    return out
 
 
 def _spawn(args: list[str], ready: str, log: Path) -> subprocess.Popen:
@@ -547,6 +631,7 @@ def main() -> None:
     ap.add_argument("section", choices=("gil", "render", "changeout", "mainjob", "idle", "all"))
     ap.add_argument("--seconds", type=float, default=20.0, help="gil: probe time per neighbour")
     ap.add_argument("--frames", type=int, default=20, help="render: frames per distance band")
+    ap.add_argument("--against", default="", help="render: also alternate frames with this git revision's renderer")
     ap.add_argument("--runs", type=int, default=5, help="changeout: runs")
     ap.add_argument("--stages", default="", help="mainjob: stages, e.g. 1 (default: all four)")
     ap.add_argument("--minutes", type=float, default=10.0, help="idle: how long the arm idles")
@@ -557,6 +642,8 @@ def main() -> None:
         rows += gil(args.seconds, steal)
     if args.section in ("render", "all"):
         rows += render(args.frames, steal)
+        if args.against:
+            rows += render_against(args.against, args.frames, steal)
     if args.section in ("changeout", "all"):
         rows += changeout(args.runs, steal)
     if args.section in ("mainjob", "all"):

@@ -44,9 +44,13 @@ a patch over the pixels it covers. Since (issue 32, same pixels): each band is e
 sensor's noise and ADC) as soon as it is composited, so no full-frame electrons image is
 written and read again; where an opaque layer (a board's inside, a sharp foreground's plate)
 covers a band's columns in every row its blur reaches, it is written straight there: its
-coverage is neither blurred nor multiplied there (the wall under it is still upsampled: skipping
-it left the band's memory cold for the writes, which then cost more); the marker's
-polygons are made and lit once per marker (only the culling is per pose).
+coverage is neither blurred nor multiplied there; the marker's polygons are made and lit once
+per marker (only the culling is per pose). Since (issue 32, the board frame ~13% less CPU,
+old and new alternating in one process): a flat layer is one uint8 label a pixel (a board's
+coverage was 0 or 1 anyway), its albedo blurred by one separable filter on the labels (the
+only change of pixels: float rounding, <= 1 DN in a few px of a board frame); the wall is
+upsampled into one reused band buffer and not under an opaque board inside that spans the band
+(with the buffer reused, the band stays in the cache for the board's writes).
 bench/bench_realtime.py render prints the CPU per frame.
 """
 from __future__ import annotations
@@ -79,13 +83,16 @@ BAND_ROWS = 128   # rows per band of the compositing passes (the band's planes s
 
 @dataclass(frozen=True)
 class FlatLayer:
-    """A flat object drawn straight into the output (distorted) image, parallel to the wall:
-    albedo premultiplied by coverage, coverage, and the depth (m) it is defocused at; the planes
-    cover the image from `origin` (x, y) on (a patch inside the image; zero coverage around it),
-    with `margin` px of zero coverage inside the patch on every side not at the image's edge
-    (Renderer.flat_margin(depth) of them: laid as it is, else grown first)."""
-    albedo: np.ndarray     # float32 (h, w)
-    alpha: np.ndarray      # float32 (h, w)
+    """A flat object drawn straight into the output (distorted) image, parallel to the wall,
+    with no partial coverage (a board: calibration_board.board_patch): a uint8 label per pixel
+    and each label's albedo (label 0 covers nothing, every other one covers its pixel), and the
+    depth (m) it is defocused at; the labels cover the image from `origin` (x, y) on (a patch
+    inside the image; nothing around it), with `margin` px of label 0 inside the patch on every
+    side not at the image's edge (Renderer.flat_margin(depth) of them: laid as it is, else
+    grown first). Why labels, not albedo and coverage planes: one byte a pixel to draw and to
+    read, not eight (the planes were ~2 ms of a board frame)."""
+    labels: np.ndarray     # uint8 (h, w)
+    levels: np.ndarray     # float32 (n,): albedo of label k
     depth: float
     origin: tuple[int, int] = (0, 0)
     margin: int = 0
@@ -176,25 +183,47 @@ def _twice(small: np.ndarray) -> np.ndarray:
     return cv2.resize(small, (small.shape[1] * 2, small.shape[0] * 2), interpolation=cv2.INTER_LINEAR)
 
 
-def _twice_rows(small: np.ndarray, y0: int, y1: int) -> np.ndarray:
+def _twice_rows(small: np.ndarray, y0: int, y1: int, into: np.ndarray | None = None) -> np.ndarray:
     """Rows y0:y1 (even y0) of _twice(small), from the rows of `small` they reach: bilinear 2x up
     weighs the two source rows nearest to each output row with weights set by its position
     alone, so a band cut out of the source with a row to spare on each side gives the same
-    pixels as the whole image's upsampling."""
+    pixels as the whole image's upsampling. `into`: a buffer of at least y1 - y0 + 6 rows to
+    write them in (one reused band after band stays in the cache)."""
     a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
-    band = cv2.resize(small[a:b], (small.shape[1] * 2, (b - a) * 2), interpolation=cv2.INTER_LINEAR)
+    size = (small.shape[1] * 2, (b - a) * 2)
+    band = cv2.resize(small[a:b], size, dst=None if into is None else into[:size[1]], interpolation=cv2.INTER_LINEAR)
     return band[y0 - 2 * a:y1 - 2 * a]
 
 
-def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float) -> np.ndarray:
+def _twice_rows_beside(small: np.ndarray, y0: int, y1: int, into: np.ndarray, hidden: tuple[int, int]) -> np.ndarray:
+    """_twice_rows(small, y0, y1, into) but for its columns hidden[0]:hidden[1] (even bounds, 2 px
+    or more from the image's edges unless at them), which are left as `into` held them (what
+    lies there is covered), all but their outer pixels: the columns beside them
+    are upsampled from the source columns they reach with one to spare (as the rows), so they
+    are the whole image's pixels."""
+    a, b = max(y0 // 2 - 1, 0), min((y1 + 1) // 2 + 1, small.shape[0])
+    rows, (xa, xb) = (b - a) * 2, hidden
+    # each side written straight into `into` with its spare column's 2 px (inside the hidden span)
+    if xa > 0:
+        left = small[a:b, :xa // 2 + 1]
+        cv2.resize(left, (left.shape[1] * 2, rows), dst=into[:rows, :left.shape[1] * 2], interpolation=cv2.INTER_LINEAR)
+    if xb < small.shape[1] * 2:
+        right = small[a:b, xb // 2 - 1:]
+        cv2.resize(right, (right.shape[1] * 2, rows), dst=into[:rows, xb - 2:], interpolation=cv2.INTER_LINEAR)
+    return into[y0 - 2 * a:y1 - 2 * a]
+
+
+def _blur_rows(image: np.ndarray, y0: int, y1: int, sigma: float, into: np.ndarray | None = None) -> np.ndarray:
     """Rows y0:y1 of _blur(image, sigma) (no halving), from the rows the kernel reaches: OpenCV's
     float kernel reaches round(8 sigma + 1) // 2 rows, so a band cut with that many to spare on
-    each side (the image's own border where it has none) gives the whole image's pixels."""
+    each side (the image's own border where it has none) gives the whole image's pixels. `into`:
+    a buffer at least as wide as `image` and y1 - y0 + 2 (ceil(4 sigma) + 1) rows to write in."""
     if sigma < 0.1:
         return image[y0:y1]
     reach = int(np.ceil(4 * sigma)) + 1
     a, b = max(y0 - reach, 0), min(y1 + reach, image.shape[0])
-    return cv2.GaussianBlur(image[a:b], (0, 0), sigma)[y0 - a:y1 - a]
+    dst = None if into is None else into[:b - a, :image.shape[1]]
+    return cv2.GaussianBlur(image[a:b], (0, 0), sigma, dst=dst)[y0 - a:y1 - a]
 
 
 def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
@@ -204,6 +233,18 @@ def _inside(opaque: np.ndarray, reach: int) -> tuple[int, int] | None:
     if len(run) == 0 or run[-1] - run[0] + 1 != len(run) or len(run) <= 4 * reach:
         return None
     return int(run[0]) + reach, int(run[-1]) + 1 - reach
+
+
+def _scale_of(levels: np.ndarray) -> np.float32 | None:
+    """The step s when a flat layer's albedo table is label * s (float32, as NumPy multiplies a
+    uint8 label by it), else None. With a step its albedo is blurred straight from the labels,
+    the step in the filter's kernel (half the float work of a looked-up plane and its blur;
+    the sums' rounding differs, by a float's last bit); else looked up, then blurred."""
+    levels = np.asarray(levels, np.float32)
+    if len(levels) < 2 or levels[1] <= 0:
+        return None
+    step = levels[1]
+    return step if np.array_equal(levels, np.arange(len(levels), dtype=np.float32) * step) else None
 
 
 def _split_edges(polys: list[np.ndarray], longest: float) -> tuple[np.ndarray, np.ndarray]:
@@ -600,23 +641,29 @@ class Renderer:
         return int(np.ceil(4 * min(self.coc_sigma_px(max(depth, 0.01)), MAX_BLUR))) + 2
 
     def _flat_box(self, flat: FlatLayer, shape: tuple[int, int], shade: float):
-        """(albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s planes over the box
-        they are laid over (grown by zeros to its blur's reach unless its margin has it: beyond
-        the patch its planes are 0, so the box's border reflects zeros as the whole frame's blur
-        would see them), its blur (sigma px) and the wall's `shade` (parallel to the wall: lit
-        alike); None for an empty patch."""
+        """(labels, albedo and coverage tables, sigma, reach, shade, (x0, y0, x1, y1)): `flat`'s
+        labels over the box they are laid over (grown by label 0 to its blur's reach unless its
+        margin has it: beyond the patch nothing is covered, so the box's border reflects zeros
+        as the whole frame's blur would see them), 256-entry float32 tables of each label's
+        albedo and coverage (cv2.LUT makes a band's planes from them), its blur (sigma px) and
+        the wall's `shade` (parallel to the wall: lit alike); None for an empty patch."""
         sigma = min(self.coc_sigma_px(max(flat.depth, 0.01)), MAX_BLUR)
-        (x, y), (h, w) = flat.origin, flat.alpha.shape
+        (x, y), (h, w) = flat.origin, flat.labels.shape
         if w == 0 or h == 0:
             return None
+        albedo, coverage = np.zeros(256, np.float32), np.ones(256, np.float32)
+        albedo[:len(flat.levels)] = flat.levels
+        albedo[0] = coverage[0] = 0.0
         reach = self.flat_margin(flat.depth)
-        if flat.margin >= reach:
-            return flat.albedo, flat.alpha, sigma, reach, shade, (x, y, x + w, y + h)
-        H, W = shape
-        x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
-        grown = [cv2.copyMakeBorder(plane, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0.0)
-                 for plane in (flat.albedo, flat.alpha)]
-        return grown[0], grown[1], sigma, reach, shade, (x0, y0, x1, y1)
+        labels, box = flat.labels, (x, y, x + w, y + h)
+        if flat.margin < reach:
+            H, W = shape
+            box = x0, y0, x1, y1 = max(x - reach, 0), max(y - reach, 0), min(x + w + reach, W), min(y + h + reach, H)
+            labels = cv2.copyMakeBorder(labels, y - y0, y1 - y - h, x - x0, x1 - x - w, cv2.BORDER_CONSTANT, value=0)
+        # a band's looked-up albedo and its blur written into the same two buffers band after
+        # band (they stay in the cache: new ones each band were as much again as the work)
+        scratch = [np.empty((BAND_ROWS + 2 * reach, labels.shape[1]), np.float32) for _ in range(2)]
+        return labels, (albedo, coverage, scratch, _scale_of(flat.levels)), sigma, reach, shade, box
 
     @staticmethod
     def _flat_rows(laid, b0: int, b1: int):
@@ -624,40 +671,50 @@ class Renderer:
         rows it covers there, (g0, g1) the rows its blur reaches for them, and (c0, c1) the image's
         columns where its blurred coverage is 1 in all of them (the inside of an opaque board:
         what lies under it does not show), or None; None for no rows."""
-        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        labels, tables, sigma, reach, shade, (x0, y0, x1, y1) = laid
         r0, r1 = max(b0, y0), min(b1, y1)
         if r1 <= r0:
             return None
         g0, g1 = max(r0 - reach, y0), min(r1 + reach, y1)
-        covered = _inside(alpha[g0 - y0:g1 - y0].min(axis=0) >= 1.0, reach)    # (a row-wise reduction: fast)
+        covered = _inside(labels[g0 - y0:g1 - y0].min(axis=0) > 0, reach)    # (a row-wise reduction: fast)
         return (r0, r1), (g0, g1), None if covered is None else (x0 + covered[0], x0 + covered[1])
 
     @staticmethod
     def _lay_flat_band(band: np.ndarray, b0: int, b1: int, laid, rows) -> None:
         """Lay the rows b0:b1 (the image's) of a flat layer (Renderer._flat_box; `rows` its
-        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: its
-        planes' rows the band's blur reaches are blurred and laid while in the cache:
-        band * (1 - blurred coverage) + shade * blurred albedo. Where the blurred coverage is 1
-        (the covered columns) that is shade * blurred albedo, whatever the band held there (it
-        need not hold the wall), and the coverage is blurred only beside them."""
+        Renderer._flat_rows there) over `band` (those rows of the image, unlit) in place: the
+        rows the band's blur reaches are blurred from its labels (the albedo straight from them
+        when its table is a scale, _scale_of; else looked up first; the coverage looked up) and
+        laid while in the cache: band * (1 - blurred coverage) + shade * blurred albedo. Where
+        the blurred coverage is 1 (the covered columns) that is shade * blurred albedo, whatever
+        the band held there (it need not hold the wall), and the coverage is looked up and
+        blurred only beside them."""
         if rows is None:
             return
-        albedo, alpha, sigma, reach, shade, (x0, y0, x1, y1) = laid
+        labels, (albedo, coverage, (looked_up, blurred), step), sigma, reach, shade, (x0, y0, x1, y1) = laid
         (r0, r1), (g0, g1), covered = rows
         keep = np.s_[r0 - g0:r1 - g0]
         region = band[r0 - b0:r1 - b0, x0:x1]
-        lit = _blur(albedo[g0 - y0:g1 - y0], sigma)[keep]
-        alpha = alpha[g0 - y0:g1 - y0]
+        labels = labels[g0 - y0:g1 - y0]
+        if step is not None and sigma >= 0.1:       # (_blur's no-op below 0.1 px)
+            kernel = cv2.getGaussianKernel(int(round(sigma * 8 + 1)) | 1, sigma, cv2.CV_32F)   # GaussianBlur's
+            lit = cv2.sepFilter2D(labels, cv2.CV_32F, kernel, kernel * step, dst=blurred[:g1 - g0],
+                                  borderType=cv2.BORDER_REFLECT_101)
+        else:
+            lit = cv2.LUT(labels, albedo, dst=looked_up[:g1 - g0])
+            if sigma >= 0.1:
+                lit = cv2.GaussianBlur(lit, (0, 0), sigma, dst=blurred[:g1 - g0])
+        lit = lit[keep]
         if covered is None:
-            parts = [(np.s_[:], _blur(alpha, sigma)[keep])]
+            parts = [(np.s_[:], _blur(cv2.LUT(labels, coverage), sigma)[keep])]
         else:
             c0, c1 = covered[0] - x0, covered[1] - x0
             np.multiply(lit[:, c0:c1], np.float32(shade), out=region[:, c0:c1])
-            parts = [(np.s_[:, :c0], _blur(alpha[:, :c0 + reach], sigma)[keep][:, :c0]),
-                     (np.s_[:, c1:], _blur(alpha[:, c1 - reach:], sigma)[keep][:, reach:])]
-        for part, blurred in parts:
+            parts = [(np.s_[:, :c0], _blur(cv2.LUT(labels[:, :c0 + reach], coverage), sigma)[keep][:, :c0]),
+                     (np.s_[:, c1:], _blur(cv2.LUT(labels[:, c1 - reach:], coverage), sigma)[keep][:, reach:])]
+        for part, cover in parts:
             under = region[part]
-            cv2.subtract(under, cv2.multiply(under, blurred), dst=under)     # in place, into the view
+            cv2.subtract(under, cv2.multiply(under, cover), dst=under)     # in place, into the view
             cv2.scaleAdd(lit[part], shade, under, dst=under)
 
     @staticmethod
@@ -698,19 +755,33 @@ class Renderer:
             elif down == 2:
                 albedo, clear = _blur_small(albedo, sigma), _blur_small(clear, sigma)
         reach = int(np.ceil(4 * sigma)) + 1 if layer is not None and down == 1 else 0    # _blur_rows's
+        upsampled = np.empty((BAND_ROWS + 6, width), np.float32) if halved else None
+        fg_upsampled = [np.empty((BAND_ROWS + 6, w), np.float32) for _ in range(2)] \
+            if layer is not None and down == 2 else (None, None)
+        fg_blurred = [np.empty((BAND_ROWS + 2 * reach, w), np.float32) for _ in range(2)] \
+            if layer is not None and down == 1 else (None, None)
         for y in range(0, height, BAND_ROWS):
             y1 = min(y + BAND_ROWS, height)
-            band = _twice_rows(wall, y, y1) if halved else wall[y:y1]
-            for laid in flats:
-                Renderer._lay_flat_band(band, y, y1, laid, Renderer._flat_rows(laid, y, y1))
+            rows = [Renderer._flat_rows(laid, y, y1) for laid in flats]
+            # the wall is not upsampled under the first flat layer's opaque inside where it
+            # covers every row of the band (its laying writes there whatever the band held)
+            hidden = bool(rows) and rows[0] is not None and rows[0][0] == (y, y1) and rows[0][2]
+            if hidden and halved and hidden[1] - hidden[0] > 64:
+                even = (hidden[0] + hidden[0] % 2, hidden[1] - hidden[1] % 2)
+                band = _twice_rows_beside(wall, y, y1, upsampled, even)
+            else:
+                band = _twice_rows(wall, y, y1, upsampled) if halved else wall[y:y1]
+            for laid, at in zip(flats, rows):
+                Renderer._lay_flat_band(band, y, y1, laid, at)
             f0, f1 = (max(y, y0) - y0, min(y1, y0 + h) - y0) if layer is not None else (0, 0)   # the foreground's rows
             if f1 > f0:
                 region = band[y0 + f0 - y:y0 + f1 - y, x0:x0 + w]
                 if down == 2:
-                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1), _twice_rows(clear, f0, f1))]
+                    parts = [(np.s_[:], _twice_rows(albedo, f0, f1, fg_upsampled[0]),
+                              _twice_rows(clear, f0, f1, fg_upsampled[1]))]
                 else:       # its inside, where its blurred transparency is 0
                     opaque = _inside(clear[max(f0 - reach, 0):f1 + reach].max(axis=0) <= 0.0, reach)
-                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region)
+                    parts = Renderer._foreground_parts(albedo, clear, f0, f1, sigma, reach, opaque, region, fg_blurred)
                 for part, a, c in parts:
                     under = region[part]
                     cv2.multiply(under, c, dst=under)        # OpenCV writes into the view, in place
@@ -721,14 +792,16 @@ class Renderer:
         return None if finish else img
 
     @staticmethod
-    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region) -> list:
+    def _foreground_parts(albedo, clear, f0: int, f1: int, sigma: float, reach: int, opaque, region,
+                          into=(None, None)) -> list:
         """The foreground's rows f0:f1 blurred, as (columns, albedo, transparency) to lay over
         `region` (those rows of the image under it); with an opaque inside (c0, c1) (its
         columns, _inside) that is written into `region` straight (the blurred albedo: what was
-        under it does not show, whatever it was) and the transparency is blurred only beside it."""
-        a = _blur_rows(albedo, f0, f1, sigma)
+        under it does not show, whatever it was) and the transparency is blurred only beside it.
+        `into`: two buffers (_blur_rows's) for the albedo's and the transparency's blur."""
+        a = _blur_rows(albedo, f0, f1, sigma, into[0])
         if opaque is None:
-            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma))]
+            return [(np.s_[:], a, _blur_rows(clear, f0, f1, sigma, into[1]))]
         c0, c1 = opaque
         np.copyto(region[:, c0:c1], a[:, c0:c1])
         return [(np.s_[:, :c0], a[:, :c0], _blur_rows(clear[:, :c0 + reach], f0, f1, sigma)[:, :c0]),

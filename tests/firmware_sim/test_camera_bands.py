@@ -15,7 +15,8 @@ from spacearm.base.vision.camera import CameraModel
 from spacearm.base.vision.config import load_camera
 from spacearm.firmware_sim.calibration_board import EDGE_STEPS, SHIFT, board_patch
 from spacearm.firmware_sim.camera.noise import SensorModel
-from spacearm.firmware_sim.camera.renderer import Renderer, _blur, _blur_rows, _twice, _twice_rows
+from spacearm.firmware_sim.camera.renderer import (Renderer, _blur, _blur_rows, _scale_of, _twice, _twice_rows,
+                                                   _twice_rows_beside)
 
 SEED = 3207           # this file's draws
 
@@ -35,6 +36,22 @@ def test_band_upsampling_and_blur_are_the_whole_image_operations(rows):
         whole = cv2.GaussianBlur(image, (0, 0), sigma) if sigma >= 0.1 else image
         bands = [_blur_rows(image, y, min(y + 128, rows), sigma) for y in range(0, rows, 128)]
         assert np.array_equal(np.vstack(bands), whole), sigma
+
+
+def test_band_upsampling_beside_a_hidden_span_is_the_whole_image_operation():
+    """The wall upsampled only beside the columns a board hides: those beside are the whole
+    image's upsampling, at any even span (at the image's edges too)."""
+    rng = np.random.default_rng(SEED + 5)
+    small = rng.random((150, 181)).astype(np.float32)
+    whole = cv2.resize(small, (362, 300), interpolation=cv2.INTER_LINEAR)
+    into = np.full((128 + 6, 362), np.nan, np.float32)
+    spans = [(0, 200), (2, 360), (100, 362), (64, 68)]
+    spans += [(int(xa), int(xa + 2 * rng.integers(2, (362 - xa) // 2 + 1))) for xa in rng.integers(0, 170, 6) * 2]
+    for xa, xb in spans:
+        for y in (0, 128, 256):
+            band = _twice_rows_beside(small, y, min(y + 128, 300), into, (int(xa), int(xb)))
+            beside = np.r_[0:xa, xb:362]
+            assert np.array_equal(band[:, beside], whole[y:y + 128][:, beside]), (xa, xb, y)
 
 
 def test_banded_sensor_noise_is_the_whole_frame_physics():
@@ -89,40 +106,52 @@ def _board_square_by_square(camera_T_board, board, camera):
 
 
 def test_board_patch_is_the_square_by_square_full_frame_drawing():
+    """The board's labels (one byte a pixel, edges 8-connected) are the float planes the board
+    was drawn as before, square by square over the frame with OpenCV's LINE_AA (which smooths
+    edges only in 8-bit images): at random poses, margins and with the board partly out of view."""
     board = load_board()
     camera = CameraModel.from_config(load_camera())
     rng = np.random.default_rng(SEED)
     shown = 0
-    for _ in range(6):      # tilted, off centre, partly out of the frame
-        T = xyz_rpy_to_transform(list(rng.uniform([-0.3, -0.25, 0.25], [0.1, 0.1, 0.8])), list(rng.uniform(-0.5, 0.5, 3)))
+    for _ in range(12):      # tilted, off centre, partly out of the frame
+        T = xyz_rpy_to_transform(list(rng.uniform([-0.3, -0.25, 0.15], [0.1, 0.1, 1.2])), list(rng.uniform(-0.6, 0.6, 3)))
         albedo, alpha = _board_square_by_square(T, board, camera)
-        patch = board_patch(T, board, camera.K, camera.dist, (camera.width, camera.height))
+        patch = board_patch(T, board, camera.K, camera.dist, (camera.width, camera.height), int(rng.integers(0, 12)))
         if patch is None:
             assert not alpha.any()
             continue
-        (x, y), (h, w) = patch[2], patch[0].shape
-        for plane, drawn in zip(patch[:2], (albedo, alpha)):
+        labels, levels, (x, y) = patch
+        (h, w) = labels.shape
+        for plane, drawn in zip((levels[labels], (labels > 0).astype(np.float32)), (albedo, alpha)):
             assert np.array_equal(plane, drawn[y:y + h, x:x + w])
             drawn[y:y + h, x:x + w] = 0
             assert not drawn.any()                    # nothing of the board outside its patch
         shown += 1
-    assert shown >= 4
+    assert shown >= 8
 
 
 def test_a_flat_layer_laid_skipping_the_covered_inside_is_the_whole_blur_composite():
     """A band with an opaque board across it: laid over the wall it is the plain formula
     wall * (1 - blur(coverage)) + shade * blur(albedo) over the whole band, whatever the band
-    held inside the board."""
+    held inside the board; the planes are the labels looked up in the layer's tables."""
     rng = np.random.default_rng(SEED)
     shade = 0.83
     for sigma in (0.3, 0.67, 1.6):
         reach = int(np.ceil(4 * sigma)) + 2
-        alpha = np.zeros((400, 400), np.float32)
+        labels = np.zeros((400, 400), np.uint8)
         left, right, top = rng.integers(5, 60), rng.integers(300, 395), int(rng.integers(0, 100))
-        alpha[top:, left:right] = 1.0
-        alpha[:, left - 1] = rng.random(400)         # an anti-aliased edge
-        albedo = alpha * np.where(rng.random((400, 400)) < 0.5, 0.9, 0.1).astype(np.float32)
-        laid = (albedo, alpha, sigma, reach, shade, (30, 0, 430, 400))           # a patch 30 px in
+        labels[top:, left:right] = rng.integers(1, 4, (400 - top, right - left))
+        labels[rng.integers(0, 400, 40), left - 1] = 3              # a ragged edge
+        levels = rng.random(4).astype(np.float32)
+        albedo_table, coverage_table = np.zeros(256, np.float32), np.ones(256, np.float32)
+        albedo_table[1:4], albedo_table[0], coverage_table[0] = levels[1:], 0.0, 0.0
+        if sigma == 0.67:     # levels a scale of the labels (the board's): multiplied, not looked up
+            albedo_table[:4] = np.arange(4, dtype=np.float32) * levels[1]
+        step = _scale_of(albedo_table[:4])
+        assert (step is not None) == (sigma == 0.67)
+        albedo, alpha = albedo_table[labels], (labels > 0).astype(np.float32)
+        scratch = [np.empty((128 + 2 * reach, 400), np.float32) for _ in range(2)]
+        laid = (labels, (albedo_table, coverage_table, scratch, step), sigma, reach, shade, (30, 0, 430, 400))   # a patch 30 px in
         wall = rng.random((400, 460), dtype=np.float32)
         expected = wall.copy()
         expected[:, 30:430] = wall[:, 30:430] * (1 - _blur(alpha, sigma)) + shade * _blur(albedo, sigma)
@@ -151,8 +180,8 @@ def test_a_still_board_is_rendered_once_and_a_moved_one_anew():
     def layers(distance):
         T = xyz_rpy_to_transform([-0.1, -0.07, distance], [0.1, -0.1, 0.0])
         margin = sim.renderer.flat_margin(distance)
-        albedo, alpha, origin = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
-        return [FlatLayer(albedo, alpha, distance, origin, margin)]
+        labels, levels, origin = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        return [FlatLayer(labels, levels, distance, origin, margin)]
 
     still, marker = layers(0.4), view(0.7, 0.2, 1.0)
     first = sim.renderer.render(sim.scene, marker, still, gain=gain).copy()
@@ -213,3 +242,42 @@ def test_a_foreground_laid_skipping_its_opaque_inside_is_the_whole_blur_composit
         region = under[y0:y0 + 420, x0:x0 + 500]
         region[:] = region * _blur(clear, sigma) + _blur(albedo, sigma)
         assert np.array_equal(got, under * light), sigma
+
+
+def test_a_board_frame_is_the_whole_image_formulas_of_the_board_drawn_as_before():
+    """The camera's frame of a board (the marker out of view), made of labels, blurred by a
+    filter on them, laid band by band and not over the wall it hides, against whole-image
+    operations on the board drawn the old way (float planes, square by square): the lit wall
+    upsampled, times one minus the blurred coverage, plus the shade times the blurred albedo.
+    The irradiance agrees to float rounding; the 8-bit frames (the same noise) differ by at
+    most 1 DN in a few pixels of a million (the filter sums the same terms in another order)."""
+    from spacearm.firmware_sim.camera.renderer import MAX_BLUR, FlatLayer
+    from spacearm.firmware_sim.camera.simulator import CameraSimulator
+    from tests.vision.views import view
+
+    sim = CameraSimulator.from_configs(scene_seed=1, noise_seed=SEED)
+    renderer, cam, board, scene = sim.renderer, sim.camera, load_board(), sim.scene
+    gain = sim.sensor.electrons_per_unit
+    rng = np.random.default_rng(SEED + 11)
+    for _ in range(3):
+        d = rng.uniform(0.3, 0.8)            # in focus to blurred (0.3-1.2 px)
+        T = xyz_rpy_to_transform(list(rng.uniform([-0.2, -0.15, d], [0.0, 0.0, d])), list(rng.uniform(-0.4, 0.4, 3)))
+        pose = view(rng.uniform(0.5, 1.2), 0.1, rng.uniform(0, 2 * np.pi), (1.5, 0.0))   # the marker out of view
+        margin = renderer.flat_margin(d)
+        labels, levels, origin = board_patch(T, board, cam.K, cam.dist, (cam.width, cam.height), margin)
+        layers = [FlatLayer(labels, levels, d, origin, margin)]
+        got = renderer.render(scene, pose, layers, gain=gain)
+
+        albedo, alpha = _board_square_by_square(T, board, camera=cam)
+        sigma = min(renderer.coc_sigma_px(d), MAX_BLUR)
+        wall_sigma = min(renderer.coc_sigma_px(max(renderer._wall_axis_depth(scene, pose), 0.01)), MAX_BLUR)
+        wall, halved = renderer._background(scene, pose, wall_sigma)
+        wall = np.multiply(wall, np.float32(1.0 / 255.0), dtype=np.float32)
+        wall = _twice(wall) if halved else wall
+        shade = renderer._wall_shade(scene)
+        expected = (wall * (1 - _blur(alpha, sigma)) + np.float32(shade) * _blur(albedo, sigma)) * gain * \
+            renderer._illumination(scene)
+        assert np.allclose(got, expected, rtol=2e-6, atol=1e-3)
+        noisy = [sim.sensor.expose_electrons(image.copy(), np.random.default_rng(SEED + 3)) for image in (got, expected)]
+        differ = noisy[0].astype(int) - noisy[1]
+        assert np.abs(differ).max() <= 1 and np.count_nonzero(differ) < 1e-4 * differ.size
