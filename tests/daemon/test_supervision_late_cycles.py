@@ -1,18 +1,20 @@
-"""Missing process data in a cycle that ran late (the controller itself starved) is no evidence
-of a lost node: the count is held a few times per gap, then a real loss still stops."""
+"""Missing process data in a cycle that ran late (the controller itself starved), or while the
+host held a vCPU (its processes stood still), is no evidence of a lost node: the count is held a
+few times per gap, then a real loss still stops."""
 from dataclasses import replace
 
 import numpy as np
 
-from spacearm.controller.cycle import Measurement
-from spacearm.controller.daemon.supervision import LATE_CYCLES_EXCUSED, SupervisionLimits, Supervisor
+from spacearm.controller.cycle import FindingCode, Measurement
+from spacearm.controller.daemon.supervision import (HOST_CYCLES_EXCUSED, LATE_CYCLES_EXCUSED, SupervisionLimits,
+                                                    Supervisor)
 
 
-def measurement(missing: tuple[str, ...], late: bool) -> Measurement:
+def measurement(missing: tuple[str, ...], late: bool, host_stalled: bool = False) -> Measurement:
     n = 2
     return Measurement(time=0.0, sync_counter=0, q=np.zeros(n), dq=np.zeros(n), tau=np.zeros(n),
                        joints_enabled=np.ones(n, bool), joints_faulted=np.zeros(n, bool), wrench=np.zeros(6),
-                       missing=missing, late=late)
+                       missing=missing, late=late, host_stalled=host_stalled)
 
 
 def supervisor() -> Supervisor:
@@ -85,3 +87,29 @@ def test_the_stop_names_every_node_silent_with_the_first() -> None:
     for _ in range(limit):
         findings = alone.check(measurement(("joint_2",), False), None, False)
     assert [f.message for f in findings] == [f"joint_2: no process data for {limit} cycles"]
+
+
+def first_stop(pattern: list[bool], sup: Supervisor) -> int | None:
+    for k, stalled in enumerate(pattern, 1):
+        findings = sup.check(measurement(("joint_1",), False, stalled), None, False)
+        if any(f.code is FindingCode.PDO_MISSING for f in findings):
+            return k
+    return None
+
+
+def test_a_100_ms_host_stall_is_no_node_loss_but_a_node_lost_in_one_still_stops():
+    sup = supervisor()
+    limit = sup.limits.missing_pdo_cycles
+    # the stall seen from the second silent cycle on, ~100 ms, then its catch-up cycles
+    stall = [False] + [True] * 7
+    assert first_stop(stall, sup) is None and sup.host_cycles_excused == 7
+    sup.check(measurement((), False), None, False)           # the data came back: a new gap
+    assert first_stop(stall * 3, supervisor()) is not None    # one endless gap is bounded ...
+    assert first_stop([True] * 40, supervisor()) == limit + HOST_CYCLES_EXCUSED
+    assert limit + HOST_CYCLES_EXCUSED <= 15                 # ... by 300 ms at 20 ms
+    # and every stall gets its own excuse: ten stalls, each followed by the data, never stop
+    sup = supervisor()
+    for _ in range(10):
+        assert first_stop(stall, sup) is None
+        sup.check(measurement((), False), None, False)
+    assert first_stop([False] * limit, sup) == limit          # a silent node with no stall: as ever
