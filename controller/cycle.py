@@ -156,8 +156,9 @@ class Measurement:
     missing: tuple[str, ...] = ()   # nodes whose PDOs did not arrive this cycle
     late: bool = False              # this cycle's own I/O ran late (controller starved): missing data is no evidence
     bridged: bool = False           # missing data of a bus line switch under way (bounded): not node loss
-    # missing data while the host held one of this machine's vCPUs (base/runtime/host_cpus.py):
-    # the nodes' host process stood still, counted against them only after a bounded excuse
+    # the host held one of this machine's vCPUs in this cycle's gap (base/runtime/host_cpus.py;
+    # a gap's first complete cycle may be the one that shows it): missing data is the stall of
+    # the nodes' host process, counted against them only after a bounded excuse
     host_stalled: bool = False
     # nodes missing at the last cycle's read whose data came later in that period: slow, not silent
     answered_late: tuple[str, ...] = ()

@@ -60,6 +60,11 @@ class HostStallWatch:
         self._stolen_at = float("-inf")
         self.held = ""              # the last sample's finding, for an event's text
 
+    @property
+    def watching(self) -> bool:
+        """Sampled since the last reset (a gap under way)."""
+        return bool(self._last)
+
     def reset(self) -> None:
         self._last = ()
 

@@ -257,7 +257,7 @@ class Daemon:
             self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
-        self._watch_nodes(measurement)
+        self._watch_nodes(measurement, tick.skipped > 0)
         mode = self.core.mode
         snapshot = Snapshot(tick, measurement, command, self.core.state,
                             mode.name if mode is not None else None,
@@ -268,13 +268,13 @@ class Daemon:
         self._record(snapshot, execution, events)
         return snapshot
 
-    def _watch_nodes(self, m: Measurement) -> None:
+    def _watch_nodes(self, m: Measurement, starved: bool) -> None:
         network = self.hardware.network
         self.node_timing.add(self.hardware.last_io_wait, not m.missing,
                              {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
                               for name, h in network.health.items()}, host_stalled=m.host_stalled,
                              last_answered_late=bool(m.answered_late)
-                             and set(m.answered_late) >= set(self._missing_last_cycle))
+                             and set(m.answered_late) >= set(self._missing_last_cycle), starved=starved)
         self._missing_last_cycle = m.missing
         if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
             summary = self.node_timing_summary()

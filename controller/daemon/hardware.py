@@ -145,11 +145,11 @@ class CanopenHardware:
         host_stalled = False
         if not self.lockstep:
             # /proc/stat costs ~0.2 ms to read: only while data is missing (the watch's baseline
-            # is the gap's first cycle)
+            # is the gap's first cycle) and once after it, when a held vCPU counts its steal
+            if not complete or self.host_watch.watching:
+                host_stalled = self.host_watch.sample(done)
             if complete:
                 self.host_watch.reset()
-            else:
-                host_stalled = self.host_watch.sample(done)
             # How late this cycle's I/O ran: a read more than a period after the last one, or
             # a TPDO wait that overshot its budget, means this process did not get the CPU.
             if self._last_read is not None:
@@ -211,7 +211,7 @@ class CanopenHardware:
             end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
                           else EndEffectorState.NONE),
             events=events, missing=missing, late=late > 0.0 and bool(missing),
-            host_stalled=host_stalled and late <= 0.0 and bool(missing))
+            host_stalled=host_stalled and late <= 0.0)
 
     def write(self, command: Command, stop: DriveRequest | None = None) -> None:
         """`stop`: what a protective stop asks of drives the command no longer enables (None:

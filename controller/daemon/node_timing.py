@@ -47,7 +47,7 @@ HEARTBEAT_GAPS = 3     # ... when it happens this often in the window
 HEARTBEAT_SERIOUS = 2.0   # periods: once is enough (the stop comes at 2.5)
 MISSING_CYCLES = 3     # cycles without all process data in the window: "starved" ...
 MISSING_RUN = 2        # ... or this many in a row (one alone, on a loaded machine, is said, not a banner)
-HOST_GAP_CYCLES = 15   # a heartbeat gap ending this soon after a host-stalled cycle is the host's
+STALL_GAP_CYCLES = 15  # a heartbeat gap ending this soon after a host stall or a late cycle is theirs
 PEER_LATE = 0.020      # s: a wake this late (a whole 20 ms cycle) ...
 PEER_LATE_REPORTS = 3  # ... in this many of a peer's reports in its window makes it late
 PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's reach)
@@ -160,14 +160,16 @@ class NodeTiming:
         self._gaps: deque[tuple[float, str]] = deque(maxlen=window)
         self._last_heartbeat: dict[str, float | None] = {}
         self._peer_late: dict[str, bool] = {}
-        self._since_host_stall = HOST_GAP_CYCLES     # cycles since the last host-stalled one
+        self._since_stall = STALL_GAP_CYCLES     # cycles since the host or this process last stalled
 
     def add(self, io_wait: float, complete: bool, heartbeats: dict[str, tuple[float | None, float]],
-            host_stalled: bool = False, last_answered_late: bool = False) -> None:
-        """One cycle: its wait for TPDOs, whether they all came (host_stalled: they did not, and
-        the host held a vCPU), and each node's (last heartbeat time, heartbeat period) as the
-        network saw them. last_answered_late: every node missing at the last cycle's read sent
-        its data later in that period - that cycle was late, not missing data."""
+            host_stalled: bool = False, last_answered_late: bool = False, starved: bool = False) -> None:
+        """One cycle: its wait for TPDOs, whether they all came, and each node's (last heartbeat
+        time, heartbeat period) as the network saw them. host_stalled: the host held a vCPU in
+        this cycle's gap (the gap's missing cycles are the host's). last_answered_late: every node
+        missing at the last cycle's read sent its data later in that period - that cycle was
+        late, not missing data. starved: this process itself ran late (skipped cycles): the
+        heartbeats it received meanwhile arrived late."""
         if last_answered_late and self._missing and self._missing[-1]:
             self._missing[-1] = False          # its io_wait is the whole budget: counted as late
         k = len(self._missing)
@@ -177,8 +179,8 @@ class NodeTiming:
             self._missing[k], self._host_stalled[k] = False, True
         self._io_wait.append(io_wait)
         self._missing.append(not complete and not host_stalled)
-        self._host_stalled.append(host_stalled)
-        self._since_host_stall = 0 if host_stalled else self._since_host_stall + 1
+        self._host_stalled.append(host_stalled and not complete)
+        self._since_stall = 0 if host_stalled or starved else self._since_stall + 1
         worst = (0.0, "")
         for name, (last, period) in heartbeats.items():
             previous = self._last_heartbeat.get(name)
@@ -186,7 +188,7 @@ class NodeTiming:
                 gap = (last - previous) / period
                 worst = max(worst, (gap, name))
             self._last_heartbeat[name] = last
-        if worst[1] and self._since_host_stall >= HOST_GAP_CYCLES:   # else the host's gap, not the node's
+        if worst[1] and self._since_stall >= STALL_GAP_CYCLES:   # else the stall's gap, not the node's
             self._gaps.append(worst)
 
     def summary(self, peer_reports: dict[str, list] | None = None, now: float = 0.0) -> NodeTimingSummary:

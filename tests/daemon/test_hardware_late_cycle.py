@@ -81,3 +81,33 @@ def test_missing_data_while_the_host_holds_a_vcpu_is_a_coded_host_stall_event(mo
     event = [e for e in m.events if e.kind is FindingCode.HOST_STALL]
     assert len(event) == 1 and "vCPU 1" in event[0].detail and "ft_sensor" in event[0].detail
     assert hw.statistics()["host_stalled_cycles"] == 2
+
+
+def test_a_stall_that_ends_before_it_shows_is_seen_in_the_first_complete_cycle(monkeypatch):
+    """vCPU 1 held 60 ms: still for one sample only, then it counts its steal when it runs again,
+    which the cycle whose data came back reads (and the next one no longer reads /proc/stat)."""
+    clock = _Clock()
+    hw = _hardware(monkeypatch, clock, wait=0.005)
+    net = hw.network
+    complete = iter([False, False, True, True])
+
+    def wait_all(timeout):
+        clock.t += 0.005
+        return next(complete)
+    monkeypatch.setattr(net, "wait_all_tpdos", wait_all)
+    monkeypatch.setattr(net, "read", lambda c: ArmState(1, c, [j.state() for j in net.joints], None, None,
+                                                        {name: NodeHealth(name, d.node_id, alive=True)
+                                                         for name, d in net.drivers.items()}))
+    reads = []
+
+    def stat():
+        reads.append(clock.t)
+        stolen = 6 if len(reads) >= 3 else 0
+        return ((int(clock.t * 100), 0), (10_000 + stolen, stolen))
+    hw.host_watch = HostStallWatch(stat)
+    seen = []
+    for _ in range(4):
+        m = hw.read(0.0)
+        clock.t += hw.period - 0.005
+        seen.append(m.host_stalled)
+    assert seen == [False, False, True, False] and len(reads) == 3

@@ -50,7 +50,9 @@ def test_a_vcpu_that_counts_no_time_while_another_does_is_held_by_the_host():
     assert watch.sample(0.36)
     stat.run(0.02)
     assert not watch.sample(0.40) and watch.held == ""
+    assert watch.watching
     watch.reset()                                # data came: the next gap starts a new baseline
+    assert not watch.watching
     stat.run(0.02, held=0)
     assert not watch.sample(0.42)
     stat.run(0.02, held=0)

@@ -184,6 +184,25 @@ def test_a_heartbeat_gap_the_host_stall_made_is_no_banner():
     assert run(stalled=False) == "late" and run(stalled=True) == "ok"
 
 
+def test_a_heartbeat_gap_while_this_process_itself_ran_late_is_no_banner():
+    timing = NodeTiming(BUDGET)
+    feed(timing, 100, 0.001)
+    timing.add(0.001, True, {"joint_1": (1.0, HB)}, starved=True)     # skipped cycles just before
+    timing.add(0.001, True, {"joint_1": (1.21, HB)})                   # a beat 2.1 periods after
+    assert timing.summary().level == "ok"
+
+
+def test_a_short_stall_seen_only_when_the_data_came_back_is_the_hosts():
+    """A 60 ms stall: two missing cycles, then the first complete one shows the steal counted."""
+    timing = NodeTiming(BUDGET)
+    feed(timing, 240, 0.001)
+    timing.add(BUDGET, False, {})
+    timing.add(BUDGET, False, {})
+    timing.add(0.001, True, {}, host_stalled=True)
+    summary = timing.summary()
+    assert summary.level == "ok" and summary.missing_cycles == 0 and summary.host_stalled_cycles == 2
+
+
 def test_one_missed_cycle_is_said_two_in_a_row_or_three_in_the_window_are_a_banner():
     timing = NodeTiming(BUDGET)
     feed(timing, 240, 0.001)
