@@ -28,7 +28,7 @@ def test_a_hunting_gear_is_visible_against_the_effect_free_noise() -> None:
     from spacearm.firmware_sim.plant import load_plant_config
     from spacearm.offline.diagnosis.trajectory import Trajectory
     nominal = bench.nominal_for(load_plant_config(bench.base.NOMINAL), 6)
-    t = np.arange(0.0, 6.0, bench.DT)
+    t = np.arange(0.0, 4.0, bench.DT)
     q = np.repeat(bench.home(6)[None, :], len(t), axis=0)
     q[:, 2] += 0.1 * np.sin(2 * math.pi * 0.3 * t)
     traj = Trajectory(t, q)
