@@ -4,7 +4,11 @@ joint 1 is a prismatic linear rail), sensor effects, out-of-catalogue effects an
 effect-free recordings, direct and made in real time; scored against the issue's targets.
 
     .venv/bin/python bench/bench_diagnosis_concealed.py [--cases 30] [--duration 40] [--seed 7001]
-        [--realtime 2] [--no-timing] [--families new]
+        [--realtime 2] [--no-timing] [--families new] [--jobs 2]
+
+--jobs N runs the cases in N worker processes (the draws stay in order in this one, so a seed
+gives the same cases for any N); each case's whole time (recording, reference replays,
+diagnosis, score) is printed beside the diagnosis time.
 
 --families new draws trajectories from families the diagnosis was never tuned on (Swevers
 et al.'s Fourier-series excitation, the real Panda recording's motions, slow ramps,
