@@ -192,10 +192,13 @@ class _CspDrive:
 def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray | None = None,
              dq_cmd: np.ndarray | None = None, settings: list[JointSettings] | None = None,
              limits: list[tuple[float, float]] | None = None, joints: list[int] | None = None,
-             t0: float = 0.0) -> SimTraces:
+             t0: float = 0.0, wrench: bool = True) -> SimTraces:
     """Replay commanded positions (N, n) through the plant; row k reports the plant after the
     command of row k-1. `joints` simulates only those columns (joints are independent unless
-    an environment couples them), which is what the diagnosis does per candidate effect."""
+    an environment couples them), which is what the diagnosis does per candidate effect.
+    `wrench=False` leaves the F/T channel at zero: the per-joint replays of the fits never
+    read it, and reading and rounding it every row cost about a tenth of such a replay (the
+    F/T sensor's noise has a generator of its own, so the joints' traces are the same)."""
     q_cmd = np.atleast_2d(np.asarray(q_cmd, float))
     rows, n = q_cmd.shape
     wanted = list(range(n)) if joints is None else list(joints)
@@ -218,7 +221,7 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     q = np.empty((rows, len(index)))
     dq = np.empty_like(q)
     tau = np.empty_like(q)
-    wrench = np.empty((rows, 6))
+    ft = np.zeros((rows, 6))
     fe = 0.0
     cols = q_cmd[:, index]
     if dq_cmd is not None:
@@ -240,12 +243,13 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
             raise SimulationDiverged(f"the simulated plant diverges at t = {t0 + dt * (r + 1):.3g} s "
                                      f"({type(exc).__name__})") from None
         fe = max([fe] + [abs(drive.q_ref - drive.joint.q_measured) for drive in drives])
-        w = plant.ft_reading()
-        wrench[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
-        wrench[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
+        if wrench:
+            w = plant.ft_reading()
+            ft[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
+            ft[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
         previous, previous_v = cols[r], vel[r]
     t = t0 + dt * np.arange(1, rows + 1)
     window = min((config.following_error[i] for i in index if i < len(config.following_error)), default=math.inf) \
         if isinstance(config, ArmPlant) else math.inf
     keep = [index.index(i) for i in wanted]
-    return SimTraces(t, cols[:, keep].copy(), q[:, keep], dq[:, keep], tau[:, keep], wrench, fe, window)
+    return SimTraces(t, cols[:, keep].copy(), q[:, keep], dq[:, keep], tau[:, keep], ft, fe, window)

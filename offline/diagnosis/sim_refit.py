@@ -52,7 +52,7 @@ def refine_size(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
         try:
             with np.errstate(all="raise"):
                 sim = simulate(apply(nominal, [fit]), q_cmd[:last], dt, q0=q0, joints=[j],
-                               dq_cmd=None if dq_cmd is None else dq_cmd[:last])
+                               dq_cmd=None if dq_cmd is None else dq_cmd[:last], wrench=False)
             r = (tau_real[:last] - sim.tau[:, 0])[rows[:last]]
         except (OverflowError, FloatingPointError, ValueError):
             return math.inf
@@ -92,7 +92,7 @@ def refine_stiction(fit: ChannelFit, nominal: PlantConfig, q_cmd: np.ndarray, dt
             try:
                 with np.errstate(all="raise"):
                     sim = simulate(apply(nominal, [trial]), q_cmd[:last], dt, q0=q0, joints=[j],
-                                   dq_cmd=None if dq_cmd is None else dq_cmd[:last])
+                                   dq_cmd=None if dq_cmd is None else dq_cmd[:last], wrench=False)
                 cache[key] = sim.tau[:, 0] if np.all(np.isfinite(sim.tau)) else None
             except (OverflowError, FloatingPointError, ValueError):
                 cache[key] = None
