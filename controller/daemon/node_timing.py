@@ -37,10 +37,10 @@ import numpy as np
 from spacearm.base.canopen.peer_timing import LATE_WAKE
 
 WINDOW = 250           # cycles (5 s at 20 ms)
-# of the wait budget: a SYNC answered later than this (or after it, in its period) counts as
-# late. Only the last tenth: a simulator computing its physics answers a few ms into an 8 ms
-# wait on any loaded machine (2-4 ms of CPU for the ORU cell), and that is on time.
-LATE_SHARE = 0.9
+# A cycle is late when its data came after the TPDO wait, later in its period: the cycle ran
+# on the previous data. An answer inside the wait is on time however far into it: a simulator
+# computing its physics answers 4-7 ms into the 8 ms wait on a loaded machine (the ORU cell's
+# contact world), and nothing the arm does depends on when within the wait it came.
 LATE_CYCLES = 0.05     # share of late cycles in the window that makes the nodes "late"
 HEARTBEAT_GAP = 1.5    # heartbeat periods between two heartbeats of one node: late ...
 HEARTBEAT_GAPS = 3     # ... when it happens this often in the window
@@ -138,7 +138,7 @@ class NodeTimingSummary:
     level: str                    # "ok" | "late" (answers late, arm still runs) | "starved" (data missing)
     io_wait_p99: float            # s from SYNC to this SYNC's last TPDO (capped at the budget)
     budget: float                 # s the cycle waits for them
-    late_cycles: int              # in the window: answered after LATE_SHARE of the budget
+    late_cycles: int              # in the window: data came after the wait (in its period)
     missing_cycles: int           # in the window: some TPDO did not come at all (the host not holding a vCPU)
     cycles: int
     heartbeat_gap: float          # worst gap between two heartbeats of a node, in heartbeat periods
@@ -156,6 +156,7 @@ class NodeTiming:
         self.budget = budget
         self._io_wait: deque[float] = deque(maxlen=window)
         self._missing: deque[bool] = deque(maxlen=window)
+        self._late: deque[bool] = deque(maxlen=window)
         self._host_stalled: deque[bool] = deque(maxlen=window)
         self._gaps: deque[tuple[float, str]] = deque(maxlen=window)
         self._last_heartbeat: dict[str, float | None] = {}
@@ -171,7 +172,7 @@ class NodeTiming:
         late, not missing data. starved: this process itself ran late (skipped cycles): the
         heartbeats it received meanwhile arrived late."""
         if last_answered_late and self._missing and self._missing[-1]:
-            self._missing[-1] = False          # its io_wait is the whole budget: counted as late
+            self._missing[-1], self._late[-1] = False, True
         k = len(self._missing)
         while host_stalled and k and self._missing[k - 1]:
             # the gap's first cycles, before the held vCPU showed (two samples): the host's too
@@ -179,6 +180,7 @@ class NodeTiming:
             self._missing[k], self._host_stalled[k] = False, True
         self._io_wait.append(io_wait)
         self._missing.append(not complete and not host_stalled)
+        self._late.append(False)
         self._host_stalled.append(host_stalled and not complete)
         self._since_stall = 0 if host_stalled or starved else self._since_stall + 1
         worst = (0.0, "")
@@ -202,8 +204,7 @@ class NodeTiming:
         n = len(io_wait)
         waits = np.array(io_wait, float) if n else np.zeros(1)
         p99 = float(np.percentile(waits, 99))
-        stalled = np.array(stalled_cycles[-n:], bool) if n else np.zeros(1, bool)
-        late = int(np.sum((waits > LATE_SHARE * self.budget) & ~stalled)) if self.budget > 0 else 0
+        late = sum(list(self._late))
         missing = int(sum(missing_cycles))
         run = longest_run(missing_cycles)
         gap, node = max(heartbeat_gaps, default=(0.0, ""))
@@ -212,8 +213,8 @@ class NodeTiming:
             level, what = "starved", f"{missing} of the last {n} cycles missed process data"
         elif n and late > LATE_CYCLES * n:
             level = "late"
-            what = (f"{late} of the last {n} cycles answered after {100 * LATE_SHARE:.0f} % of the "
-                    f"{1e3 * self.budget:.1f} ms wait")
+            what = (f"the data of {late} of the last {n} cycles came after the {1e3 * self.budget:.1f} ms "
+                    "wait (those cycles ran on the previous data)")
         elif gap >= HEARTBEAT_SERIOUS or gaps >= HEARTBEAT_GAPS:
             level, what = "late", f"heartbeats of {node} {gap:.1f} periods apart"
         else:

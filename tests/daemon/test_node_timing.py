@@ -26,20 +26,32 @@ def test_nodes_answering_early_are_ok():
     assert summary.level == "ok" and summary.late_cycles == 0 and summary.io_wait_p99 == 0.001
 
 
-def test_answers_in_the_last_tenth_of_the_budget_are_reported_with_advice():
+def answers_after_the_wait(timing: NodeTiming, cycles: int) -> None:
+    """Each cycle's data missing at the read, then come later in its period (answered late)."""
+    for k in range(cycles):
+        timing.add(BUDGET, False, {}, last_answered_late=k > 0)
+    timing.add(0.001, True, {}, last_answered_late=True)
+
+
+def test_data_after_the_wait_in_more_than_5_percent_of_cycles_is_reported_with_advice():
     timing = NodeTiming(BUDGET)
-    feed(timing, 200, 0.001)
-    feed(timing, 50, 0.0075)
+    feed(timing, 224, 0.001)
+    answers_after_the_wait(timing, 25)
     summary = timing.summary()
-    assert summary.level == "late" and summary.late_cycles == 50
+    assert summary.level == "late" and summary.late_cycles == 25 and summary.missing_cycles == 0
+    assert "the data of 25 of the last 250 cycles came after the 8.0 ms wait" in summary.message
     assert "--rt-priority 50" in summary.message
+    few = NodeTiming(BUDGET)
+    feed(few, 240, 0.001)
+    answers_after_the_wait(few, 10)
+    assert few.summary().level == "ok"
 
 
-def test_answers_well_inside_the_budget_are_on_time_however_many():
-    """A simulator computing its physics answers 6 ms into the 8 ms wait on a loaded machine."""
+def test_answers_inside_the_wait_are_on_time_however_late_in_it():
+    """A simulator computing its physics answers 4-7 ms into the 8 ms wait on a loaded machine."""
     timing = NodeTiming(BUDGET)
-    feed(timing, 250, 0.006)
-    assert timing.summary().level == "ok"
+    feed(timing, 250, 0.0079)
+    assert timing.summary().level == "ok" and timing.summary().late_cycles == 0
 
 
 def test_a_cycle_whose_data_came_after_the_wait_in_its_period_is_late_not_missing():
@@ -235,8 +247,8 @@ def test_the_first_cycles_of_a_gap_before_the_held_vcpu_showed_are_the_hosts_too
 
 def test_late_answers_beside_real_time_peers_on_time_do_not_advise_rt_priority():
     timing = NodeTiming(BUDGET)
-    feed(timing, 200, 0.001)
-    feed(timing, 50, 0.0075)
+    feed(timing, 224, 0.001)
+    answers_after_the_wait(timing, 25)
     summary = timing.summary({"simulator": _fifo_reports(100.0, [0.001] * 5), "hub": _fifo_reports(100.0, [0.001] * 5)},
                              100.0)
     assert summary.level == "late" and "--rt-priority" not in summary.message
