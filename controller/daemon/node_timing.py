@@ -175,7 +175,7 @@ class NodeTiming:
             self._missing[-1], self._late[-1] = False, True
         k = len(self._missing)
         while host_stalled and k and self._missing[k - 1]:
-            # the gap's first cycles, before the held vCPU showed (two samples): the host's too
+            # the gap's first cycles, before the held vCPU showed (HostStallWatch.HELD): the host's too
             k -= 1
             self._missing[k], self._host_stalled[k] = False, True
         self._io_wait.append(io_wait)
@@ -199,8 +199,7 @@ class NodeTiming:
         # copies first: the cycle thread appends while an API thread asks (a deque mutated
         # during iteration raised in `status` polled every 10 ms); list() copies under the GIL
         io_wait, missing_cycles, heartbeat_gaps = list(self._io_wait), list(self._missing), list(self._gaps)
-        stalled_cycles = list(self._host_stalled)
-        host_stalled = sum(stalled_cycles)
+        host_stalled = sum(list(self._host_stalled))
         n = len(io_wait)
         waits = np.array(io_wait, float) if n else np.zeros(1)
         p99 = float(np.percentile(waits, 99))
