@@ -48,6 +48,7 @@ HEARTBEAT_SERIOUS = 2.0   # periods: once is enough (the stop comes at 2.5)
 MISSING_CYCLES = 3     # cycles without all process data in the window: "starved" ...
 MISSING_RUN = 2        # ... or this many in a row (one alone, on a loaded machine, is said, not a banner)
 STALL_GAP_CYCLES = 15  # a heartbeat gap ending this soon after a host stall or a late cycle is theirs
+HOST_GAP_SLACK = 0.010  # s: a heartbeat this much later than a peer's host-held wake is still the host's
 PEER_LATE = 0.020      # s: a wake this late (a whole 20 ms cycle) ...
 PEER_LATE_REPORTS = 3  # ... in this many of a peer's reports in its window makes it late
 PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's reach)
@@ -158,7 +159,7 @@ class NodeTiming:
         self._missing: deque[bool] = deque(maxlen=window)
         self._late: deque[bool] = deque(maxlen=window)
         self._host_stalled: deque[bool] = deque(maxlen=window)
-        self._gaps: deque[tuple[float, str]] = deque(maxlen=window)
+        self._gaps: deque[tuple[float, str, float]] = deque(maxlen=window)   # periods, node, s late
         self._last_heartbeat: dict[str, float | None] = {}
         self._peer_late: dict[str, bool] = {}
         self._since_stall = STALL_GAP_CYCLES     # cycles since the host or this process last stalled
@@ -183,12 +184,12 @@ class NodeTiming:
         self._late.append(False)
         self._host_stalled.append(host_stalled and not complete)
         self._since_stall = 0 if host_stalled or starved else self._since_stall + 1
-        worst = (0.0, "")
+        worst = (0.0, "", 0.0)
         for name, (last, period) in heartbeats.items():
             previous = self._last_heartbeat.get(name)
             if last is not None and previous is not None and last != previous and period > 0:
                 gap = (last - previous) / period
-                worst = max(worst, (gap, name))
+                worst = max(worst, (gap, name, last - previous - period))
             self._last_heartbeat[name] = last
         if worst[1] and self._since_stall >= STALL_GAP_CYCLES:   # else the stall's gap, not the node's
             self._gaps.append(worst)
@@ -199,6 +200,13 @@ class NodeTiming:
         # copies first: the cycle thread appends while an API thread asks (a deque mutated
         # during iteration raised in `status` polled every 10 ms); list() copies under the GIL
         io_wait, missing_cycles, heartbeat_gaps = list(self._io_wait), list(self._missing), list(self._gaps)
+        peers = {name: p for name, r in (peer_reports or {}).items()
+                 if (p := peer_summary(name, r, now, self._peer_late.get(name, False)))}
+        # a peer whose timer the host held (its own report) sent its heartbeats late by as much:
+        # gaps no longer than that are the host's (its SYNC answers may have come from a thread
+        # on the other vCPU, so no data went missing for the daemon to see the stall)
+        host_held = max((p.max_lateness for p in peers.values() if p.cause == "host"), default=-1.0)
+        heartbeat_gaps = [(g, name) for g, name, late in heartbeat_gaps if late > host_held + HOST_GAP_SLACK]
         host_stalled = sum(list(self._host_stalled))
         n = len(io_wait)
         waits = np.array(io_wait, float) if n else np.zeros(1)
@@ -222,8 +230,6 @@ class NodeTiming:
         if host_stalled:
             what += (f"; the host held a vCPU in {host_stalled} of the last {n} cycles (CPU steal): their "
                      "missing data is the host's, not the nodes'")
-        peers = {name: p for name, r in (peer_reports or {}).items()
-                 if (p := peer_summary(name, r, now, self._peer_late.get(name, False)))}
         self._peer_late = {name: p.level == "late" for name, p in peers.items()}
         behind = [p.message for p in peers.values() if p.level != "ok"]
         if behind:

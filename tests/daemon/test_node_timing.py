@@ -196,6 +196,24 @@ def test_a_heartbeat_gap_the_host_stall_made_is_no_banner():
     assert run(stalled=False) == "late" and run(stalled=True) == "ok"
 
 
+def test_heartbeat_gaps_no_longer_than_a_host_held_wake_of_the_simulator_are_the_hosts():
+    """The host held the simulator's timer (its report: 95 ms, cause host) while its SYNC answers
+    came on time from another thread: three gaps 1.9 periods apart are the host's; with the
+    same report naming a core, or gaps longer than the stall, they are the nodes'."""
+    def summary(cause: str, late_by: float) -> str:
+        timing = NodeTiming(BUDGET)
+        beats = [0.0]
+        for k in range(3):
+            beats += [beats[-1] + 0.1 * j for j in (1, 2, 3)] + [beats[-1] + 0.4 + late_by]
+        t = 0.0
+        for _ in range(int((beats[-1] + 0.1) / 0.02)):
+            t += 0.02
+            timing.add(0.001, True, {"joint_1": (max(b for b in beats if b <= t + 1e-9), HB)})
+        return timing.summary({"simulator": _fifo_reports(10.0, [0.001] * 4 + [0.095], cause)}, 10.0).level
+    assert summary("host", 0.09) == "ok"
+    assert summary("core", 0.09) == "late" and summary("host", 0.15) == "late"
+
+
 def test_a_heartbeat_gap_while_this_process_itself_ran_late_is_no_banner():
     timing = NodeTiming(BUDGET)
     feed(timing, 100, 0.001)
