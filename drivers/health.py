@@ -129,7 +129,9 @@ class HealthMonitor:
         (informational) instead of `heartbeat_lost`. A node that really went silent is still
         declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
-        heartbeat periods holds whatever the load."""
+        heartbeat periods holds whatever the load - but for one case: right after a starved
+        pass no silence is judged until some node is heard again (at most one period more;
+        _nobody_heard_since), since the nodes' host may have been starved with this process."""
         if self.timer_priority:
             self.timer_scheduling = use_fifo(self.timer_priority) or describe()
         factor = self.config.bus.heartbeat_loss_factor
@@ -140,6 +142,7 @@ class HealthMonitor:
                              (self.config.bus.master_heartbeat_timeout - period) / 2))
         self._next_own_heartbeat = time.monotonic()
         due = self._next_own_heartbeat
+        starved_at = float("-inf")      # monotonic time of the last starved pass
         while not self._stop.wait(max(MONITOR_MIN_SLEEP, due - time.monotonic())):
             now = time.monotonic()
             excess = now - due - STARVED_SLACK
@@ -162,9 +165,12 @@ class HealthMonitor:
                     self.stats.starved_time += excess
                     self._excuse(now, excess, factor)
                     due = now + RECHECK_AFTER_STARVED
+                    starved_at = now
                     continue
                 if self._line_switching(now):
                     continue        # silence of a bus line switch, bounded (drivers/line_redundancy.py)
+                if self._nobody_heard_since(starved_at, now):
+                    continue
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
@@ -175,6 +181,17 @@ class HealthMonitor:
                                     f"period {cfg.heartbeat_period:.3f} s)")
                         self._expected = None
                         self._cv.notify_all()
+
+    def _nobody_heard_since(self, starved_at: float, now: float) -> bool:
+        """Right after a starved pass, one node's silence is evidence only once the path it
+        shares with the others is seen working: some node heard since. Until then (at most one
+        heartbeat period) the nodes may be catching up themselves - a simulator in this
+        process, or on the same held CPU, was starved too."""
+        longest = max((cfg.heartbeat_period for cfg in self.config.nodes), default=0.0)
+        if now - starved_at >= longest:
+            return False
+        return not any(h.last_heartbeat is not None and h.last_heartbeat > starved_at
+                       for h in self.health.values())
 
     def _lockstep_health(self, now: float) -> None:
         """Lockstep, at every SYNC (under the network's lock): the controller's heartbeat when
