@@ -119,7 +119,6 @@ class Daemon:
         # lockstep waits as long as the nodes take, so only the heartbeats say anything there
         self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
         self._reported_level = "ok"
-        self._missing_last_cycle: tuple[str, ...] = ()   # nodes missing at the last cycle's read
         # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
         # A factory builds a Mode from validated arguments; composite modes (the ORU task
         # flow) build their sub-modes through the same registry.
@@ -270,12 +269,13 @@ class Daemon:
 
     def _watch_nodes(self, m: Measurement, starved: bool) -> None:
         network = self.hardware.network
+        # the snapshot is still the last cycle's: the nodes missing at its read
+        last_missing = self.snapshot.measurement.missing if self.snapshot is not None else ()
         self.node_timing.add(self.hardware.last_io_wait, not m.missing,
                              {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
                               for name, h in network.health.items()}, host_stalled=m.host_stalled,
                              last_answered_late=bool(m.answered_late)
-                             and set(m.answered_late) >= set(self._missing_last_cycle), starved=starved)
-        self._missing_last_cycle = m.missing
+                             and set(m.answered_late) >= set(last_missing), starved=starved)
         if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
             summary = self.node_timing_summary()
             if summary.level != self._reported_level:
