@@ -98,9 +98,7 @@ class CameraPoseModel:
         s = e[0]
         p, z = T[:, :3, 3], T[:, :3, 2]
         zp = np.einsum("ni,ni->n", z, p)
-        r = np.empty((len(T), 6))
-        r[:, :3] = measured[:, :3, 3] - (p + s * zp[:, None] * z)
-        r[:, 3:] = rotvec_batch(measured[:, :3, :3] @ np.swapaxes(T[:, :3, :3], 1, 2))
+        r = PoseModel().residual(self.predict(T, e), Jt, e, measured)[0]   # the scale moves no rotation
         # d(zp z) = (z.dp + (w x z).p) z + zp (w x z), with (w x z).p = w.(z x p) and w x z = -[z]x w
         dp, w = Jt[:, :3], Jt[:, 3:]
         dzp = np.einsum("ni,nip->np", z, dp) + np.einsum("ni,nip->np", np.cross(z, p), w)

@@ -81,8 +81,12 @@ def validation_day_registration(fit: TiagoFit, sigma: float = SIGMA) -> tuple[fl
     em = fit.model
     vp = CompositeProblem(em, [Block(PointModel(), Qv, Pv, sigma)], em.frame_names("world"), fit.report.result.x)
     mean = vp.position_errors(vp.x0)[0].mean(axis=0)
-    e = vp.position_errors(lm(vp).x)[0]
-    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1)))), mean
+    return _rms_distance(vp.position_errors(lm(vp).x)[0]), mean
+
+
+def _rms_distance(e: Array) -> float:
+    """RMS of the lengths of position errors (N, 3)."""
+    return float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))
 
 
 def day_to_day_repeatability(tol: float = 1e-3) -> tuple[Array, float, float]:
@@ -101,8 +105,7 @@ def day_to_day_repeatability(tol: float = 1e-3) -> tuple[Array, float, float]:
     A, B = Pt[hit], Pv[rows]
     T = kabsch(A, B)
     moved = A @ T[:3, :3].T + T[:3, 3]
-    rms = lambda e: float(np.sqrt(np.mean(np.sum(e ** 2, axis=1))))  # noqa: E731
-    return rows, rms(B - A), rms(B - moved)
+    return rows, _rms_distance(B - A), _rms_distance(B - moved)
 
 
 def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0),
