@@ -63,6 +63,7 @@ class NetworkStats:
     expected_tpdos: int = 0   # TPDOs the SYNCs sent so far asked for (live OPERATIONAL nodes)
     syncs_sent: int = 0
     tpdo_timeouts: int = 0
+    syncs_kept_off: int = 0   # SYNCs a line fault kept off a redundant pair's active line (nobody could answer)
     unknown: int = 0      # standard frames nobody listens to
     malformed: int = 0    # known service, wrong length
     ignored: int = 0      # error, remote, extended-ID frames
@@ -179,6 +180,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self._next_own_heartbeat = float("inf")        # wall-clock heartbeat producer (health.py), set by its timer
         self._own_heartbeat_lock = threading.Lock()
         self._lockstep_wait_expired = 0.0     # s of the last TPDO wait that ran out
+        self._sync_kept_off = False           # the last SYNC never entered the line (cyclic_io.send_sync)
         self._connected = False
         self._stop = threading.Event()
         self._monitor: threading.Thread | None = None

@@ -208,14 +208,10 @@ def start_at(path, posture, plant: str) -> str:
     return str(path)
 
 
-# Not in the vcan VM subset (no vcan_vm mark) yet, issue 34 open: its one run there (2026-11-27,
-# `hil_tests.vm.runner --vm --paths hil_tests/test_redundancy_flow.py`, host load 5-11) enabled
-# after 189 s, then lost joint_2 before the first cut: a 0.75 s TPDO wait that ran out was 0.77 s
-# of observed silence. With the full-scale wait above it passed there once (2026-11-27, 569 s,
-# host load ~3): too dear for the subset's budget (the whole subset takes ~390 s). A third of it is
-# waiting, not work: on the host at SPACEARM_TIME_SCALE=15 it takes 191 s wall for 18 s of CPU,
-# each cut line costing ~5 cycles of the 7.5 s TPDO wait (lockstep waits for a TPDO that a cut line
-# never brings, so that whether one arrives never depends on timing). Here it runs on a virtual pair.
+# In the vcan VM subset. A cycle whose SYNC a cut line kept off costs no wait (no node got it:
+# drivers/cyclic_io.py); a cycle whose SYNC reached the new line before the nodes followed
+# waits out the scaled TPDO wait (7.5 s there), ~2-3 cycles a cut.
+@pytest.mark.vcan_vm
 @pytest.mark.timeout(900)      # the VM: bring-up alone took 189 s to > 300 s there at host load 5-19
 def test_short_moves_and_impedance_through_cuts_each_way_then_both_lost(request, tmp_path, time_scale):
     """The cheap variant for the vcan VM (each cycle there costs ~15 host cycles): two short

@@ -260,15 +260,21 @@ class RedundantBus(can.BusABC):
             if self._admit(line, msg.arbitration_id, data):
                 self.lines[line].send(msg, timeout)
 
-    def send_frame(self, can_id: int, data: bytes) -> None:
+    def send_frame(self, can_id: int, data: bytes) -> bool:
+        """Send one frame; False if a line fault kept it off every line it was sent on. A real
+        controller knows this too: a frame nobody received is never acknowledged."""
         if self.tx_router is None:      # the master: the active line only
             line = self.active
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
-            return
+                return True
+            return False
+        entered = False
         for line in self._tx_lines(can_id):
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
+                entered = True
+        return entered
 
     def send_frames(self, frames) -> None:
         """A burst of (can_id, data): each line's share in one write, order kept per line."""

@@ -275,7 +275,8 @@ class Daemon:
                              {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
                               for name, h in network.health.items()}, host_stalled=m.host_stalled,
                              last_answered_late=bool(m.answered_late)
-                             and set(m.answered_late) >= set(last_missing), starved=starved)
+                             and set(m.answered_late) >= set(last_missing), starved=starved,
+                             bridged=m.bridged)
         if self.stats.cycles % 50 == 0:         # once a second: say it when the level changes
             summary = self.node_timing_summary()
             if summary.level != self._reported_level:

@@ -159,19 +159,22 @@ class NodeTiming:
         self._missing: deque[bool] = deque(maxlen=window)
         self._late: deque[bool] = deque(maxlen=window)
         self._host_stalled: deque[bool] = deque(maxlen=window)
+        self._bridged: deque[bool] = deque(maxlen=window)
         self._gaps: deque[tuple[float, str, float]] = deque(maxlen=window)   # periods, node, s late
         self._last_heartbeat: dict[str, float | None] = {}
         self._peer_late: dict[str, bool] = {}
         self._since_stall = STALL_GAP_CYCLES     # cycles since the host or this process last stalled
 
     def add(self, io_wait: float, complete: bool, heartbeats: dict[str, tuple[float | None, float]],
-            host_stalled: bool = False, last_answered_late: bool = False, starved: bool = False) -> None:
+            host_stalled: bool = False, last_answered_late: bool = False, starved: bool = False,
+            bridged: bool = False) -> None:
         """One cycle: its wait for TPDOs, whether they all came, and each node's (last heartbeat
         time, heartbeat period) as the network saw them. host_stalled: the host held a vCPU in
         this cycle's gap (the gap's missing cycles are the host's). last_answered_late: every node
         missing at the last cycle's read sent its data later in that period - that cycle was
         late, not missing data. starved: this process itself ran late (skipped cycles): the
-        heartbeats it received meanwhile arrived late."""
+        heartbeats it received meanwhile arrived late. bridged: a bus line switch was under way
+        (drivers/line_redundancy.py): its missing data and heartbeat gaps are the cut line's."""
         if last_answered_late and self._missing and self._missing[-1]:
             self._missing[-1], self._late[-1] = False, True
         k = len(self._missing)
@@ -180,10 +183,11 @@ class NodeTiming:
             k -= 1
             self._missing[k], self._host_stalled[k] = False, True
         self._io_wait.append(io_wait)
-        self._missing.append(not complete and not host_stalled)
+        self._missing.append(not complete and not host_stalled and not bridged)
         self._late.append(False)
         self._host_stalled.append(host_stalled and not complete)
-        self._since_stall = 0 if host_stalled or starved else self._since_stall + 1
+        self._bridged.append(bridged and not complete)
+        self._since_stall = 0 if host_stalled or starved or bridged else self._since_stall + 1
         worst = (0.0, "", 0.0)
         for name, (last, period) in heartbeats.items():
             previous = self._last_heartbeat.get(name)
@@ -230,6 +234,8 @@ class NodeTiming:
         if host_stalled:
             what += (f"; the host held a vCPU in {host_stalled} of the last {n} cycles (CPU steal): their "
                      "missing data is the host's, not the nodes'")
+        if bridged := sum(list(self._bridged)):
+            what += f"; {bridged} of the last {n} cycles bridged a bus line switch (their data was on the cut line)"
         self._peer_late = {name: p.level == "late" for name, p in peers.items()}
         behind = [p.message for p in peers.values() if p.level != "ok"]
         if behind:

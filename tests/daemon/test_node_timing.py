@@ -284,3 +284,22 @@ def test_one_heartbeat_gap_is_no_banner_repeated_or_long_ones_are():
     assert timing.summary().level == "ok"
     beats(timing, [20.0, 20.21])                               # 2.1 periods: near the 2.5-period stop
     assert timing.summary().level == "late"
+
+
+def test_data_missing_while_a_bus_line_switch_bridges_it_is_the_lines_not_the_nodes():
+    """A cut line: the cycles until the network is on the other line miss data, and the nodes'
+    heartbeats of the cut line never come. Both are the switch's (said, no banner, no advice to
+    run anything at a real-time priority); the same cycles with no switch are the nodes'."""
+    def run(bridged: bool):
+        timing = NodeTiming(BUDGET)
+        feed(timing, 240, 0.001)
+        timing.add(0.001, True, {"joint_2": (10.0, 0.1)})
+        for _ in range(5):
+            timing.add(BUDGET, False, {"joint_2": (10.0, 0.1)}, bridged=bridged)
+        timing.add(0.001, True, {"joint_2": (10.7, 0.1)})     # heard again on the other line
+        return timing.summary()
+    switch, nodes = run(True), run(False)
+    assert switch.level == "ok" and switch.missing_cycles == 0 and switch.heartbeat_gap < 2.0, switch
+    assert "5 of the last 247 cycles bridged a bus line switch" in switch.message
+    assert "--rt-priority" not in switch.message
+    assert nodes.level == "starved" and nodes.missing_cycles == 5

@@ -99,3 +99,23 @@ def test_intermittent_line_moves_the_network_and_nothing_faults(pair):
     pair.run(1.0)
     assert pair.master.active == start ^ 1 and set(pair.node_lines().values()) == {start ^ 1}
     assert no_faults(pair, cut_at)
+
+
+def test_a_sync_the_cut_line_kept_off_is_not_waited_for_and_is_no_silence(pair):
+    """A SYNC a line fault kept off reached no node (the simulator counts none), so nothing can
+    answer it: the TPDO wait ends at once, counts no timeout and observes no silence (a lockstep
+    cycle on a cut line used to wait out its whole timeout, 7.5 s in the vcan VM). Once the line
+    carries the SYNC again, the nodes answer it and the wait ends complete."""
+    pair.run(0.2)
+    line = pair.master.active
+    syncs, timeouts = pair.sim.stats.syncs, pair.net.stats.tpdo_timeouts
+    pair.cut(line)
+    pair.net.send_sync()
+    assert pair.net.wait_all_tpdos(timeout=5.0) is False
+    assert pair.sim.stats.syncs == syncs, "the kept-off SYNC reached the simulator"
+    assert pair.net.stats.syncs_kept_off == 1
+    assert pair.net.stats.tpdo_timeouts == timeouts and pair.net._lockstep_wait_expired == 0.0
+    pair.restore(line)
+    pair.net.send_sync()
+    assert pair.net.wait_all_tpdos(timeout=5.0) is True
+    assert pair.sim.stats.syncs == syncs + 1 and pair.net.stats.syncs_kept_off == 1
