@@ -224,7 +224,10 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
                   "pitch (issue 30 report, not re-run): the wrist's four markers in the fit (marker 1 scored; 3.61 mm), "
                   "Huber-weighted postures with the scale from the residuals (no outlier: 6 weights 0.71-0.98, 2.950 mm), "
                   "each posture weighted by its own marker_std_mm (2.971 mm), and a prior width per D-H group chosen by "
-                  "the leave-one-out (3.21 -> 2.76 mm on the identification day, 3.755 mm on the validation day)")
+                  "the leave-one-out (3.21 -> 2.76 mm on the identification day, 3.755 mm on the validation day), the "
+                  "default prior (0.5 deg / 5 mm) under the group selection (2.98 mm on the identification day, 4.171 mm), "
+                  "groups chosen by the error on each joint's outer 20 % of postures fitted from the rest, an "
+                  "extrapolation criterion (drops a_i and alpha_i: 3.463 mm)")
 
 
 def per_joint(ours: dict | None) -> None:
@@ -289,7 +292,9 @@ def bench_fr3(steal: CpuSteal) -> None:
               "and in the session that added the board's pitch (issue 30 report, not re-run): the D-H prior "
               "0.1 deg / 1 mm to 5 deg / 50 mm picked per split by the training leave-one-out (1.272 mm), the depth "
               "scale on top of the board's pitch (1.279 mm), a robust loss (the Huber threshold of the view covariance "
-              "1.0-3.5 or none: 1.314-1.380 mm without the board term): none below 1.27 mm")
+              "1.0-3.5 or none: 1.314-1.380 mm without the board term), a once-per-turn error per joint on top of "
+              "the board's pitch (a sin q or a cos q term: 1.403 / 1.367 mm, though it lowers the training "
+              "leave-one-out in most splits): none below 1.27 mm")
 
 
 def bench_draw_wire(steal: CpuSteal, cases: int = 5) -> None:
