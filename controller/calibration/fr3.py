@@ -6,7 +6,10 @@ arm's modified D-H errors. Two fits per random 80/34 split:
   registration  only the 12 frame parameters,
   full          frames + the identifiable D-H parameters (identifiability on the training set),
 both weighted LM with noise levels re-estimated from the registration residuals, the full fit
-with a weak prior on the D-H errors (MAP) so that 80 postures do not overfit.
+with a weak prior on the D-H errors (MAP) so that 80 postures do not overfit. By default each
+split's full fit is made with and without the board's pitch per axis (BoardScaleModel) and keeps
+the one with the lower leave-one-view-out error on its own training views (by MIN_GAIN), so the
+held-out views take no part in the choice.
 """
 from __future__ import annotations
 
@@ -23,9 +26,11 @@ from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.datafile import DataFileError
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import find_identifiable
-from spacearm.controller.calibration.measurement_models import CameraPoseModel, PoseModel
+from spacearm.controller.calibration.fit_checks import Priors
+from spacearm.controller.calibration.measurement_models import BoardScaleModel, CameraPoseModel, PoseModel
 from spacearm.controller.calibration.residuals import Problem
 from spacearm.controller.calibration.solvers import CalibrationResult, lm
+from spacearm.controller.calibration.trusted_fit import loo_position_rms
 from spacearm.controller.calibration.validation import compare_poses
 from spacearm.base.kinematics import KinematicModel
 from spacearm.base.spatial import rotz, trans
@@ -39,6 +44,7 @@ FR3_ALPHA = [0, -np.pi / 2, np.pi / 2, np.pi / 2, -np.pi / 2, np.pi / 2, np.pi /
 FR3_FLANGE = 0.107
 FR3_Q_MIN = [-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159]
 FR3_Q_MAX = [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]
+MIN_GAIN = 0.02      # a camera term must lower the training leave-one-out RMS by 2 % (as group_selection)
 
 
 def fr3_kinematics() -> KinematicModel:
@@ -115,6 +121,7 @@ class SplitResult:
     held_pos_rms: dict[str, float]    # m
     held_rot_rms: dict[str, float]    # rad
     held_pos_axes: dict[str, Array]   # m, RMS per board axis (x, y, z)
+    train_loo: float = float("nan")   # m, the full fit's leave-one-view-out position RMS on its training views
 
 
 def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
@@ -145,9 +152,10 @@ def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
 
 
 def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.radians(0.5),
-              prior_length: float = 5e-3, depth_scale: bool = False) -> SplitResult:
+              prior_length: float = 5e-3, depth_scale: bool = False, board_scale: bool = False) -> SplitResult:
     """`depth_scale`: the full fit also estimates the camera's depth scale (CameraPoseModel: a
-    focal length error scales every view's depth), a term of the camera, not of the arm."""
+    focal length error scales every view's depth), a term of the camera, not of the arm;
+    `board_scale`: the board's pitch along its x and y axes (BoardScaleModel) instead."""
     kin = fr3_kinematics()
     W0, cam0 = initial_frames(kin, data, train)
     em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board",
@@ -164,7 +172,7 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     free = ident.kept
     prior = np.array([np.inf if n in frames else (prior_length if n.split("_")[0] in ("a", "d")
                       else prior_angle) for n in free])
-    camera = CameraPoseModel() if depth_scale else PoseModel()
+    camera = BoardScaleModel() if board_scale else CameraPoseModel() if depth_scale else PoseModel()
     full = dataclasses.replace(reg, x=np.concatenate([reg.x, camera.extra_nominal]))
     free, prior = free + list(camera.extra_names), np.concatenate([prior, np.full(len(camera.extra_names), np.inf)])
     for _ in range(3):
@@ -172,6 +180,7 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
         problem = CompositeProblem(em, [block], free, x0=full.x)
         full = lm(problem, x_prior=problem.nominal(), sigma_prior=prior)
         full = dataclasses.replace(full, residuals=problem.block_residuals(full.x, jacobian=False)[0][0])
+    loo = loo_position_rms(problem, full.x, Priors(by_prefix=tuple(zip(free, prior))))
     pos, rot, axes = {}, {}, {}
     for name, res, model in (("registration", reg, PoseModel()), ("full", full, camera)):
         T = model.predict(em.poses(res.x[: em.n_params], data.Q[test]), res.x[em.n_params:])
@@ -179,15 +188,29 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
         pos[name] = float(np.sqrt(np.mean(st.pos_norm ** 2)))
         rot[name] = float(np.sqrt(np.mean(np.sum(st.rot ** 2, axis=1))))
         axes[name] = st.rms_pos
-    return SplitResult(reg, full, pos, rot, axes)
+    return SplitResult(reg, full, pos, rot, axes, loo)
+
+
+def fit_split_chosen(data: FR3Data, train: Array, test: Array) -> SplitResult:
+    """fit_split with or without the board's pitch per axis, whichever predicts the training
+    views better when each is left out (linearised leave-one-out, training views only)."""
+    rigid = fit_split(data, train, test)
+    board = fit_split(data, train, test, board_scale=True)
+    return board if board.train_loo < (1.0 - MIN_GAIN) * rigid.train_loo else rigid
+
+
+def _board_splits(results: list[SplitResult]) -> int:
+    return sum("camera_scale_x" in r.full.free for r in results)
 
 
 def _count_dh(names: list[str]) -> int:
-    return sum(1 for n in names if not n.startswith(("board_", "cam_")))
+    return sum(1 for n in names if not n.startswith(("board_", "cam_", "camera_")))
 
 
 def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
-              path: Path = DATA, depth_scale: bool = False) -> tuple[str, dict]:
+              path: Path = DATA, depth_scale: bool = False, choose_camera: bool = True) -> tuple[str, dict]:
+    """`choose_camera`: each split picks the board-pitch term by its training views (fit_split_chosen);
+    `depth_scale` (the focal length term instead) or choose_camera=False: one model in every split."""
     data = load_fr3(path)
     kin = fr3_kinematics()
     em = ErrorModel.from_kinematics(kin)
@@ -197,13 +220,18 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
     results = []
     for _ in range(splits):
         perm = rng.permutation(N)
-        results.append(fit_split(data, perm[:n_train], perm[n_train:], depth_scale=depth_scale))
+        if choose_camera and not depth_scale:
+            results.append(fit_split_chosen(data, perm[:n_train], perm[n_train:]))
+        else:
+            results.append(fit_split(data, perm[:n_train], perm[n_train:], depth_scale=depth_scale))
     lines = [f"FR3 eye-in-hand real data: {N} postures, {splits} random {n_train}/{N - n_train} splits",
              f"nominal model vs controller FK of the flange: max {chk.pos_norm.max() * 1e3:.4f} mm",
-             f"full fit estimates {len(results[0].full.free)} parameters: "
-             f"{_count_dh(results[0].full.free)} D-H + {len(results[0].full.free) - _count_dh(results[0].full.free)}"
-             " frame (the other frame parameters duplicate joint-1/joint-7 D-H ones)",
-             "weighted LM, noise covariance estimated in the camera frame, Huber IRLS, weak D-H prior", "",
+             f"full fit estimates {len(results[0].full.free)} parameters: {_count_dh(results[0].full.free)} D-H + "
+             f"{sum(n.startswith(('board_', 'cam_')) for n in results[0].full.free)} frame (the other frame parameters "
+             f"duplicate joint-1/joint-7 D-H ones) + {sum(n.startswith('camera_') for n in results[0].full.free)} camera",
+             "weighted LM, noise covariance estimated in the camera frame, Huber IRLS, weak D-H prior",
+             f"board pitch per axis (x, y) kept by the training views' leave-one-out in {_board_splits(results)} "
+             f"of {splits} splits", "",
              f"{'split':<7}{'reg pos mm':>12}{'reg ori deg':>13}{'full pos mm':>13}{'full ori deg':>14}"]
     for k, r in enumerate(results):
         lines.append(f"{k:<7}{r.held_pos_rms['registration'] * 1e3:>12.3f}"
@@ -213,6 +241,8 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
            for w in ("registration", "full") for q in ("pos", "rot")}
     med["full_pos_axes"] = np.median([r.held_pos_axes["full"] for r in results], axis=0)
     med["depth_scale"] = np.array([r.full.estimate.get("camera_depth_scale", np.nan) for r in results])
+    med["board_scale"] = np.array([[r.full.estimate.get(f"camera_scale_{a}", np.nan) for a in "xy"] for r in results])
+    med["board_splits"] = _board_splits(results)
     lines.append(f"{'median':<7}{med['registration_pos'] * 1e3:>12.3f}{np.degrees(med['registration_rot']):>13.3f}"
                  f"{med['full_pos'] * 1e3:>13.3f}{np.degrees(med['full_rot']):>14.3f}")
     lines.append("(held-out RMS of the position error norm and of the rotation angle)")

@@ -9,6 +9,10 @@ arm parameters and to the model's own extra parameters (anchor, plane, tool poin
   CameraPoseModel  6 rows  the camera's pose from its own view of a target (board_T_cam), with the
                        camera's depth scale: a focal length off by a fraction s scales the target's
                        depth along the optical axis by 1 + s; extra: <prefix>_depth_scale
+  BoardScaleModel  6 rows  the camera's pose from its view of a target whose pitch is off along
+                       the target's x and y axes by fractions s_x, s_y (a printed board's scale per
+                       print axis): the camera's position in the target frame scales by (1 + s) per
+                       axis; extra: <prefix>_scale_x, <prefix>_scale_y
   PointModel   3 rows  a point on the tool, p + R t (motion-capture marker, laser-tracker SMR);
                        extra: tool point t = (<prefix>_tx, _ty, _tz) in the tool frame
   RangeModel   1 row   distance from a fixed anchor to a point on the tool plus a length offset,
@@ -23,6 +27,7 @@ The measurement frame is the error model's world frame: its six small-motion par
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -65,7 +70,29 @@ class PoseModel:
 
 
 @dataclass(frozen=True)
-class CameraPoseModel:
+class _CameraView:
+    """A camera's pose in a target's frame from its own image of the target (board_T_cam), with
+    `terms` of the camera or the target (zero when exact) as the model's extra parameters."""
+    prefix: str = "camera"
+    name: str = "pose"
+    rows: int = 6
+    position_rows: tuple[int, ...] = (0, 1, 2)
+    terms: ClassVar[tuple[str, ...]] = ()
+
+    @property
+    def extra_names(self) -> tuple[str, ...]:
+        return tuple(f"{self.prefix}_{t}" for t in self.terms)
+
+    @property
+    def extra_nominal(self) -> Array:
+        return np.zeros(len(self.terms))
+
+    def as_rows(self, measured_or_predicted: Array) -> Array:
+        return measured_or_predicted[:, :3, 3]
+
+
+@dataclass(frozen=True)
+class CameraPoseModel(_CameraView):
     """The camera's pose in the target's frame from its own image of the target (PnP), whose
     distance along the optical axis is off by the fraction s of the focal length error.
 
@@ -75,18 +102,7 @@ class CameraPoseModel:
     tilt of the camera and already a tool-frame parameter; a wrong target size is a scale of every
     length, which the D-H and frame lengths carry; the depth scale is neither.
     """
-    prefix: str = "camera"
-    name: str = "pose"
-    rows: int = 6
-    position_rows: tuple[int, ...] = (0, 1, 2)
-
-    @property
-    def extra_names(self) -> tuple[str, ...]:
-        return (f"{self.prefix}_depth_scale",)
-
-    @property
-    def extra_nominal(self) -> Array:
-        return np.zeros(1)
+    terms: ClassVar[tuple[str, ...]] = ("depth_scale",)
 
     def predict(self, T: Array, e: Array) -> Array:
         out = T.copy()
@@ -109,8 +125,29 @@ class CameraPoseModel:
         A_e[:, :3, 0] = zp[:, None] * z
         return r, A, A_e
 
-    def as_rows(self, measured_or_predicted: Array) -> Array:
-        return measured_or_predicted[:, :3, 3]
+
+@dataclass(frozen=True)
+class BoardScaleModel(_CameraView):
+    """The camera's pose in the target's frame from its own image of a target whose pitch is off
+    by fractions (s_x, s_y) along the target's own x and y axes: the pose estimate places the
+    camera at (x (1 + s_x), y (1 + s_y), z) in the target frame. An equal scale of x, y and z is a
+    scale of every length (the D-H and frame lengths carry it), so with the lengths free this term
+    is the camera's lateral offsets against its height above the target; the rotation is untouched.
+    """
+    terms: ClassVar[tuple[str, ...]] = ("scale_x", "scale_y")
+
+    def predict(self, T: Array, e: Array) -> Array:
+        out = T.copy()
+        out[:, :2, 3] = T[:, :2, 3] * (1.0 + e[:2])
+        return out
+
+    def residual(self, T: Array, Jt: Array, e: Array, measured: Array) -> tuple[Array, Array, Array]:
+        r = PoseModel().residual(self.predict(T, e), Jt, e, measured)[0]
+        A = Jt.copy()
+        A[:, :2] *= (1.0 + e[:2])[None, :, None]
+        A_e = np.zeros((len(T), 6, 2))
+        A_e[:, 0, 0], A_e[:, 1, 1] = T[:, 0, 3], T[:, 1, 3]
+        return r, A, A_e
 
 
 @dataclass(frozen=True)
@@ -225,4 +262,4 @@ class PlaneModel:
         return np.reshape(values, (-1, 1))
 
 
-MeasurementModel = PoseModel | CameraPoseModel | PointModel | RangeModel | PlaneModel
+MeasurementModel = PoseModel | CameraPoseModel | BoardScaleModel | PointModel | RangeModel | PlaneModel

@@ -1,7 +1,11 @@
-"""The camera's depth scale (CameraPoseModel): a focal length off by a fraction s makes the
-camera's own pose estimate place the target (1 + s) times as deep along the optical axis. Checked
-against finite differences and against views rendered with a known scale at the real FR3 postures
-(the rigid arm + frames model cannot take that error, the camera model must find s)."""
+"""Terms of the camera's own pose estimate of its target, checked against finite differences and
+against views rendered with a known error at the real FR3 postures:
+- the depth scale (CameraPoseModel): a focal length off by a fraction s places the target (1 + s)
+  times as deep along the optical axis (the rigid arm + frames model cannot take that error);
+- the board's pitch per axis (BoardScaleModel): a target whose squares are off by (s_x, s_y) along
+  its own axes places the camera at (x (1 + s_x), y (1 + s_y), z) in the target frame; the per-split
+  choice (fit_split_chosen, the training views' leave-one-out only) must take the term when the
+  views carry it and leave it out when they do not."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,10 +14,11 @@ import pytest
 from spacearm.controller.calibration import fr3 as F
 from spacearm.controller.calibration.composite import Block, CompositeProblem
 from spacearm.controller.calibration.errormodel import ErrorModel
-from spacearm.controller.calibration.measurement_models import CameraPoseModel
+from spacearm.controller.calibration.measurement_models import BoardScaleModel, CameraPoseModel
 
 pytestmark = pytest.mark.skipif(not F.DATA.exists(), reason="FR3 data not available")
 TRUE_SCALE = 0.008           # a focal length 0.8 % off
+TRUE_PITCH = np.array([-0.008, -0.005])      # a board printed 0.8 % / 0.5 % small along x / y
 
 
 @pytest.fixture(scope="module")
@@ -25,16 +30,17 @@ def setup():
     return data, em
 
 
-def test_depth_scale_jacobian_matches_finite_differences(setup):
+@pytest.mark.parametrize("model, e", [(CameraPoseModel(), [0.02]), (BoardScaleModel(), [0.012, -0.018])])
+def test_camera_term_jacobian_matches_finite_differences(setup, model, e):
     data, em = setup
     rng = np.random.default_rng(4)
-    seen = CameraPoseModel().predict(em.poses(em.nominal, data.Q[:6]), np.array([0.015]))   # near the prediction,
-    pr = CompositeProblem(em, [Block(CameraPoseModel(), data.Q[:6], seen, 1e-3)], [])          # as at a solution
+    seen = model.predict(em.poses(em.nominal, data.Q[:6]), 0.75 * np.array(e))   # near the prediction,
+    pr = CompositeProblem(em, [Block(model, data.Q[:6], seen, 1e-3)], [])         # as at a solution
     x = pr.nominal() + rng.normal(0, 1e-3, len(pr.names))
-    x[-1] = 0.02
+    x[-len(e):] = e
     r, A = pr.residual_and_jacobian(x)
     h = 1e-7
-    for j in [0, 4, 9, 20, len(x) - 2, len(x) - 1]:
+    for j in [0, 4, 9, 20] + list(range(len(x) - len(e) - 1, len(x))):
         dx = np.zeros(len(x))
         dx[j] = h
         num = -(pr.residual_and_jacobian(x + dx)[0][:, 0] - pr.residual_and_jacobian(x - dx)[0][:, 0]) / (2 * h)
@@ -66,3 +72,30 @@ def test_a_focal_length_error_is_found_and_the_rigid_model_cannot_take_it(setup)
     assert camera.full.estimate["camera_depth_scale"] == pytest.approx(TRUE_SCALE, abs=5e-4)
     assert camera.held_pos_rms["full"] < 0.5e-3
     assert rigid.held_pos_rms["full"] > 2 * camera.held_pos_rms["full"]
+
+
+def test_board_pitch_scales_the_position_along_the_board_axes_only(setup):
+    data, em = setup
+    T = em.poses(em.nominal, data.Q[:5])
+    seen = BoardScaleModel().predict(T, TRUE_PITCH)
+    np.testing.assert_allclose(seen[:, :2, 3], T[:, :2, 3] * (1 + TRUE_PITCH), rtol=1e-12)
+    np.testing.assert_allclose(seen[:, 2, 3], T[:, 2, 3], atol=1e-15)
+    np.testing.assert_allclose(seen[:, :3, :3], T[:, :3, :3])
+
+
+def _pitched_views(data, em, pitch, seed):
+    seen = BoardScaleModel().predict(em.poses(em.nominal, data.Q), pitch)
+    seen[:, :3, 3] += np.random.default_rng(seed).normal(0.0, 1e-4, (len(seen), 3))
+    return F.FR3Data(data.Q, seen, data.base_T_flange)
+
+
+def test_training_views_choose_the_board_pitch_only_when_the_views_carry_it(setup):
+    data, em = setup
+    perm = np.random.default_rng(2).permutation(len(data.Q))
+    pitched = F.fit_split_chosen(_pitched_views(data, em, TRUE_PITCH, 8), perm[:80], perm[80:])
+    np.testing.assert_allclose([pitched.full.estimate.get(f"camera_scale_{a}", np.nan) for a in "xy"],
+                               TRUE_PITCH, atol=1e-3)
+    assert pitched.held_pos_rms["full"] < 0.5e-3
+    exact = F.fit_split_chosen(_pitched_views(data, em, np.zeros(2), 9), perm[:80], perm[80:])
+    assert "camera_scale_x" not in exact.full.free
+    assert exact.held_pos_rms["full"] < 0.5e-3
