@@ -33,7 +33,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SUBSET_ARGS = ["-m", "vcan_vm", "--transport", "socketcan"]
-DEFAULT_BUDGET = float(os.environ.get("SPACEARM_VM_BUDGET", "900"))  # kill limit, not the target (~7 min)
+DEFAULT_BUDGET = float(os.environ.get("SPACEARM_VM_BUDGET", "1500"))  # kill limit, not the target (~11-13 min)
 
 
 class VMUnavailable(RuntimeError):
