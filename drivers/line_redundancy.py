@@ -301,7 +301,8 @@ class LineRedundancyMaster:
                 events.append(LineEvent(now, LINES_LOST, self.bus.active,
                                         f"both bus lines lost: no node frame on line A or B for "
                                         f"{now - max(heard):.3f} s"))
-        self._emit(events)
+        if events:
+            self._emit(events)
 
     def bridging(self, now: float | None = None) -> bool:
         """Is a switch under way (missing process data is the switch, not node loss)?"""

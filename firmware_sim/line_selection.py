@@ -198,8 +198,16 @@ class LineSelection:
                     self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
+        # 1016h:1 as SimNode.param() last cached it, and the master it names: a timer pass (every
+        # node, several per SYNC period) parses it again only after a write or a reset dropped it
+        params = getattr(node, "_params", None)
+        master_key, master_read = (od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB), [None, None]
+
         def consumers(now: float) -> None:
-            master = rule.master() if rule is not None else None
+            value = params.get(master_key) if params is not None else None
+            if value is None or value is not master_read[0]:
+                master_read[0], master_read[1] = value, rule.master()
+            master = master_read[1]
             if master is not None:
                 last = node.consumer_last.get(master[0])
                 if last is not None and now - last > master[1]:
@@ -208,7 +216,9 @@ class LineSelection:
                         rule.master_missed(now, master[1])
             check_consumers(now)
 
-        node.on_heartbeat, node.check_consumers = heartbeat, consumers
+        node.on_heartbeat = heartbeat
+        if rule is not None:        # without the rule the node's own check is all there is
+            node.check_consumers = consumers
 
     def _gated(self, node, original):
         own_line = self.rules.get(node.node_id, _ON_LINE_A)
