@@ -214,8 +214,17 @@ class LineRedundancyMaster:
             events = self._absorb(now)
             if self.operational:
                 self.unanswered[line] += 1
-                events += self._decide(now)
-        self._emit(events)
+                # the usual cycle's SYNC is not judged (issue 34: its cost): every node heard on
+                # this line as of now, fewer SYNCs than SYNCS_UNANSWERED unanswered, no frame of
+                # the other line newer, the network not lost: _decide could only say "stay" (no
+                # silence, no node ahead on the other line, no search)
+                heard, other_last = self.heard[line], self.line_last[line ^ 1]
+                if not (self.unanswered[line] < SYNCS_UNANSWERED and not self.lost
+                        and len(heard) == len(self.node_ids) and min(heard.values()) >= now
+                        and (other_last is None or other_last <= now)):
+                    events += self._decide(now)
+        if events:
+            self._emit(events)
 
     # ------------------------------------------------------------------ the rule
     def _decide(self, now: float) -> list[LineEvent]:
@@ -292,7 +301,8 @@ class LineRedundancyMaster:
                 events.append(LineEvent(now, LINES_LOST, self.bus.active,
                                         f"both bus lines lost: no node frame on line A or B for "
                                         f"{now - max(heard):.3f} s"))
-        self._emit(events)
+        if events:
+            self._emit(events)
 
     def bridging(self, now: float | None = None) -> bool:
         """Is a switch under way (missing process data is the switch, not node loss)?"""

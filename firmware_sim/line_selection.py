@@ -132,10 +132,17 @@ class LineSelection:
             self._gate(node)
         self.bus.tx_router = self.tx_line
         self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
+        self._lines_changed()
         # no thread of its own: the simulator's timer runs timer_pass() (a thread more would cost
         # every pass of peer_timing's per-thread scan, and a wake-up every TICK)
 
     # ------------------------------------------------------------------ lines
+    def _lines_changed(self) -> None:
+        """After a node's line changed (a rule toggles only in timer_pass): the line every node
+        is on, if one, lets a burst skip the look-up per frame (RedundantBus.tx_common_line)."""
+        lines = {self.line_of(node) for node in self.sim.nodes.values()}
+        self.bus.tx_common_line = lines.pop() if len(lines) == 1 else None
+
     def line_of(self, node) -> int:
         rule = self.rules.get(node.node_id)
         return rule.line if rule is not None else 0
@@ -181,7 +188,7 @@ class LineSelection:
         rx = rx_state
 
         def heartbeat(producer: int, now: float) -> None:
-            line = getattr(rx, "line", None)      # hears(node), inlined: every node, every master heartbeat
+            line = rx.line       # hears(node), inlined: every node, every master heartbeat
             if line is not None and line != own_line.line:
                 return
             # only a node that searches or is due to toggle has anything to end here (master_heard)
@@ -191,8 +198,16 @@ class LineSelection:
                     self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
+        # 1016h:1 as SimNode.param() last cached it, and the master it names: a timer pass (every
+        # node, several per SYNC period) parses it again only after a write or a reset dropped it
+        params = getattr(node, "_params", None)
+        master_key, master_read = (od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB), [None, None]
+
         def consumers(now: float) -> None:
-            master = rule.master() if rule is not None else None
+            value = params.get(master_key) if params is not None else None
+            if value is None or value is not master_read[0]:
+                master_read[0], master_read[1] = value, rule.master()
+            master = master_read[1]
             if master is not None:
                 last = node.consumer_last.get(master[0])
                 if last is not None and now - last > master[1]:
@@ -201,15 +216,17 @@ class LineSelection:
                         rule.master_missed(now, master[1])
             check_consumers(now)
 
-        node.on_heartbeat, node.check_consumers = heartbeat, consumers
+        node.on_heartbeat = heartbeat
+        if rule is not None:        # without the rule the node's own check is all there is
+            node.check_consumers = consumers
 
     def _gated(self, node, original):
-        rule = self.rules.get(node.node_id)
+        own_line = self.rules.get(node.node_id, _ON_LINE_A)
         rx = rx_state
 
         def gated(*args):       # hears(node), inlined: it runs for every frame a node gets
-            line = getattr(rx, "line", None)
-            if line is None or line == (rule.line if rule is not None else 0):
+            line = rx.line
+            if line is None or line == own_line.line:
                 return original(*args)
             return None
         return gated
@@ -237,6 +254,7 @@ class LineSelection:
                 continue
             with nullcontext() if locked else self.sim._sync_lock:
                 kind = rule.toggle(now, master[1])
+                self._lines_changed()
                 self.events.append(LineEvent(time.monotonic(), node.name, "switch", rule.line))
                 node.next_heartbeat = 0.0     # the producer restarts on the new line
                 node.send_heartbeat()

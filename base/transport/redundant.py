@@ -23,7 +23,8 @@ The pair models ECSS-E-ST-50-15C's two bus access architectures in one class:
   line its sender listens on (None: on both, for frames of no node), and the simulator
   delivers a received frame only to the nodes listening on its line
   (firmware_sim/line_selection.py); `tx_owners[can_id].line`, where known, spares the router
-  call per frame of a burst.
+  call per frame of a burst, and `tx_common_line`, when set, is the line every sender of
+  `tx_owners` is on (a burst of known senders then goes there whole, no look-up per frame).
 
 Faults of one line (line_faults.py: cut, babble, stuck_dominant, error_passive,
 intermittent) are applied where a frame enters the line, so every receiver loses the same
@@ -31,9 +32,12 @@ frame, and again on receipt for the deterministic ones (a cut line also cuts fra
 plain bus attached to it).
 
 Cost: a second line must not make a cycle dearer (issue 34: <= 10 %). On the in-process pair a
-frame costs one fault check and the observers on top of one line; the thread-local is set only
+frame costs one call (each listener's per-frame function, built at attach time for its line and
+target), one fault check and the observers on top of one line; the thread-local is set only
 for listeners that read it (`needs_rx_line`, default True; the master's listener says False);
-a burst of the master goes to the active line in one call, with no per-frame routing.
+a burst goes to its line in one call, with no per-frame routing (the master's: the active line;
+the nodes': `tx_common_line` while they are all on one line); an unwatched frame of the master
+on a sound line is sent without `_admit`.
 
 Why a thread-local for the receive line: python-can's Listener API has no place for it,
 and the pair delivers each frame in the thread that reads it (the sender's thread on the
@@ -56,13 +60,18 @@ LINE_NAMES = ("A", "B")
 _READ_POLL = 0.1   # s: a line reader's recv timeout, bounds shutdown
 _can_id = itemgetter(0)
 
-_rx = threading.local()
+
+class _RxState(threading.local):
+    line: int | None = None     # every thread starts with it: a hot path reads `.line`, no getattr call
+
+
+_rx = _RxState()
 rx_state = _rx     # the thread-local behind rx_line(): `.line`, for per-frame hot paths
 
 
 def rx_line() -> int | None:
     """The line (0 = A, 1 = B) of the frame this thread is delivering, None off a pair."""
-    return getattr(_rx, "line", None)
+    return _rx.line
 
 
 def split_pair(spec: str) -> tuple[str, str] | None:
@@ -88,40 +97,52 @@ def line_channel(spec: str) -> str:
 
 class _LineListener(can.Listener):
     """Delivers one line's frames to an application listener in the sender's thread
-    (the in-process bus), tagged with the line."""
+    (the in-process bus), tagged with the line.
+
+    `on_frame` is built here, once, for this line and this target (issue 34: a second line must
+    cost a cycle almost nothing, and this runs for every frame): the line, its fault, the
+    target's handler and whether the target reads the thread-local are fixed at attach time,
+    so a frame pays no branch on them."""
 
     def __init__(self, pair: "RedundantBus", line: int, target: can.Listener):
         self.pair, self.line, self.target = pair, line, target
-        self._on_frame = getattr(target, "on_frame", None)
-        self._tags = getattr(target, "needs_rx_line", True)
-        self._fault = pair.faults[line]
+        self.on_frame = self._frame_handler(getattr(target, "on_frame", None),
+                                            getattr(target, "needs_rx_line", True))
 
-    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        # the hot path of every frame on the in-process bus: no fault, no method call
-        pair, line = self.pair, self.line
-        if self._fault.mode != "ok" and pair._rx_blocked(line):
-            return
-        note = pair.rx_note
-        if note is not None and line == pair.active and can_id & 0x780 != 0x700:
-            note[line].add(can_id)          # instead of the observers: the owner folds it in later
-        else:
-            for observer in pair.rx_observers:
-                observer(line, can_id, data, timestamp)
-        if line != pair.active and pair.standby_passes is not None and not pair.standby_passes(can_id):
-            return
-        if not self._tags and self._on_frame is not None:
-            self._on_frame(can_id, data, timestamp)
-            return
-        previous = getattr(_rx, "line", None)
-        _rx.line = line
-        try:
-            if self._on_frame is not None:
-                self._on_frame(can_id, data, timestamp)
-            else:
-                self.target.on_message_received(can.Message(
+    def _frame_handler(self, on_frame, tags: bool) -> Callable[[int, bytes, float], None]:
+        pair, line, target = self.pair, self.line, self.target
+        fault, blocked, rx = pair.faults[line], pair._rx_blocked, _rx
+        if on_frame is None:     # a listener of Messages only: one built per frame
+            def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
+                target.on_message_received(can.Message(
                     timestamp=timestamp, arbitration_id=can_id, data=data, is_extended_id=False, check=False))
-        finally:
-            _rx.line = previous
+
+        def deliver(can_id: int, data: bytes, timestamp: float) -> None:
+            if fault.mode != "ok" and blocked(line):
+                return
+            if line == pair.active:
+                note = pair.rx_note
+                if note is not None and can_id & 0x780 != 0x700:
+                    note[line].add(can_id)      # instead of the observers: the owner folds it in later
+                else:
+                    for observer in pair.rx_observers:
+                        observer(line, can_id, data, timestamp)
+            else:
+                for observer in pair.rx_observers:
+                    observer(line, can_id, data, timestamp)
+                passes = pair.standby_passes
+                if passes is not None and not passes(can_id):
+                    return
+            if not tags:          # fixed for this target: the master's listener reads no line
+                on_frame(can_id, data, timestamp)
+                return
+            previous = rx.line
+            rx.line = line
+            try:
+                on_frame(can_id, data, timestamp)
+            finally:
+                rx.line = previous
+        return deliver
 
     def on_message_received(self, msg: can.Message) -> None:
         if self.pair._rx_blocked(self.line):
@@ -162,6 +183,7 @@ class RedundantBus(can.BusABC):
         self.standby_passes: Callable[[int], bool] | None = None
         self.rx_note: tuple[set[int], set[int]] | None = None
         self.tx_owners: dict[int, object] | None = None
+        self.tx_common_line: int | None = None
         self.tx_watch: dict[int, list[Callable[[int, int], None]]] = {}
         self.sent = [0, 0]
         self._senders = tuple(frame_sender(line) for line in self.lines)
@@ -265,6 +287,10 @@ class RedundantBus(can.BusABC):
         controller knows this too: a frame nobody received is never acknowledged."""
         if self.tx_router is None:      # the master: the active line only
             line = self.active
+            if self.faults[line].mode == "ok" and can_id not in self.tx_watch:   # _admit's usual answer
+                self.sent[line] += 1
+                self._senders[line](can_id, data)
+                return True
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
                 return True
@@ -289,8 +315,15 @@ class RedundantBus(can.BusABC):
                 if frames:
                     self._batch_senders[self.active](frames)
                 return
-            per_line: tuple[list, list] = ([], [])
             owners = self.tx_owners if self.tx_owners is not None else {}
+            common = self.tx_common_line
+            if common is not None and all(map(owners.__contains__, map(_can_id, frames))):
+                # every sender known and every node on one line: the burst goes there whole
+                self.sent[common] += len(frames)
+                if frames:
+                    self._batch_senders[common](frames)
+                return
+            per_line: tuple[list, list] = ([], [])
             for frame in frames:
                 owner = owners.get(frame[0])
                 line = owner.line if owner is not None else router(frame[0])
