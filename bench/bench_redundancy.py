@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Bus redundancy benchmark (issue 34): line switches and the cost of a second line.
 
-    .venv/bin/python bench/bench_redundancy.py [--trials 5] [--cycles 2000] [--transport virtual|loopback]
+    .venv/bin/python bench/bench_redundancy.py [--trials 5] [--cycles 2000] [--blocks 12] [--processes 3]
+        [--transport virtual|loopback]
 
 1. Switch time: the simulator and the master on a redundant pair (in one process on
    virtual lines, or through the loopback hub), cycled at the SYNC period as the daemon's
@@ -14,9 +15,10 @@
    cycled `--cycles` times in lockstep (SYNC, wait for every TPDO, read), blocks of one line
    and two lines alternated; CPU and wall per cycle, median of the blocks; the ratio judged is
    the median of the blocks' ratios (each two-line block to the one-line block just before it),
-   of the same run. Each setup runs in a process of its own, so a block's process CPU is its
+   of the same run. Each setup runs in processes of its own, so a block's process CPU is its
    setup's alone, timer threads included (the pair's redundancy timers, its faster master
-   heartbeat), not the idle other setup's.
+   heartbeat), not the idle other setup's; `--processes` of them per setup (default 3), blocks
+   rotated over them, since one process running the same code as another can be 15 % off it.
 3. Real-time cycle cost, the same way: cycles paced at the SYNC period (as the daemon's
    real-time loop runs them, one period's TPDO wait), `--rt-cycles` per block; CPU per cycle.
 
@@ -140,56 +142,66 @@ def _cost_worker(spec: str, conn) -> None:
         sim.stop()
 
 
-def cycle_cost(cycles: int, rt_cycles: int, blocks: int, steal: CpuSteal) -> list[list[str]]:
+def cycle_cost(cycles: int, rt_cycles: int, blocks: int, processes: int, steal: CpuSteal) -> list[list[str]]:
     """Lockstep, then paced cycles on one line and on a pair, alternated in blocks; per-cycle
-    CPU and wall."""
+    CPU and wall. Each setup runs in `processes` processes of its own, block k in the k-th
+    (mod `processes`) of each: two processes running the same code differ by up to 15 % in
+    CPU per cycle here (issue 34 report), an offset a single process per setup would put into
+    every one of its blocks and so into the ratio."""
     import multiprocessing
 
     context = multiprocessing.get_context("spawn")
-    setups = {}
-    for name, spec in (("one line", f"virtual:cost-{uuid.uuid4().hex[:8]}"),
-                       ("two lines", "+".join(line_specs("virtual", None)))):
-        ours, theirs = context.Pipe()
-        process = context.Process(target=_cost_worker, args=(spec, theirs), daemon=True)
-        process.start()
-        setups[name] = (process, ours)
+    setups: dict[str, list] = {"one line": [], "two lines": []}
+    for k in range(processes):
+        for name, spec in (("one line", f"virtual:cost-{uuid.uuid4().hex[:8]}"),
+                           ("two lines", "+".join(line_specs("virtual", None)))):
+            ours, theirs = context.Pipe()
+            process = context.Process(target=_cost_worker, args=(spec, theirs), daemon=True)
+            process.start()
+            setups[name].append((process, ours))
     per_block = cycles // blocks
     rows = []
     try:
-        for _, conn in setups.values():
-            if conn.recv() != "ready":
-                raise RuntimeError("a cost setup did not start")
+        for workers in setups.values():
+            for _, conn in workers:
+                if conn.recv() != "ready":
+                    raise RuntimeError("a cost setup did not start")
         for label, paced, n in (("lockstep", False, per_block), ("real-time", True, rt_cycles)):
             cpu = {name: [] for name in setups}
             wall = {name: [] for name in setups}
             steal.fraction()
-            for _ in range(blocks):
-                for name, (_, conn) in setups.items():
+            for block in range(blocks):
+                for name, workers in setups.items():
+                    conn = workers[block % processes][1]
                     conn.send((paced, n))
                     used, took = conn.recv()
                     cpu[name].append(used / n)
                     wall[name].append(took / n)
-            rows += cost_rows(label, cpu, wall, conditions(steal))
+            rows += cost_rows(label, cpu, wall, processes, conditions(steal))
     finally:
-        for process, conn in setups.values():
-            try:
-                conn.send(None)
-            except OSError:
-                pass
-            process.join(10)
-            if process.is_alive():
-                process.kill()
+        for workers in setups.values():
+            for process, conn in workers:
+                try:
+                    conn.send(None)
+                except OSError:
+                    pass
+                process.join(10)
+                if process.is_alive():
+                    process.kill()
     return rows
 
 
-def cost_rows(label: str, cpu: dict, wall: dict, where: str) -> list[list[str]]:
+def cost_rows(label: str, cpu: dict, wall: dict, processes: int, where: str) -> list[list[str]]:
     """The ratio judged is the median of the blocks' ratios, each two-line block to the one-line
     block run just before it (a loaded machine's drift cancels in a pair of neighbours); the
-    ratio of the two medians is printed beside it."""
+    ratio of the two medians is printed beside it, and the spread of the one-line processes'
+    own medians (the same code in each: what a process alone is off by)."""
     one, two = statistics.median(cpu["one line"]), statistics.median(cpu["two lines"])
     ratio = statistics.median(b / a for a, b in zip(cpu["one line"], cpu["two lines"]))
+    own = [statistics.median(cpu["one line"][k::processes]) for k in range(processes)]
+    spread = f"; its {processes} processes' medians {min(own) * 1e6:.0f}-{max(own) * 1e6:.0f} us" if processes > 1 else ""
     return [[f"{label} cycle, one line (reference)",
-             f"{1e6 * one:.0f} us CPU / {1e6 * statistics.median(wall['one line']):.0f} us wall",
+             f"{1e6 * one:.0f} us CPU / {1e6 * statistics.median(wall['one line']):.0f} us wall{spread}",
              "", "", "", "", "", where],
             [f"{label} cycle, two lines",
              f"{1e6 * two:.0f} us CPU / {1e6 * statistics.median(wall['two lines']):.0f} us wall",
@@ -202,7 +214,8 @@ def main() -> int:
     parser.add_argument("--trials", type=int, default=5)
     parser.add_argument("--cycles", type=int, default=2000)
     parser.add_argument("--rt-cycles", type=int, default=50, help="paced cycles per block")
-    parser.add_argument("--blocks", type=int, default=10)
+    parser.add_argument("--blocks", type=int, default=12)
+    parser.add_argument("--processes", type=int, default=3, help="processes per setup, blocks rotated over them")
     parser.add_argument("--only", choices=("cost",), help="the cycle-cost rows alone")
     parser.add_argument("--transport", choices=("virtual", "loopback"), default="virtual")
     args = parser.parse_args()
@@ -218,7 +231,7 @@ def main() -> int:
     finally:
         if hub is not None:
             hub.stop()
-    rows += cycle_cost(args.cycles, args.rt_cycles, args.blocks, steal)
+    rows += cycle_cost(args.cycles, args.rt_cycles, args.blocks, args.processes, steal)
     header = ["figure", "measured", "target", "missing cycles / ratio", "fault events", "starved", "", "conditions"]
     widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
     for row in [header] + rows:
