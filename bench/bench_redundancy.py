@@ -39,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from hil_tests.harness import CpuSteal  # noqa: E402
+from spacearm.base.runtime import priority  # noqa: E402
 from spacearm.base.config.bus import load_bus_config  # noqa: E402
 from spacearm.base.transport.line_faults import clear_all, line_fault  # noqa: E402
 from spacearm.drivers.network import ArmNetwork  # noqa: E402
@@ -118,12 +119,16 @@ def switch_trials(transport: str, trials: int, hub, steal: CpuSteal) -> list[lis
     return rows
 
 
-def _cost_worker(spec: str, conn) -> None:
-    """One setup in its own process: boots, then runs the blocks it is sent, answering each with
-    (process CPU s, wall s) over its cycles."""
+def _cost_worker(spec: str, conn, rt_priority: int) -> None:
+    """One setup in its own process at SCHED_FIFO `rt_priority` (as the daemon's real-time loop
+    runs; 0: normal), so the controller's 20 ms heartbeat on a pair is not held up behind other
+    processes' threads, which its nodes (60 ms consumer time) take for a dead line. Boots, then
+    runs the blocks it is sent, answering each with (process CPU s, wall s, line switches so far)
+    over its cycles."""
+    refused = priority.use_fifo(rt_priority)
     sim, net = start(spec)
     try:
-        conn.send("ready")
+        conn.send(("ready", refused))
         period = net.config.bus.sync_period
         while (job := conn.recv()) is not None:
             paced, cycles = job
@@ -136,13 +141,15 @@ def _cost_worker(spec: str, conn) -> None:
                     time.sleep(max(0.0, next_cycle - time.monotonic()))
                 else:
                     net.cycle()
-            conn.send((time.process_time() - c0, time.perf_counter() - w0))
+            switches = net.line_redundancy.switches if net.line_redundancy is not None else 0
+            conn.send((time.process_time() - c0, time.perf_counter() - w0, switches))
     finally:
         net.close()
         sim.stop()
 
 
-def cycle_cost(cycles: int, rt_cycles: int, blocks: int, processes: int, steal: CpuSteal) -> list[list[str]]:
+def cycle_cost(cycles: int, rt_cycles: int, blocks: int, processes: int, rt_priority: int,
+               steal: CpuSteal) -> list[list[str]]:
     """Lockstep, then paced cycles on one line and on a pair, alternated in blocks; per-cycle
     CPU and wall. Each setup runs in `processes` processes of its own, block k in the k-th
     (mod `processes`) of each: two processes running the same code differ by up to 15 % in
@@ -156,16 +163,21 @@ def cycle_cost(cycles: int, rt_cycles: int, blocks: int, processes: int, steal: 
         for name, spec in (("one line", f"virtual:cost-{uuid.uuid4().hex[:8]}"),
                            ("two lines", "+".join(line_specs("virtual", None)))):
             ours, theirs = context.Pipe()
-            process = context.Process(target=_cost_worker, args=(spec, theirs), daemon=True)
+            process = context.Process(target=_cost_worker, args=(spec, theirs, rt_priority), daemon=True)
             process.start()
             setups[name].append((process, ours))
     per_block = cycles // blocks
     rows = []
     try:
+        refusals = set()
         for workers in setups.values():
             for _, conn in workers:
-                if conn.recv() != "ready":
+                ready, refused = conn.recv()
+                if ready != "ready":
                     raise RuntimeError("a cost setup did not start")
+                refusals.add(refused)
+        scheduling = f"SCHED_FIFO {rt_priority}" if refusals == {None} else "normal: " + "; ".join(map(str, refusals))
+        switches = [0] * processes
         for label, paced, n in (("lockstep", False, per_block), ("real-time", True, rt_cycles)):
             cpu = {name: [] for name in setups}
             wall = {name: [] for name in setups}
@@ -174,10 +186,14 @@ def cycle_cost(cycles: int, rt_cycles: int, blocks: int, processes: int, steal: 
                 for name, workers in setups.items():
                     conn = workers[block % processes][1]
                     conn.send((paced, n))
-                    used, took = conn.recv()
+                    used, took, switched = conn.recv()
                     cpu[name].append(used / n)
                     wall[name].append(took / n)
+                    if name == "two lines":
+                        switches[block % processes] = switched
             rows += cost_rows(label, cpu, wall, processes, conditions(steal))
+        rows.append(["line switches in the pair's processes (no fault injected)", f"{sum(switches)}", "0", "", "", "",
+                     "ok" if sum(switches) == 0 else "(spurious)", scheduling])
     finally:
         for workers in setups.values():
             for process, conn in workers:
@@ -216,6 +232,7 @@ def main() -> int:
     parser.add_argument("--rt-cycles", type=int, default=50, help="paced cycles per block")
     parser.add_argument("--blocks", type=int, default=12)
     parser.add_argument("--processes", type=int, default=3, help="processes per setup, blocks rotated over them")
+    parser.add_argument("--rt-priority", type=int, default=50, help="SCHED_FIFO priority of the cost setups (0: normal)")
     parser.add_argument("--only", choices=("cost",), help="the cycle-cost rows alone")
     parser.add_argument("--transport", choices=("virtual", "loopback"), default="virtual")
     args = parser.parse_args()
@@ -231,7 +248,7 @@ def main() -> int:
     finally:
         if hub is not None:
             hub.stop()
-    rows += cycle_cost(args.cycles, args.rt_cycles, args.blocks, args.processes, steal)
+    rows += cycle_cost(args.cycles, args.rt_cycles, args.blocks, args.processes, args.rt_priority, steal)
     header = ["figure", "measured", "target", "missing cycles / ratio", "fault events", "starved", "", "conditions"]
     widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(len(header))]
     for row in [header] + rows:
