@@ -39,6 +39,7 @@ from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_find
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.breakaway import at_breakaway
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
+from spacearm.offline.diagnosis.stick_slip import stiction_by_breakaway
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import PlantConfig
 
@@ -341,6 +342,14 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits,
                                   table.dq_cmd)
             fit = at_breakaway(fit, table.tau[:, j] - quiet.tau[:, j], quiet.dq[:, j], train, table.dt, tau_noise)
+        if fit is None or set(fit.effects) <= {"coulomb", "viscous"}:
+            # a running law (or none) may miss stiction that shows only where the joint breaks free
+            sticking = stiction_by_breakaway(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
+                                             table.dq_cmd, table.tau[:, j], sim.tau[:, j], quiet.dq[:, j],
+                                             np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train,
+                                             tau_noise)
+            if sticking is not None:
+                fit, alternatives[j] = sticking, []
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])

@@ -24,16 +24,22 @@ WINDOW_S = 1.0              # s after a start in which the joint breaks free
 MIN_EVENTS = 5
 
 
+def start_events(velocity: np.ndarray) -> np.ndarray:
+    """Rows where the joint starts from rest or reverses (the nominal replay's `velocity`):
+    where stiction shows as a breakaway peak."""
+    moving = np.abs(velocity) > MOVING
+    starts = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
+    reversals = np.flatnonzero(moving[1:] & moving[:-1] & (np.sign(velocity[1:]) != np.sign(velocity[:-1]))) + 1
+    return np.unique(np.r_[starts, reversals])
+
+
 def breakaway_level(residual: np.ndarray, velocity: np.ndarray, rows: np.ndarray, dt: float,
                     noise: float) -> tuple[float, float, int] | None:
     """(level, standard error, starts used) from the torque `residual` and the nominal replay's
     `velocity` of one joint, over the boolean `rows`; None with fewer than MIN_EVENTS starts."""
-    moving = np.abs(velocity) > MOVING
-    starts = np.flatnonzero(moving[1:] & ~moving[:-1]) + 1
-    reversals = np.flatnonzero(moving[1:] & moving[:-1] & (np.sign(velocity[1:]) != np.sign(velocity[:-1]))) + 1
     window = max(int(round(WINDOW_S / dt)), 2)
     peaks = []
-    for e in np.unique(np.r_[starts, reversals]):
+    for e in start_events(velocity):
         end = e + window
         if end > len(residual) or not rows[e:end].all():
             continue
