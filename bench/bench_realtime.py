@@ -48,6 +48,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -528,6 +529,7 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
     readings = nodes_late = stats_late = episodes = hosts = 0
     stops: list[str] = []
     worst_sim, messages, answer_p99 = 0.0, set(), []
+    stats_causes, worst_stats = Counter(), [0.0, 0.0]
     hub, timeline = HubProcess(rt_priority=50, ready_timeout=60.0), StealTimeline()
     with tempfile.TemporaryDirectory() as work, CpuLoad(2):
         try:
@@ -547,7 +549,11 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
                     was_late = late
                     if late:
                         messages.add(nodes.get("message", ""))
-                    stats_late += stats.get("cycles", 0) >= STATS_SETTLED and stats.get("level") not in (None, "ok")
+                    if stats.get("cycles", 0) >= STATS_SETTLED and stats.get("level") not in (None, "ok"):
+                        stats_late += 1
+                        stats_causes.update(_stats_causes(stats))
+                        worst_stats = [max(worst_stats[0], stats.get("period_error_p99", 0.0)),
+                                       max(worst_stats[1], stats.get("compute_p99", 0.0))]
                     answer_p99.append(nodes.get("io_wait_p99") or 0.0)
                     sim_view = (nodes.get("peers") or {}).get("simulator") or {}
                     worst_sim = max(worst_sim, sim_view.get("max_lateness") or 0.0)
@@ -576,9 +582,24 @@ def idle(minutes: float, steal: CpuSteal) -> list[str]:
             f"vCPU {(final.get('network') or {}).get('host_stalled_cycles', '-')}; the nodes' answer p99 (last 250 "
             f"cycles) median {1e3 * float(np.median(answer_p99 or [np.nan])):.1f} ms, worst "
             f"{1e3 * max(answer_p99, default=np.nan):.1f} ms of the 8 ms wait"]
+    if stats_late:
+        rows.append(f"  idle arm: the cycle statistics not ok by {', '.join(f'{c} in {n}' for c, n in stats_causes.most_common())} "
+                    f"readings; worst window p99s: period error {1e3 * worst_stats[0]:.2f} ms, compute "
+                    f"{1e3 * worst_stats[1]:.2f} ms")
     rows += [f"  idle arm stop: {s}" for s in stops[:10]]
     rows += [f"  idle arm banner: {m}" for m in sorted(messages)[:3]]
     return rows
+
+
+def _stats_causes(stats: dict) -> list[str]:
+    """Which of the cycle statistics' thresholds (controller/daemon/cycle_stats.py) put a reading
+    above ok: the window's period error p99, its compute p99, or a skipped cycle counted in it."""
+    from spacearm.controller.daemon.cycle_stats import CycleThresholds
+    t = CycleThresholds()
+    causes = [name for name, value, warn in (("period error p99", "period_error_p99", t.period_error_warn),
+                                             ("compute p99", "compute_p99", t.execution_warn))
+              if stats.get(value, 0.0) > warn]
+    return causes or ["another rule"]
 
 
 def _reset_and_enable(client, lease: str) -> None:
@@ -605,11 +626,12 @@ def mainjob(stages: str, steal: CpuSteal) -> list[str]:
         args = [sys.executable, "-m", "spacearm.console.main", "demo", "--record-dir", work] + \
             (["--stages", stages] if stages else [])
         out = subprocess.run(args, capture_output=True, text=True, cwd=ROOT, stdin=subprocess.DEVNULL,
-                             env={**os.environ, "COLUMNS": "200"})
+                             env={**os.environ, "COLUMNS": "1000"})   # no wrapped summary lines
     text = out.stdout + out.stderr
     cond = conditions(steal)
     summary = re.search(r"period error median ([\d.]+) ms, p99 ([\d.]+) ms, max ([\d.]+) ms; execution p99 "
-                        r"([\d.]+) ms; overruns (\d+) \((\d+) cycles skipped\)", text)
+                        r"([\d.]+) ms; overruns (\d+) \((\d+) cycles skipped\)(?:; by cause: ([^\n]*))?", text)
+    overruns = re.findall(r"note: overrun: (.*)", text)
     scheduling = re.search(r"scheduling: (.*)", text)
     stage_rows = re.findall(r"│ (\d) ([^│]*?)\s*│\s*([\d.]+) │", text)
     if out.returncode != 0 or summary is None:
@@ -623,7 +645,9 @@ def mainjob(stages: str, steal: CpuSteal) -> list[str]:
             f"{n_stages} of {want} stages, {stops} stops, {skipped} skipped cycles ({summary.group(5)} overruns), "
             f"period error p99 {p99:.3f} ms, max {float(summary.group(3)):.1f} ms | 0 skipped, p99 <= 1 ms, "
             f"{want} stages | {'met' if met else 'MISSED'} | {cond}",
-            f"  main job scheduling | {scheduling.group(1) if scheduling else '-'}"]
+            f"  main job scheduling | {scheduling.group(1) if scheduling else '-'}"] + \
+        ([f"  main job overruns by cause | {summary.group(7)}"] if summary.group(7) else []) + \
+        [f"  main job overrun | {o}" for o in overruns]
 
 
 def main() -> None:

@@ -38,7 +38,8 @@ def status_lines(status: dict[str, Any]) -> list[str]:
             f"cycle: period error median {1e3 * stats['period_error_median']:.3f} ms, "
             f"p99 {1e3 * stats['period_error_p99']:.3f} ms, max {1e3 * stats['period_error_max']:.3f} ms; "
             f"execution p99 {1e3 * stats['execution_p99']:.3f} ms "
-            f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']} "
+            f"(compute {1e3 * stats.get('compute_p99', float('nan')):.3f} ms); overruns {stats['overruns']}"
+            f"{overrun_causes_text(stats)} "
             f"[{stats['level'] if stats.get('cycles', STATS_SETTLED) >= STATS_SETTLED else 'starting'}]"
             + (f"; scheduling {status['scheduling']}" if status.get("scheduling") else ""))
     nodes = status.get("nodes") or {}
@@ -142,3 +143,9 @@ def status_table(status: dict[str, Any]):
     header = Text("\n".join(status_lines(status) + event_lines(status, 3)),
                   style="bold red" if status["state"] == "stopped" else "")
     return Group(header, table)
+
+
+def overrun_causes_text(stats: dict) -> str:
+    """"; by cause: host 1, gil 1" for the cycle statistics' judged overruns, "" for none."""
+    causes = stats.get("overrun_causes") or {}
+    return "; by cause: " + ", ".join(f"{cause} {n}" for cause, n in causes.items()) if causes else ""

@@ -24,6 +24,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from spacearm.console.errors import BadInput, CommandFailed, friendly_errors
+from spacearm.console.status_view import overrun_causes_text
 from spacearm.controller.daemon.command_api import ApiError
 from spacearm.controller.daemon.daemon import Daemon, DaemonOptions
 from spacearm.controller.recording.csv_export import export_csv
@@ -185,7 +186,8 @@ def _changeout_summary(console: Console, result) -> None:
     console.print(f"changeout {result.arm_time:.1f} s arm time; {result.cycles} cycles in {result.wall_time:.1f} s wall; "
                   f"period error median {1e3 * s['period_error_median']:.3f} ms, p99 {1e3 * s['period_error_p99']:.3f} ms, "
                   f"max {1e3 * s['period_error_max']:.3f} ms; execution p99 {1e3 * s['execution_p99']:.3f} ms; "
-                  f"overruns {s['overruns']} ({s.get('skipped_cycles', 0)} cycles skipped)")
+                  f"overruns {s['overruns']} ({s.get('skipped_cycles', 0)} cycles skipped)"
+                  + overrun_causes_text(s))
 
 
 def _ms(value) -> str:

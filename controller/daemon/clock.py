@@ -34,12 +34,16 @@ class CycleClock(Protocol):
 
 class RealTimeClock:
     def __init__(self, period: float, now: Callable[[], float] = time.monotonic,
-                 sleep: Callable[[float], None] = time.sleep):
+                 sleep: Callable[[float], None] = time.sleep,
+                 on_overrun: Callable[[float], None] | None = None):
+        """on_overrun(missed_deadline): called the moment an overrun is found, before the sleep
+        to the next deadline still ahead (controller/daemon/overrun_cause.py measures it)."""
         if not period > 0:
             raise ValueError(f"period must be positive, got {period}")
         self.period = period
         self._now = now
         self._sleep = sleep
+        self.on_overrun = on_overrun
         self._start: float | None = None
         self._cycle = -1
         self.overruns = 0
@@ -57,6 +61,8 @@ class RealTimeClock:
         if now > deadline + self.period * 1e-3:
             # Still busy past the deadline we were heading for: the previous cycle overran.
             # Jump to the next deadline still ahead and count the ones missed.
+            if self.on_overrun is not None:
+                self.on_overrun(deadline)
             late_cycles = math.floor((now - deadline) / self.period) + 1
             skipped = late_cycles
             cycle += late_cycles

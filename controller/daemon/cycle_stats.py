@@ -11,7 +11,8 @@ its 8 ms budget to answer is on time, not a slow controller.
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from collections import Counter
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
@@ -40,6 +41,7 @@ class CycleSummary:
     warnings: int
     errors: int
     level: str            # "ok" | "warn" | "error": worst threshold crossed in the window
+    overrun_causes: dict = field(default_factory=dict)   # judged overruns by cause (overrun_cause.py)
 
     def as_dict(self) -> dict:
         return asdict(self)
@@ -59,6 +61,7 @@ class CycleStats:
         self.execution_max = 0.0
         self.warnings = 0
         self.errors = 0
+        self.overrun_causes: Counter = Counter()     # the daemon's OverrunMeter fills it
 
     def add(self, period_error: float, execution: float, skipped: int = 0, io_wait: float = 0.0) -> str:
         """Record one cycle (`io_wait`: the part of `execution` spent waiting for TPDOs);
@@ -102,7 +105,8 @@ class CycleStats:
             execution_median=ex50, execution_p99=ex99,
             execution_max=self.execution_max,
             compute_median=co50, compute_p99=co99,
-            warnings=self.warnings, errors=self.errors, level=level)
+            warnings=self.warnings, errors=self.errors, level=level,
+            overrun_causes=dict(self.overrun_causes.most_common()))
 
 
 def median_and_p99(rows: np.ndarray) -> tuple[list[float], list[float]]:

@@ -26,6 +26,7 @@ from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.daemon.node_timing import NodeTiming
+from spacearm.controller.daemon.overrun_cause import Overrun, OverrunMeter
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_process import RecorderProcess
 from spacearm.controller.recording.can_trace import TraceLimit
@@ -114,7 +115,11 @@ class Daemon:
         if self.hardware.dof != self.model.nq:
             raise ValueError(f"bus config {options.bus_config} has {self.hardware.dof} joint drives, "
                              f"arm {options.arm} has {self.model.nq} joints")
-        self.clock = LockstepClock(options.period) if lockstep else RealTimeClock(options.period)
+        # what each real-time overrun spent its time on (a lockstep cycle has no deadline)
+        self.overruns = OverrunMeter() if not lockstep else None
+        self.overrun_log: list[Overrun] = []         # the last judged overruns
+        self.clock = LockstepClock(options.period) if lockstep else \
+            RealTimeClock(options.period, on_overrun=self.overruns.overrun_found)
         # the nodes' answers in time (a starved simulator or hub shows here before it stops the arm);
         # lockstep waits as long as the nodes take, so only the heartbeats say anything there
         self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
@@ -247,6 +252,15 @@ class Daemon:
             return self._cycle(tick, measurement)
         finally:
             self.core.answer_commands()     # a cycle that raised still answers what it took
+            if self.overruns is not None:
+                self._judge_overruns(tick)
+
+    def _judge_overruns(self, tick: Tick) -> None:
+        self.overruns.end(tick.cycle, tick.deadline, tick.deadline + self.clock.period, self.hardware.last_io_wait)
+        for overrun in self.overruns.pop_judged():
+            self.stats.overrun_causes[overrun.cause] += 1
+            self.core._event(tick.time, "overrun", overrun.describe())
+            self.overrun_log = (self.overrun_log + [overrun])[-20:]
 
     def _cycle(self, tick, measurement: Measurement) -> Snapshot:
         command = self.core.update(measurement)

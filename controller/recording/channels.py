@@ -54,7 +54,10 @@ STATS_SCHEMA: dict[str, Any] = {
     "properties": {k: {"type": "number"} for k in (
         "cycles", "overruns", "skipped_cycles", "period_error_median", "period_error_p99",
         "period_error_max", "execution_median", "execution_p99", "execution_max",
-        "compute_median", "compute_p99", "warnings", "errors")} | {"level": {"type": "string"}},
+        "compute_median", "compute_p99", "warnings", "errors")} | {
+        "level": {"type": "string"},
+        "overrun_causes": {"type": "object", "additionalProperties": {"type": "number"},
+                           "description": "judged overruns by cause (controller/daemon/overrun_cause.py)"}},
 }
 
 CHANNELS = {"/cycle": CYCLE_SCHEMA, "/events": EVENT_SCHEMA, "/stats": STATS_SCHEMA}

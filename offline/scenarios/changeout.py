@@ -24,6 +24,7 @@ class ChangeoutFailed(Exception):
     pass
 
 
+OVERRUNS_SHOWN = 5      # the first overruns of a run described in its notes (each with its cause)
 @dataclass
 class StageSummary:
     number: int
@@ -176,5 +177,6 @@ def run_changeout(daemon: Daemon, on_progress: Callable[[str, float], None], wor
     result.recording = str(daemon.recorder.path) if daemon.recorder else None
     result.cycles = daemon.stats.cycles
     result.stats = daemon.stats.summary().as_dict()
+    result.notes += [f"overrun: {o.describe()}" for o in daemon.overrun_log[:OVERRUNS_SHOWN]]
     result.wall_time = time.monotonic() - started
     return result

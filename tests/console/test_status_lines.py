@@ -18,3 +18,10 @@ def test_the_first_cycles_say_starting_not_error():
 def test_settled_statistics_show_their_level():
     line = next(x for x in status_lines(_status(STATS_SETTLED, "error")) if x.startswith("cycle:"))
     assert "overruns 0 [error]" in line
+
+
+def test_overruns_are_shown_with_their_measured_causes():
+    status = _status(STATS_SETTLED, "warn")
+    status["stats"] |= {"overruns": 3, "overrun_causes": {"host": 2, "gil": 1}}
+    line = next(x for x in status_lines(status) if x.startswith("cycle:"))
+    assert "overruns 3; by cause: host 2, gil 1 [warn]" in line
