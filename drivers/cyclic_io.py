@@ -10,7 +10,8 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from spacearm.base.canopen import od
-from spacearm.drivers.devices import (EeCommand, EndEffectorState, FtState, JointDriver, JointState)
+from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState, FtState, JointDriver, JointState,
+                                      PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
 
@@ -47,7 +48,7 @@ class CyclicIO:
     # ------------------------------------------------------------------ cycle API
     def send_sync(self) -> int:
         """Send one SYNC; returns its number. TPDOs arriving from now on belong to it."""
-        with self._cv:
+        with self._lock:
             expected = self._expected_tpdos()
             if self._expected is not None and self._monitoring:
                 self._count_missing_tpdos(expected - self._received)
@@ -71,15 +72,18 @@ class CyclicIO:
     def _note_answers(self, expected: set[int]) -> None:
         """Which nodes answered the SYNC now ending: every TPDO of theirs it asked for arrived
         before the next one goes out, however late in the period (answered_last_sync)."""
-        routes = self._tpdo_routes
-        absent = {routes[cob][0].name for cob in expected - self._received}
-        self._answered = {routes[cob][0].name for cob in expected} - absent
+        owner = self._tpdo_owner
+        answered = self._owners_of.get(expected)
+        if answered is None:        # a set of live nodes not seen before (a few per run)
+            answered = self._owners_of[expected] = frozenset(owner[cob] for cob in expected)
+        missing = expected - self._received
+        self._answered = answered - {owner[cob] for cob in missing} if missing else answered
 
     def answered_last_sync(self, names) -> list[str]:
         """Of `names`, the nodes that answered the previous SYNC before this one went out.
         A node missing at a real-time read whose data came later in the same period was slow
         (it, the bus or this process), not silent: its TPDO is the evidence it is alive."""
-        with self._cv:
+        with self._lock:
             return [name for name in names if name in self._answered]
 
     def _count_missing_tpdos(self, missing: set[int]) -> None:
@@ -96,13 +100,10 @@ class CyclicIO:
                 self._event("tpdo_missing", driver, f"{driver.label}: {spec.label} missing for {n} SYNCs "
                                                     f"(mapped, node alive)")
 
-    def _expected_tpdos(self) -> set[int]:
-        cobs = set()
-        for d in self.drivers.values():
-            h = self.health[d.name]
-            if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL:
-                cobs.update(s.cob_id for s in d.tpdos)
-        return cobs
+    def _expected_tpdos(self) -> frozenset[int]:
+        # the per-node sets are built with the routes (drivers/network.py), from the layouts
+        return frozenset().union(*[cobs for h, cobs in self._tpdo_nodes
+                                   if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL])
 
     def wait_all_tpdos(self, timeout: float | None = None) -> bool:
         """Lockstep: wait until every live OPERATIONAL node sent this SYNC's TPDOs."""
@@ -127,12 +128,15 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        with self._cv:
-            for d in self.drivers.values():
-                if isinstance(d, JointDriver) and self._master_following_error(d):
-                    self._check_following_error(d)
+        bringup = self.bringup
+        with self._lock:
+            for d, joint, h in self._cycle_drivers:
+                if joint:
+                    report = bringup.get(d.name)
+                    if report is not None and report.master_following_error:
+                        self._check_following_error(d)
                 d.step()
-                if isinstance(d, JointDriver):
+                if joint:
                     if d.axis.fault_reset_failed:
                         d.axis.fault_reset_failed = False
                         self._event("fault_reset_failed", d,
@@ -141,7 +145,6 @@ class CyclicIO:
                                     d.value(od.ERROR_CODE))
                     if d.axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
-                h = self.health[d.name]
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
@@ -151,10 +154,6 @@ class CyclicIO:
                 raise DriverError("the network is not connected: call boot() first")
             with self.network.send_lock:
                 self._send_frames(frames)      # one write on the loopback bus
-
-    def _master_following_error(self, d: JointDriver) -> bool:
-        report = self.bringup.get(d.name)
-        return report is not None and report.master_following_error
 
     def _check_following_error(self, d: JointDriver) -> None:
         """The fallback for a drive without a following-error window (6065h/6066h absent or
@@ -199,19 +198,19 @@ class CyclicIO:
 
     def nodes_missing_tpdos(self) -> list[str]:
         """Names of live nodes whose TPDOs of the current SYNC have not all arrived."""
-        with self._cv:
+        with self._lock:
             missing = self._expected_tpdos() - self._received
-            return sorted({self._tpdo_routes[cob][0].name for cob in missing})
+            return sorted({self._tpdo_owner[cob] for cob in missing})
 
     def tpdos_complete(self) -> bool:
         """Have all expected TPDOs of the last SYNC arrived (non-blocking)?"""
-        with self._cv:
+        with self._lock:
             return self._expected_tpdos() <= self._received
 
     def read(self, complete: bool | None = None) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
         tpdos_complete(): whether they all belong to the last SYNC."""
-        with self._cv:
+        with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
             return ArmState(
@@ -233,18 +232,30 @@ class CyclicIO:
 
 
     def _on_tpdo(self, can_id, data, timestamp):
-        driver, spec = self._tpdo_routes[can_id]
-        length = self._tpdo_lengths.get(id(spec))
-        if length is None:
-            length = self._tpdo_lengths[id(spec)] = spec.length
-        if len(data) < length:
+        route = self._tpdo_in[can_id]
+        if len(data) < route.length:
             self.stats.malformed += 1
             return
-        with self._cv:
-            driver.decode(spec, bytes(data))
-            self.health[driver.name].life_sync = self._sync
-            self._received.add(can_id)
+        with self._lock:
+            if route.unpack is not None:    # the common case, without a call: one unpack per frame
+                route.driver.values.update(zip(route.keys, route.unpack(data)))
+            else:
+                route.codec.decode_into(route.driver.values, data)
+            route.health.life_sync = self._sync
+            received = self._received
+            received.add(can_id)
             self.stats.tpdos += 1
-            if self._expected is None or self._expected <= self._received:
+            if self._expected is None or self._expected <= received:
                 self._cv.notify_all()
 
+
+class TpdoRoute:
+    """Where a TPDO goes, fixed when the network is built from the drivers' layouts: its
+    driver, the node's health and the compiled codec (devices.PdoCodec)."""
+
+    __slots__ = ("driver", "health", "codec", "length", "keys", "unpack")
+
+    def __init__(self, driver: DeviceDriver, health: NodeHealth, codec: PdoCodec):
+        self.driver, self.health, self.codec = driver, health, codec
+        self.length, self.keys = codec.length, codec.keys
+        self.unpack = codec.struct.unpack_from if codec.struct is not None else None

@@ -46,7 +46,7 @@ from spacearm.base.transport import frame_sender, frames_sender, open_bus
 from spacearm.drivers import line_redundancy
 from spacearm.drivers.boot_master import BootMaster
 from spacearm.drivers.bringup import BringupReport
-from spacearm.drivers.cyclic_io import ArmCommand, ArmState, CyclicIO
+from spacearm.drivers.cyclic_io import ArmCommand, ArmState, CyclicIO, TpdoRoute
 from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, FtDriver,
                                       JointDriver)
 from spacearm.drivers.errors import DriverError, NetworkEvent, SdoError, SdoTimeoutError
@@ -102,7 +102,7 @@ class _Listener(can.Listener):
         arm = self.arm
         arm.stats.rx_frames += 1
         try:
-            if can_id in arm._tpdo_routes:
+            if can_id in arm._tpdo_in:
                 arm._on_tpdo(can_id, data, timestamp)
             elif can_id in arm.network.subscribers:
                 arm.network.notify(can_id, data, timestamp)
@@ -136,9 +136,10 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.end_effector: EndEffectorDriver | None = None
         self.ft: FtDriver | None = None
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
+        self._tpdo_in: dict[int, TpdoRoute] = {}        # COB-ID -> its compiled route (cyclic_io.py)
+        self._tpdo_owner: dict[int, str] = {}           # COB-ID -> node name
         self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
-        self._tpdo_lengths: dict[int, int] = {}         # id(PdoSpec) -> its length (the mapping is fixed)
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
         self._guard_toggle: dict[int, int] = {}         # node-guarded node ID -> toggle bit of its last answer
         self._slave_locks: dict[str, threading.Lock] = {}  # one boot-slave process per node at a time
@@ -150,13 +151,22 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
             self.health[cfg.name] = NodeHealth(cfg.name, cfg.node_id)
             for spec in driver.tpdos:
                 self._tpdo_routes[spec.cob_id] = (driver, spec)
+                self._tpdo_in[spec.cob_id] = TpdoRoute(driver, self.health[cfg.name], driver.tpdo_codecs[spec.cob_id])
+                self._tpdo_owner[spec.cob_id] = driver.name
             if isinstance(driver, JointDriver):
                 self.joints.append(driver)
             elif isinstance(driver, EndEffectorDriver):
                 self.end_effector = driver
             elif isinstance(driver, FtDriver):
                 self.ft = driver
-        self._cv = threading.Condition()
+        # What the cycle walks every SYNC, fixed here with the layouts: the drivers in order,
+        # each node's TPDO set (the expected set is their union over the live nodes).
+        self._cycle_drivers = [(d, isinstance(d, JointDriver), self.health[d.name]) for d in self.drivers.values()]
+        self._tpdo_nodes = [(self.health[d.name], frozenset(s.cob_id for s in d.tpdos)) for d in self.drivers.values()]
+        self._owners_of: dict[frozenset[int], frozenset[str]] = {}   # expected TPDOs -> their nodes
+        # the cycle takes the lock itself (a C call); the condition on it wakes TPDO waiters
+        self._lock = threading.RLock()
+        self._cv = threading.Condition(self._lock)
         self._events: deque[NetworkEvent] = deque(maxlen=1000)
         self.event_callbacks: list[Callable[[NetworkEvent], None]] = []
         self._booted: set[int] = set()
