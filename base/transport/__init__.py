@@ -155,10 +155,13 @@ class _FastVirtual:
                 on_frame(can_id, data, timestamp)
             except Exception as exc:   # a tap's bug must not fail the sender
                 self._taps.failed(on_frame, exc)
-        own = self.queue
-        active = _active_inline()
+        own = None if self.receive_own_messages else self.queue
+        try:
+            active = _inline.active       # this thread's receivers in delivery (_enter_inline)
+        except AttributeError:
+            active = _inline.active = set()
         for bus_queue in self.channel:
-            if bus_queue is own and not self.receive_own_messages:
+            if bus_queue is own:
                 continue
             handlers = getattr(bus_queue, "inline_handlers", None)
             key = id(bus_queue)
@@ -310,14 +313,6 @@ def _enter_inline(bus_queue) -> bool:
 
 def _leave_inline(bus_queue) -> None:
     _inline.active.discard(id(bus_queue))
-
-
-def _active_inline() -> set:
-    """This thread's set of receivers whose inline delivery is running (see _enter_inline)."""
-    active = getattr(_inline, "active", None)
-    if active is None:
-        active = _inline.active = set()
-    return active
 
 
 _CHECKED: dict[str, type] = {}
