@@ -144,8 +144,13 @@ class DeviceDriver:
         """Once per cycle after this SYNC's TPDOs: advance internal state machines."""
 
     def rpdo_frames(self) -> list[tuple[int, bytes]]:
-        values = self.rpdo_values
-        return [(codec.cob_id, codec.encode(values)) for codec in self._rpdo_codecs]
+        values, frames = self.rpdo_values, []
+        for codec in self._rpdo_codecs:
+            if codec.struct is not None:    # PdoCodec.encode's common case, without its call
+                frames.append((codec.cob_id, codec.struct.pack(*map(values.get, codec.keys, codec.zeros))))
+            else:
+                frames.append((codec.cob_id, codec.encode(values)))
+        return frames
 
 
 class PdoCodec:
@@ -153,14 +158,14 @@ class PdoCodec:
     entry is a number of its mapped size (compile_pdo), else entry by entry as the library
     codes them (24/40/48/56-bit types, strings). Objects missing from the values encode as 0."""
 
-    __slots__ = ("spec", "cob_id", "length", "keys", "struct", "_zeros")
+    __slots__ = ("spec", "cob_id", "length", "keys", "struct", "zeros")
 
     def __init__(self, spec: PdoSpec):
         self.spec, self.cob_id, self.length = spec, spec.cob_id, spec.length
         self.keys = tuple((e.index, e.sub) for e in spec.entries)
         compiled = compile_pdo(spec)
         self.struct = compiled[0] if compiled is not None else None
-        self._zeros = (0,) * len(self.keys)
+        self.zeros = (0,) * len(self.keys)     # the default of each object not in the values
 
     def decode_into(self, values: dict, data) -> None:
         if self.struct is not None:
@@ -173,7 +178,7 @@ class PdoCodec:
 
     def encode(self, values: dict) -> bytes:
         if self.struct is not None:
-            return self.struct.pack(*map(values.get, self.keys, self._zeros))
+            return self.struct.pack(*map(values.get, self.keys, self.zeros))
         return b"".join(e.var.encode_raw(values.get(key, 0)) for e, key in zip(self.spec.entries, self.keys))
 
 
