@@ -5,6 +5,7 @@ wait for a SYNC's TPDOs.
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from typing import Sequence
@@ -14,6 +15,8 @@ from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState,
                                       PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -113,8 +116,10 @@ class CyclicIO:
             # 7.5 s), and it is no observed silence of any node.
             return False
         timeout = self.config.bus.lockstep_timeout if timeout is None else timeout
-        with self._cv:
-            ok = self._cv.wait_for(lambda: self._expected_tpdos() <= self._received, timeout=timeout)
+        with self._lock:
+            # in-process, every answer came during the SYNC's send: no wait to set up
+            ok = self._expected_tpdos() <= self._received or self._cv.wait_for(
+                lambda: self._expected_tpdos() <= self._received, timeout=timeout)
         if not ok:
             self.stats.tpdo_timeouts += 1
             self._lockstep_wait_expired = timeout     # observed silence (health.py _lockstep_health)
@@ -231,22 +236,37 @@ class CyclicIO:
 
 
 
-    def _on_tpdo(self, can_id, data, timestamp):
-        route = self._tpdo_in[can_id]
-        if len(data) < route.length:
-            self.stats.malformed += 1
-            return
-        with self._lock:
-            if route.unpack is not None:    # the common case, without a call: one unpack per frame
-                route.driver.values.update(zip(route.keys, route.unpack(data)))
-            else:
-                route.codec.decode_into(route.driver.values, data)
-            route.health.life_sync = self._sync
-            received = self._received
-            received.add(can_id)
-            self.stats.tpdos += 1
-            if self._expected is None or self._expected <= received:
-                self._cv.notify_all()
+    def _receive_frame(self, can_id: int, data, timestamp: float) -> None:
+        """Every standard data frame the network receives (its listener's on_frame, never
+        raises): a TPDO is decoded here, in one call, with its compiled route; anything else
+        goes to the library's subscribers (heartbeat, EMCY, SDO, ...)."""
+        stats = self.stats
+        stats.rx_frames += 1
+        try:
+            route = self._tpdo_in.get(can_id)
+            if route is None:
+                if can_id in self.network.subscribers:
+                    self.network.notify(can_id, data, timestamp)
+                else:
+                    stats.unknown += 1
+                return
+            if len(data) < route.length:
+                stats.malformed += 1
+                return
+            with self._lock:
+                if route.unpack is not None:    # the common case: one unpack per frame
+                    route.driver.values.update(zip(route.keys, route.unpack(data)))
+                else:
+                    route.codec.decode_into(route.driver.values, data)
+                route.health.life_sync = self._sync
+                received = self._received
+                received.add(can_id)
+                stats.tpdos += 1
+                if self._expected is None or self._expected <= received:
+                    self._cv.notify_all()
+        except Exception:
+            stats.callback_errors += 1
+            logger.exception("error handling frame 0x%03X", can_id)
 
 
 class TpdoRoute:

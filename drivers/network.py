@@ -80,37 +80,17 @@ class _Listener(can.Listener):
 
     def __init__(self, arm: "ArmNetwork"):
         self.arm = arm
+        # In-process bus hot path: a standard data frame as plain values, TPDOs decoded in
+        # the same call (cyclic_io.py), everything else through the library's subscribers.
+        self.on_frame = arm._receive_frame
 
     def on_message_received(self, msg: can.Message) -> None:
-        stats = self.arm.stats
-        stats.rx_frames += 1
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
+            stats = self.arm.stats
+            stats.rx_frames += 1
             stats.ignored += 1
             return
-        if msg.arbitration_id not in self.arm.network.subscribers:
-            stats.unknown += 1
-            return
-        try:
-            self.arm.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
-        except Exception:
-            stats.callback_errors += 1
-            logger.exception("error handling frame %s", msg)
-
-    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        """In-process bus hot path: a standard data frame as plain values; TPDOs go straight
-        to their decoder, everything else through the library's subscribers."""
-        arm = self.arm
-        arm.stats.rx_frames += 1
-        try:
-            if can_id in arm._tpdo_in:
-                arm._on_tpdo(can_id, data, timestamp)
-            elif can_id in arm.network.subscribers:
-                arm.network.notify(can_id, data, timestamp)
-            else:
-                arm.stats.unknown += 1
-        except Exception:
-            arm.stats.callback_errors += 1
-            logger.exception("error handling frame 0x%03X", can_id)
+        self.on_frame(msg.arbitration_id, msg.data, msg.timestamp)    # counts it
 
     def on_error(self, exc: Exception) -> None:
         self.arm.stats.callback_errors += 1
@@ -220,8 +200,6 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
             self.network.subscribe(od.HEARTBEAT_BASE + driver.node_id, self._make_hb_handler(name))
             self.network.subscribe(od.EMCY_BASE + driver.node_id, self._make_emcy_handler(name))
             self.remote[name] = node
-        for cob in self._tpdo_routes:
-            self.network.subscribe(cob, self._on_tpdo)
         # RemoteNode follows NMT commands on 0x000 with a parser that raises on short frames
         self.network.unsubscribe(od.NMT_COB_ID)
         self.network.subscribe(od.NMT_COB_ID, self._on_nmt_frame)
