@@ -164,9 +164,8 @@ class _FastVirtual:
             if bus_queue is own:
                 continue
             handlers = getattr(bus_queue, "inline_handlers", None)
-            key = id(bus_queue)
-            if handlers and not bus_queue.queue and key not in active:   # deque length: no lock
-                active.add(key)
+            if handlers and not bus_queue.queue and bus_queue not in active:   # deque length: no lock
+                active.add(bus_queue)
                 try:
                     for on_frame, listener in handlers:
                         try:
@@ -177,7 +176,7 @@ class _FastVirtual:
                         except Exception as exc:   # a receiver's bug must not fail the sender
                             listener.on_error(exc)
                 finally:
-                    active.discard(key)
+                    active.discard(bus_queue)
                 continue
             bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
 
@@ -302,17 +301,20 @@ _inline = threading.local()
 
 
 def _enter_inline(bus_queue) -> bool:
+    """Mark `bus_queue`'s inline delivery as running in this thread (False if it already is).
+    The set holds the receive queues themselves (identity-hashed): one call less per frame
+    than their id()."""
     active = getattr(_inline, "active", None)
     if active is None:
         active = _inline.active = set()
-    if id(bus_queue) in active:
+    if bus_queue in active:
         return False
-    active.add(id(bus_queue))
+    active.add(bus_queue)
     return True
 
 
 def _leave_inline(bus_queue) -> None:
-    _inline.active.discard(id(bus_queue))
+    _inline.active.discard(bus_queue)
 
 
 _CHECKED: dict[str, type] = {}
