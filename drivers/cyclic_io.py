@@ -223,7 +223,7 @@ class CyclicIO:
                 joints=[j.state() for j in self.joints],
                 end_effector=self.end_effector.state() if self.end_effector else None,
                 ft=self.ft.state() if self.ft else None,
-                nodes={n: NodeHealth(**vars(h)) for n, h in self.health.items()})
+                nodes={n: h.snapshot() for n, h in self.health.items()})
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
               timeout: float | None = None) -> ArmState:

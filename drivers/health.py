@@ -36,6 +36,13 @@ class NodeHealth:
     def nmt_state_name(self) -> str:
         return od.NMT_STATE_NAMES.get(self.nmt_state, "UNKNOWN")
 
+    def snapshot(self) -> "NodeHealth":
+        """A copy for readers outside the network's lock (ArmState.nodes, every cycle): the
+        same fields without the dataclass __init__'s keyword handling."""
+        copy = object.__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        return copy
+
 
 
 class HealthMonitor:
