@@ -42,21 +42,6 @@ def use_tree(root: Path) -> None:
     sys.path.insert(0, str(root))
 
 
-def scenario_determinism(script) -> None:
-    """tests/daemon/test_lockstep_determinism.py's scenario, unslowed."""
-    start = [j["q"] for j in script.daemon.status()["joints"]]
-    script.move_and_wait("move_joints", q=[0.3, -0.2, 1.2, -1.3, 0.4, -1.2])
-    script.move_and_wait("jog", joint=3, delta=0.05)
-    script.run(7)
-    script.call("stop")
-    script.run(40)
-    script.call("reset")
-    script.call("enable")
-    script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
-    script.move_and_wait("move_joints", q=start)
-    script.run(20)
-
-
 def scenario_pair(script) -> None:
     """A redundant pair: other joints and moves, a Cartesian move, a protective stop mid-jog,
     a disable and a re-enable. No line fault: when the master's line rule notices a cut
@@ -104,16 +89,17 @@ def dump(root: Path, name: str, out: Path) -> None:
     from tests.daemon.lockstep_script import scripted_daemon
 
     runs = Path(tempfile.mkdtemp(prefix=f"cmp-{name}-"))
-    lines = ("virtual:cmp-a", "virtual:cmp-b")
-    if name == "determinism":
-        plant, bus, run = "configs/plant/oru_testbed_errors.toml", "virtual:cmp", scenario_determinism
-    elif name == "pair":
-        plant, bus, run = "configs/plant/oru_testbed_nominal.toml", "+".join(lines), scenario_pair
+    stats = {}
+    if name == "determinism":      # the test's own scenario, unslowed (its bus name is random)
+        from tests.daemon import test_lockstep_determinism
+
+        test_lockstep_determinism.scenario(runs, 0.0)
     else:
-        plant, bus, run = "configs/plant/oru_testbed_errors.toml", "virtual:cmp", scenario_wrist
-    with scripted_daemon(plant, record_dir=runs, bus=bus) as script:
-        run(script)
-        stats = script.daemon.hardware.statistics()
+        plant = "configs/plant/oru_testbed_nominal.toml" if name == "pair" else "configs/plant/oru_testbed_errors.toml"
+        bus = "virtual:cmp-a+virtual:cmp-b" if name == "pair" else "virtual:cmp"
+        with scripted_daemon(plant, record_dir=runs, bus=bus) as script:
+            (scenario_pair if name == "pair" else scenario_wrist)(script)
+            stats = script.daemon.hardware.statistics()
     clear_all()
     from spacearm.base.canopen import peer_timing
     wall_clock_ids = set(peer_timing.SOURCES)
@@ -126,11 +112,11 @@ def dump(root: Path, name: str, out: Path) -> None:
         _stamp, channel, frame, *flags = line.split()
         can_id, _, data = frame.partition("#")
         if not 0x700 <= int(can_id, 16) <= 0x77F and int(can_id, 16) not in wall_clock_ids:
-            frames.append((channel, can_id, data, *flags))
+            frames.append((channel if name == "pair" else "", can_id, data, *flags))
     shutil.rmtree(runs, ignore_errors=True)
     out.write_bytes(pickle.dumps({"cycles": cycles, "events": events, "frames": frames,
                                   "stats": {k: stats[k] for k in ("syncs_sent", "tpdos", "expected_tpdos",
-                                                                  "syncs_kept_off", "tpdo_timeouts")}}))
+                                                                  "syncs_kept_off", "tpdo_timeouts") if k in stats}}))
 
 
 def compare(a: dict, b: dict) -> list[str]:
