@@ -5,14 +5,18 @@ wait for a SYNC's TPDOs.
 """
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass
 from typing import Sequence
 
 from spacearm.base.canopen import od
-from spacearm.drivers.devices import (EeCommand, EndEffectorState, FtState, JointDriver, JointState)
+from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState, FtState, JointDriver, JointState,
+                                      PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass
@@ -47,7 +51,7 @@ class CyclicIO:
     # ------------------------------------------------------------------ cycle API
     def send_sync(self) -> int:
         """Send one SYNC; returns its number. TPDOs arriving from now on belong to it."""
-        with self._cv:
+        with self._lock:
             expected = self._expected_tpdos()
             if self._expected is not None and self._monitoring:
                 self._count_missing_tpdos(expected - self._received)
@@ -71,15 +75,18 @@ class CyclicIO:
     def _note_answers(self, expected: set[int]) -> None:
         """Which nodes answered the SYNC now ending: every TPDO of theirs it asked for arrived
         before the next one goes out, however late in the period (answered_last_sync)."""
-        routes = self._tpdo_routes
-        absent = {routes[cob][0].name for cob in expected - self._received}
-        self._answered = {routes[cob][0].name for cob in expected} - absent
+        owner = self._tpdo_owner
+        answered = self._owners_of.get(expected)
+        if answered is None:        # a set of live nodes not seen before (a few per run)
+            answered = self._owners_of[expected] = frozenset(owner[cob] for cob in expected)
+        missing = expected - self._received
+        self._answered = answered - {owner[cob] for cob in missing} if missing else answered
 
     def answered_last_sync(self, names) -> list[str]:
         """Of `names`, the nodes that answered the previous SYNC before this one went out.
         A node missing at a real-time read whose data came later in the same period was slow
         (it, the bus or this process), not silent: its TPDO is the evidence it is alive."""
-        with self._cv:
+        with self._lock:
             return [name for name in names if name in self._answered]
 
     def _count_missing_tpdos(self, missing: set[int]) -> None:
@@ -96,13 +103,10 @@ class CyclicIO:
                 self._event("tpdo_missing", driver, f"{driver.label}: {spec.label} missing for {n} SYNCs "
                                                     f"(mapped, node alive)")
 
-    def _expected_tpdos(self) -> set[int]:
-        cobs = set()
-        for d in self.drivers.values():
-            h = self.health[d.name]
-            if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL:
-                cobs.update(s.cob_id for s in d.tpdos)
-        return cobs
+    def _expected_tpdos(self) -> frozenset[int]:
+        # the per-node sets are built with the routes (drivers/network.py), from the layouts
+        return frozenset().union(*[cobs for h, cobs in self._tpdo_nodes
+                                   if h.alive and h.nmt_state == od.NMT_STATE_OPERATIONAL])
 
     def wait_all_tpdos(self, timeout: float | None = None) -> bool:
         """Lockstep: wait until every live OPERATIONAL node sent this SYNC's TPDOs."""
@@ -112,8 +116,10 @@ class CyclicIO:
             # 7.5 s), and it is no observed silence of any node.
             return False
         timeout = self.config.bus.lockstep_timeout if timeout is None else timeout
-        with self._cv:
-            ok = self._cv.wait_for(lambda: self._expected_tpdos() <= self._received, timeout=timeout)
+        with self._lock:
+            # in-process, every answer came during the SYNC's send: no wait to set up
+            ok = self._expected_tpdos() <= self._received or self._cv.wait_for(
+                lambda: self._expected_tpdos() <= self._received, timeout=timeout)
         if not ok:
             self.stats.tpdo_timeouts += 1
             self._lockstep_wait_expired = timeout     # observed silence (health.py _lockstep_health)
@@ -127,12 +133,15 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        with self._cv:
-            for d in self.drivers.values():
-                if isinstance(d, JointDriver) and self._master_following_error(d):
-                    self._check_following_error(d)
+        bringup = self.bringup
+        with self._lock:
+            for d, joint, h in self._cycle_drivers:
+                if joint:
+                    report = bringup.get(d.name)
+                    if report is not None and report.master_following_error:
+                        self._check_following_error(d)
                 d.step()
-                if isinstance(d, JointDriver):
+                if joint:
                     if d.axis.fault_reset_failed:
                         d.axis.fault_reset_failed = False
                         self._event("fault_reset_failed", d,
@@ -141,7 +150,6 @@ class CyclicIO:
                                     d.value(od.ERROR_CODE))
                     if d.axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
-                h = self.health[d.name]
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
@@ -151,10 +159,6 @@ class CyclicIO:
                 raise DriverError("the network is not connected: call boot() first")
             with self.network.send_lock:
                 self._send_frames(frames)      # one write on the loopback bus
-
-    def _master_following_error(self, d: JointDriver) -> bool:
-        report = self.bringup.get(d.name)
-        return report is not None and report.master_following_error
 
     def _check_following_error(self, d: JointDriver) -> None:
         """The fallback for a drive without a following-error window (6065h/6066h absent or
@@ -199,19 +203,19 @@ class CyclicIO:
 
     def nodes_missing_tpdos(self) -> list[str]:
         """Names of live nodes whose TPDOs of the current SYNC have not all arrived."""
-        with self._cv:
+        with self._lock:
             missing = self._expected_tpdos() - self._received
-            return sorted({self._tpdo_routes[cob][0].name for cob in missing})
+            return sorted({self._tpdo_owner[cob] for cob in missing})
 
     def tpdos_complete(self) -> bool:
         """Have all expected TPDOs of the last SYNC arrived (non-blocking)?"""
-        with self._cv:
+        with self._lock:
             return self._expected_tpdos() <= self._received
 
     def read(self, complete: bool | None = None) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
         tpdos_complete(): whether they all belong to the last SYNC."""
-        with self._cv:
+        with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
             return ArmState(
@@ -219,7 +223,7 @@ class CyclicIO:
                 joints=[j.state() for j in self.joints],
                 end_effector=self.end_effector.state() if self.end_effector else None,
                 ft=self.ft.state() if self.ft else None,
-                nodes={n: NodeHealth(**vars(h)) for n, h in self.health.items()})
+                nodes={n: h.snapshot() for n, h in self.health.items()})
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
               timeout: float | None = None) -> ArmState:
@@ -232,19 +236,46 @@ class CyclicIO:
 
 
 
-    def _on_tpdo(self, can_id, data, timestamp):
-        driver, spec = self._tpdo_routes[can_id]
-        length = self._tpdo_lengths.get(id(spec))
-        if length is None:
-            length = self._tpdo_lengths[id(spec)] = spec.length
-        if len(data) < length:
-            self.stats.malformed += 1
-            return
-        with self._cv:
-            driver.decode(spec, bytes(data))
-            self.health[driver.name].life_sync = self._sync
-            self._received.add(can_id)
-            self.stats.tpdos += 1
-            if self._expected is None or self._expected <= self._received:
-                self._cv.notify_all()
+    def _receive_frame(self, can_id: int, data, timestamp: float) -> None:
+        """Every standard data frame the network receives (its listener's on_frame, never
+        raises): a TPDO is decoded here, in one call, with its compiled route; anything else
+        goes to the library's subscribers (heartbeat, EMCY, SDO, ...)."""
+        stats = self.stats
+        stats.rx_frames += 1
+        try:
+            route = self._tpdo_in.get(can_id)
+            if route is None:
+                if can_id in self.network.subscribers:
+                    self.network.notify(can_id, data, timestamp)
+                else:
+                    stats.unknown += 1
+                return
+            if len(data) < route.length:
+                stats.malformed += 1
+                return
+            with self._lock:
+                if route.unpack is not None:    # the common case: one unpack per frame
+                    route.driver.values.update(zip(route.keys, route.unpack(data)))
+                else:
+                    route.codec.decode_into(route.driver.values, data)
+                route.health.life_sync = self._sync
+                received = self._received
+                received.add(can_id)
+                stats.tpdos += 1
+                if self._expected is None or self._expected <= received:
+                    self._cv.notify_all()
+        except Exception:
+            stats.callback_errors += 1
+            logger.exception("error handling frame 0x%03X", can_id)
 
+
+class TpdoRoute:
+    """Where a TPDO goes, fixed when the network is built from the drivers' layouts: its
+    driver, the node's health and the compiled codec (devices.PdoCodec)."""
+
+    __slots__ = ("driver", "health", "codec", "length", "keys", "unpack")
+
+    def __init__(self, driver: DeviceDriver, health: NodeHealth, codec: PdoCodec):
+        self.driver, self.health, self.codec = driver, health, codec
+        self.length, self.keys = codec.length, codec.keys
+        self.unpack = codec.struct.unpack_from if codec.struct is not None else None

@@ -96,11 +96,26 @@ class DeviceDriver:
         self.bus = bus
         self.od = object_dictionary
         self.name, self.node_id, self.label = cfg.name, cfg.node_id, cfg.label
-        # the configured layout, checked against the EDS (MappingError names node, PDO, object)
-        self.rpdos, self.tpdos = resolve_layout(cfg, object_dictionary)
         self.values: dict[tuple[int, int], int] = {}
-        self._pdo_codecs: dict[int, tuple] = {}   # id(PdoSpec) -> (spec, compile_pdo(spec))
         self.rpdo_values: dict[tuple[int, int], int] = {}
+        # the configured layout, checked against the EDS (MappingError names node, PDO, object)
+        self.set_layout(*resolve_layout(cfg, object_dictionary))
+
+    def set_layout(self, rpdos, tpdos) -> None:
+        """The PDO layout, and its codecs compiled once from it: a frame then costs one
+        unpack/pack and no lookup by object or by spec. The layout is replaced whole (tuples),
+        so the codecs cannot silently describe another mapping than the one in use."""
+        self._rpdos, self._tpdos = tuple(rpdos), tuple(tpdos)
+        self.tpdo_codecs = {spec.cob_id: PdoCodec(spec) for spec in self._tpdos}
+        self._rpdo_codecs = tuple(PdoCodec(spec) for spec in self._rpdos)
+
+    @property
+    def rpdos(self) -> tuple[PdoSpec, ...]:
+        return self._rpdos
+
+    @property
+    def tpdos(self) -> tuple[PdoSpec, ...]:
+        return self._tpdos
 
     # bring-up -------------------------------------------------------------------
     def config_writes(self) -> list[tuple[int, int, int]]:
@@ -117,17 +132,10 @@ class DeviceDriver:
 
     # cycle ------------------------------------------------------------------------
     def decode(self, spec: PdoSpec, data: bytes) -> None:
-        codec = self._pdo_codecs.get(id(spec))
-        if codec is None or codec[0] is not spec:
-            codec = self._pdo_codecs[id(spec)] = (spec, compile_pdo(spec))
-        packer = codec[1]
-        if packer is not None:       # every entry a fixed-size number: one unpack for the frame
-            self.values.update(zip(packer[1], packer[0].unpack_from(data)))
-            return
-        offset = 0
-        for e in spec.entries:
-            self.values[(e.index, e.sub)] = e.var.decode_raw(data[offset:offset + e.size])
-            offset += e.size
+        codec = self.tpdo_codecs.get(spec.cob_id)
+        if codec is None or codec.spec is not spec:
+            codec = PdoCodec(spec)       # a spec outside the layout (tests): coded, not kept
+        codec.decode_into(self.values, data)
 
     def value(self, index: int, sub: int = 0, default=0):
         return self.values.get((index, sub), default)
@@ -136,19 +144,42 @@ class DeviceDriver:
         """Once per cycle after this SYNC's TPDOs: advance internal state machines."""
 
     def rpdo_frames(self) -> list[tuple[int, bytes]]:
-        frames = []
-        values = self.rpdo_values
-        for spec in self.rpdos:
-            codec = self._pdo_codecs.get(id(spec))
-            if codec is None or codec[0] is not spec:
-                codec = self._pdo_codecs[id(spec)] = (spec, compile_pdo(spec))
-            packer = codec[1]
-            if packer is not None:
-                data = packer[0].pack(*[values.get(key, 0) for key in packer[1]])
+        values, frames = self.rpdo_values, []
+        for codec in self._rpdo_codecs:
+            if codec.struct is not None:    # PdoCodec.encode's common case, without its call
+                frames.append((codec.cob_id, codec.struct.pack(*map(values.get, codec.keys, codec.zeros))))
             else:
-                data = b"".join(e.var.encode_raw(values.get((e.index, e.sub), 0)) for e in spec.entries)
-            frames.append((spec.cob_id, data))
+                frames.append((codec.cob_id, codec.encode(values)))
         return frames
+
+
+class PdoCodec:
+    """One PDO's coding, compiled from its mapping: one struct for the whole frame where every
+    entry is a number of its mapped size (compile_pdo), else entry by entry as the library
+    codes them (24/40/48/56-bit types, strings). Objects missing from the values encode as 0."""
+
+    __slots__ = ("spec", "cob_id", "length", "keys", "struct", "zeros")
+
+    def __init__(self, spec: PdoSpec):
+        self.spec, self.cob_id, self.length = spec, spec.cob_id, spec.length
+        self.keys = tuple((e.index, e.sub) for e in spec.entries)
+        compiled = compile_pdo(spec)
+        self.struct = compiled[0] if compiled is not None else None
+        self.zeros = (0,) * len(self.keys)     # the default of each object not in the values
+
+    def decode_into(self, values: dict, data) -> None:
+        if self.struct is not None:
+            values.update(zip(self.keys, self.struct.unpack_from(data)))
+            return
+        offset = 0
+        for e in self.spec.entries:
+            values[(e.index, e.sub)] = e.var.decode_raw(bytes(data[offset:offset + e.size]))
+            offset += e.size
+
+    def encode(self, values: dict) -> bytes:
+        if self.struct is not None:
+            return self.struct.pack(*map(values.get, self.keys, self.zeros))
+        return b"".join(e.var.encode_raw(values.get(key, 0)) for e, key in zip(self.spec.entries, self.keys))
 
 
 # 605Eh: a drive that faults while moving stops on its quick-stop ramp (6085h) before the brake
@@ -221,25 +252,27 @@ class JointDriver(DeviceDriver):
 
     @property
     def position(self) -> float:
-        return self.value(od.POSITION_ACTUAL) / self.k
+        return self.values.get(_POSITION_ACTUAL, 0) / self.k
 
     def step(self) -> None:
-        cw = self.axis.step(self.value(od.STATUSWORD))
-        if self.axis.state != State.OPERATION_ENABLED:
+        get = self.values.get
+        statusword = get(_STATUSWORD, 0)
+        axis = self.axis
+        cw = axis.step(statusword)
+        if axis.state != State.OPERATION_ENABLED:
             # not enabled: command the actual position so enabling never jumps
-            self._hold = self.position
+            self._hold = get(_POSITION_ACTUAL, 0) / self.k
             self.target = None
             target = self._hold
         else:
             if self._hold is None:
-                self._hold = self.position
+                self._hold = get(_POSITION_ACTUAL, 0) / self.k
             target = self.target if self.target is not None else self._hold
         if self.mode == od.MODE_PROFILE_POSITION:
             # set-point handshake: bit 4 high until the drive acknowledges (statusword bit 12)
-            statusword = self.value(od.STATUSWORD)
             if self._pp_pending and statusword & SW_OP_MODE_12:
                 self._pp_pending = False
-            elif (not self._pp_pending and self.axis.state == State.OPERATION_ENABLED and self.target is not None
+            elif (not self._pp_pending and axis.state == State.OPERATION_ENABLED and self.target is not None
                   and self.target != self._pp_sent and not statusword & SW_OP_MODE_12):
                 self._pp_pending, self._pp_sent = True, self.target
             if self._pp_pending:
@@ -249,26 +282,44 @@ class JointDriver(DeviceDriver):
                 target = self._pp_sent
         if self.halt:
             cw |= CW_HALT
-        self.rpdo_values[(od.CONTROLWORD, 0)] = cw
-        self.rpdo_values[(od.TARGET_POSITION, 0)] = _clamp32(round(target * self.k))
-        self.rpdo_values[(od.VELOCITY_OFFSET, 0)] = _clamp32(round(self.velocity_ff * self.k))
+        rpdo, k = self.rpdo_values, self.k
+        rpdo[_CONTROLWORD] = cw
+        rpdo[_TARGET_POSITION] = max(_I32_MIN, min(_I32_MAX, round(target * k)))
+        rpdo[_VELOCITY_OFFSET] = max(_I32_MIN, min(_I32_MAX, round(self.velocity_ff * k)))
         ratio = self.rated_joint_torque
-        self.rpdo_values[(od.TORQUE_OFFSET, 0)] = max(-32768, min(32767, round(self.torque_ff / ratio * 1000)))
+        rpdo[_TORQUE_OFFSET] = max(-32768, min(32767, round(self.torque_ff / ratio * 1000)))
 
     def state(self) -> JointState:
-        k = self.k
+        get, k = self.values.get, self.k
+        statusword = get(_STATUSWORD, 0)
+        state = _STATES.get(statusword)
+        if state is None:
+            state = _STATES[statusword] = decode_statusword(statusword)
+        temperature, brake = self._temperature, self._brake
         return JointState(
             name=self.name, node_id=self.node_id,
-            state=decode_statusword(self.value(od.STATUSWORD)), statusword=self.value(od.STATUSWORD),
-            position=self.value(od.POSITION_ACTUAL) / k,
-            velocity=self.value(od.VELOCITY_ACTUAL) / k,
-            torque=self.value(od.TORQUE_ACTUAL) / 1000.0 * self.rated_joint_torque,
-            following_error=self.value(od.FOLLOWING_ERROR_ACTUAL) / k,
-            temperature=self.value(*self._temperature) / 10.0 if self._temperature else float("nan"),
-            brake_engaged=bool(self.value(*self._brake, default=1)) if self._brake else None,
-            error_code=self.value(od.ERROR_CODE),
-            mode=self.value(od.MODES_OF_OPERATION_DISPLAY),
+            state=state, statusword=statusword,
+            position=get(_POSITION_ACTUAL, 0) / k,
+            velocity=get(_VELOCITY_ACTUAL, 0) / k,
+            torque=get(_TORQUE_ACTUAL, 0) / 1000.0 * self.rated_joint_torque,
+            following_error=get(_FOLLOWING_ERROR_ACTUAL, 0) / k,
+            temperature=get(temperature, 0) / 10.0 if temperature else float("nan"),
+            brake_engaged=bool(get(brake, 1)) if brake else None,
+            error_code=get(_ERROR_CODE, 0),
+            mode=get(_MODE_DISPLAY, 0),
         )
+
+
+# the cycle's objects as value keys, built once (the drivers read and write them every cycle)
+_STATUSWORD, _POSITION_ACTUAL = (od.STATUSWORD, 0), (od.POSITION_ACTUAL, 0)
+_VELOCITY_ACTUAL, _TORQUE_ACTUAL = (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0)
+_FOLLOWING_ERROR_ACTUAL, _ERROR_CODE = (od.FOLLOWING_ERROR_ACTUAL, 0), (od.ERROR_CODE, 0)
+_MODE_DISPLAY = (od.MODES_OF_OPERATION_DISPLAY, 0)
+_CONTROLWORD, _TARGET_POSITION = (od.CONTROLWORD, 0), (od.TARGET_POSITION, 0)
+_VELOCITY_OFFSET, _TORQUE_OFFSET = (od.VELOCITY_OFFSET, 0), (od.TORQUE_OFFSET, 0)
+_I32_MIN, _I32_MAX = -2**31, 2**31 - 1
+_FT_VALUES, _FT_STATUS = tuple((od.FT_VALUES, i) for i in range(1, 7)), (od.FT_STATUS, 0)
+_STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
 
 
 class EndEffectorDriver(DeviceDriver):
@@ -305,9 +356,9 @@ class FtDriver(DeviceDriver):
                 (od.FT_OVERLOAD_LIMIT, 2, s.torque_limit)]
 
     def state(self) -> FtState:
-        s = self.cfg.ft
-        v = [self.value(od.FT_VALUES, i) for i in range(1, 7)]
-        status = self.value(od.FT_STATUS)
+        s, get = self.cfg.ft, self.values.get
+        v = [get(key, 0) for key in _FT_VALUES]
+        status = get(_FT_STATUS, 0)
         return FtState(
             name=self.name, node_id=self.node_id,
             force=tuple(x / s.force_counts_per_n for x in v[:3]),
@@ -324,7 +375,7 @@ def _mapped_ref(ref: str | None, mapped: set[tuple[int, int]]) -> tuple[int, int
 
 
 def _clamp32(value: int) -> int:
-    return max(-2**31, min(2**31 - 1, value))
+    return max(_I32_MIN, min(_I32_MAX, value))
 
 
 __all__ = ["EeCommand", "EeState", "JointState", "EndEffectorState", "FtState", "JointDriver",

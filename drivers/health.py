@@ -36,6 +36,13 @@ class NodeHealth:
     def nmt_state_name(self) -> str:
         return od.NMT_STATE_NAMES.get(self.nmt_state, "UNKNOWN")
 
+    def snapshot(self) -> "NodeHealth":
+        """A copy for readers outside the network's lock (ArmState.nodes, every cycle): the
+        same fields without the dataclass __init__'s keyword handling."""
+        copy = object.__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        return copy
+
 
 
 class HealthMonitor:
@@ -259,8 +266,10 @@ class HealthMonitor:
     def _send_own_heartbeat(self) -> None:
         """The controller's heartbeat (on the wall clock from the timer, in lockstep also per SYNC)."""
         try:
-            self.network.send_message(od.HEARTBEAT_BASE + self.config.bus.master_node_id,
-                                      bytes([od.NMT_STATE_OPERATIONAL]))
+            # as the cycle's frames go (plain values, no Message on the in-process bus), under
+            # the library's send lock: on a redundant pair this runs 5x as often as on one line
+            with self.network.send_lock:
+                self._send_frame(od.HEARTBEAT_BASE + self.config.bus.master_node_id, _OPERATIONAL)
         except Exception as exc:
             logger.warning("controller heartbeat not sent: %s", exc)
 
@@ -300,3 +309,4 @@ MONITOR_PERIOD = 0.010      # s
 MONITOR_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020       # s
 RECHECK_AFTER_STARVED = 0.003  # s: a starved pass judges nothing; the next one comes this soon
+_OPERATIONAL = bytes([od.NMT_STATE_OPERATIONAL])      # the controller's heartbeat

@@ -46,7 +46,7 @@ from spacearm.base.transport import frame_sender, frames_sender, open_bus
 from spacearm.drivers import line_redundancy
 from spacearm.drivers.boot_master import BootMaster
 from spacearm.drivers.bringup import BringupReport
-from spacearm.drivers.cyclic_io import ArmCommand, ArmState, CyclicIO
+from spacearm.drivers.cyclic_io import ArmCommand, ArmState, CyclicIO, TpdoRoute
 from spacearm.drivers.devices import (DRIVERS, DeviceDriver, EeCommand, EndEffectorDriver, FtDriver,
                                       JointDriver)
 from spacearm.drivers.errors import DriverError, NetworkEvent, SdoError, SdoTimeoutError
@@ -80,37 +80,17 @@ class _Listener(can.Listener):
 
     def __init__(self, arm: "ArmNetwork"):
         self.arm = arm
+        # In-process bus hot path: a standard data frame as plain values, TPDOs decoded in
+        # the same call (cyclic_io.py), everything else through the library's subscribers.
+        self.on_frame = arm._receive_frame
 
     def on_message_received(self, msg: can.Message) -> None:
-        stats = self.arm.stats
-        stats.rx_frames += 1
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):
+            stats = self.arm.stats
+            stats.rx_frames += 1
             stats.ignored += 1
             return
-        if msg.arbitration_id not in self.arm.network.subscribers:
-            stats.unknown += 1
-            return
-        try:
-            self.arm.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
-        except Exception:
-            stats.callback_errors += 1
-            logger.exception("error handling frame %s", msg)
-
-    def on_frame(self, can_id: int, data: bytes, timestamp: float) -> None:
-        """In-process bus hot path: a standard data frame as plain values; TPDOs go straight
-        to their decoder, everything else through the library's subscribers."""
-        arm = self.arm
-        arm.stats.rx_frames += 1
-        try:
-            if can_id in arm._tpdo_routes:
-                arm._on_tpdo(can_id, data, timestamp)
-            elif can_id in arm.network.subscribers:
-                arm.network.notify(can_id, data, timestamp)
-            else:
-                arm.stats.unknown += 1
-        except Exception:
-            arm.stats.callback_errors += 1
-            logger.exception("error handling frame 0x%03X", can_id)
+        self.on_frame(msg.arbitration_id, msg.data, msg.timestamp)    # counts it
 
     def on_error(self, exc: Exception) -> None:
         self.arm.stats.callback_errors += 1
@@ -136,9 +116,10 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self.end_effector: EndEffectorDriver | None = None
         self.ft: FtDriver | None = None
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
+        self._tpdo_in: dict[int, TpdoRoute] = {}        # COB-ID -> its compiled route (cyclic_io.py)
+        self._tpdo_owner: dict[int, str] = {}           # COB-ID -> node name
         self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
-        self._tpdo_lengths: dict[int, int] = {}         # id(PdoSpec) -> its length (the mapping is fixed)
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)
         self._guard_toggle: dict[int, int] = {}         # node-guarded node ID -> toggle bit of its last answer
         self._slave_locks: dict[str, threading.Lock] = {}  # one boot-slave process per node at a time
@@ -150,13 +131,22 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
             self.health[cfg.name] = NodeHealth(cfg.name, cfg.node_id)
             for spec in driver.tpdos:
                 self._tpdo_routes[spec.cob_id] = (driver, spec)
+                self._tpdo_in[spec.cob_id] = TpdoRoute(driver, self.health[cfg.name], driver.tpdo_codecs[spec.cob_id])
+                self._tpdo_owner[spec.cob_id] = driver.name
             if isinstance(driver, JointDriver):
                 self.joints.append(driver)
             elif isinstance(driver, EndEffectorDriver):
                 self.end_effector = driver
             elif isinstance(driver, FtDriver):
                 self.ft = driver
-        self._cv = threading.Condition()
+        # What the cycle walks every SYNC, fixed here with the layouts: the drivers in order,
+        # each node's TPDO set (the expected set is their union over the live nodes).
+        self._cycle_drivers = [(d, isinstance(d, JointDriver), self.health[d.name]) for d in self.drivers.values()]
+        self._tpdo_nodes = [(self.health[d.name], frozenset(s.cob_id for s in d.tpdos)) for d in self.drivers.values()]
+        self._owners_of: dict[frozenset[int], frozenset[str]] = {}   # expected TPDOs -> their nodes
+        # the cycle takes the lock itself (a C call); the condition on it wakes TPDO waiters
+        self._lock = threading.RLock()
+        self._cv = threading.Condition(self._lock)
         self._events: deque[NetworkEvent] = deque(maxlen=1000)
         self.event_callbacks: list[Callable[[NetworkEvent], None]] = []
         self._booted: set[int] = set()
@@ -210,8 +200,6 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
             self.network.subscribe(od.HEARTBEAT_BASE + driver.node_id, self._make_hb_handler(name))
             self.network.subscribe(od.EMCY_BASE + driver.node_id, self._make_emcy_handler(name))
             self.remote[name] = node
-        for cob in self._tpdo_routes:
-            self.network.subscribe(cob, self._on_tpdo)
         # RemoteNode follows NMT commands on 0x000 with a parser that raises on short frames
         self.network.unsubscribe(od.NMT_COB_ID)
         self.network.subscribe(od.NMT_COB_ID, self._on_nmt_frame)

@@ -155,15 +155,17 @@ class _FastVirtual:
                 on_frame(can_id, data, timestamp)
             except Exception as exc:   # a tap's bug must not fail the sender
                 self._taps.failed(on_frame, exc)
-        own = self.queue
-        active = _active_inline()
+        own = None if self.receive_own_messages else self.queue
+        try:
+            active = _inline.active       # this thread's receivers in delivery (_enter_inline)
+        except AttributeError:
+            active = _inline.active = set()
         for bus_queue in self.channel:
-            if bus_queue is own and not self.receive_own_messages:
+            if bus_queue is own:
                 continue
             handlers = getattr(bus_queue, "inline_handlers", None)
-            key = id(bus_queue)
-            if handlers and not bus_queue.queue and key not in active:   # deque length: no lock
-                active.add(key)
+            if handlers and not bus_queue.queue and bus_queue not in active:   # deque length: no lock
+                active.add(bus_queue)
                 try:
                     for on_frame, listener in handlers:
                         try:
@@ -174,7 +176,7 @@ class _FastVirtual:
                         except Exception as exc:   # a receiver's bug must not fail the sender
                             listener.on_error(exc)
                 finally:
-                    active.discard(key)
+                    active.discard(bus_queue)
                 continue
             bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
 
@@ -299,25 +301,20 @@ _inline = threading.local()
 
 
 def _enter_inline(bus_queue) -> bool:
+    """Mark `bus_queue`'s inline delivery as running in this thread (False if it already is).
+    The set holds the receive queues themselves (identity-hashed): one call less per frame
+    than their id()."""
     active = getattr(_inline, "active", None)
     if active is None:
         active = _inline.active = set()
-    if id(bus_queue) in active:
+    if bus_queue in active:
         return False
-    active.add(id(bus_queue))
+    active.add(bus_queue)
     return True
 
 
 def _leave_inline(bus_queue) -> None:
-    _inline.active.discard(id(bus_queue))
-
-
-def _active_inline() -> set:
-    """This thread's set of receivers whose inline delivery is running (see _enter_inline)."""
-    active = getattr(_inline, "active", None)
-    if active is None:
-        active = _inline.active = set()
-    return active
+    _inline.active.discard(bus_queue)
 
 
 _CHECKED: dict[str, type] = {}

@@ -124,6 +124,10 @@ class Daemon:
         # lockstep waits as long as the nodes take, so only the heartbeats say anything there
         self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
         self._reported_level = "ok"
+        # each node's health record and heartbeat period, as _watch_nodes reads them every cycle
+        network = self.hardware.network
+        self._heartbeat_sources = [(name, h, network.drivers[name].cfg.heartbeat_period)
+                                   for name, h in network.health.items()]
         # Reactive modes other features provide, by name ("approach", "impedance", "oru", ...).
         # A factory builds a Mode from validated arguments; composite modes (the ORU task
         # flow) build their sub-modes through the same registry.
@@ -282,12 +286,11 @@ class Daemon:
         return snapshot
 
     def _watch_nodes(self, m: Measurement, starved: bool) -> None:
-        network = self.hardware.network
         # the snapshot is still the last cycle's: the nodes missing at its read
         last_missing = self.snapshot.measurement.missing if self.snapshot is not None else ()
         self.node_timing.add(self.hardware.last_io_wait, not m.missing,
-                             {name: (h.last_heartbeat, network.drivers[name].cfg.heartbeat_period)
-                              for name, h in network.health.items()}, host_stalled=m.host_stalled,
+                             {name: (h.last_heartbeat, period) for name, h, period in self._heartbeat_sources},
+                             host_stalled=m.host_stalled,
                              last_answered_late=bool(m.answered_late)
                              and set(m.answered_late) >= set(last_missing), starved=starved,
                              bridged=m.bridged)

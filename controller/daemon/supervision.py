@@ -6,6 +6,7 @@ the finding as the stop reason until an explicit reset.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,9 +56,17 @@ class Supervisor:
         self._wrench_changes = 0
         self._wrench_same = 0
         self._ft_live = False     # seen changing every cycle (noise): the frozen check is armed
+        self._bounds: _Bounds | None = None
+
+    def _bounds_of(self, limits: SupervisionLimits) -> "_Bounds":
+        """The limits as every cycle compares them, worked out once per limits object."""
+        if self._bounds is None or self._bounds.limits is not limits:
+            self._bounds = _Bounds(limits)
+        return self._bounds
 
     def check(self, m: Measurement, last_target: np.ndarray | None, moving: bool) -> list[Finding]:
         lim = self.limits
+        bounds = self._bounds_of(lim)
         findings: list[Finding] = []
         for event in m.events:
             label = EVENT_LABELS.get(event.kind)
@@ -89,7 +98,7 @@ class Supervisor:
                 continue
             self._missing_count[node] = self._missing_count.get(node, 0) + 1
             counted.append(node)
-        silent = [n for n in counted if self._missing_count[n] >= lim.missing_pdo_cycles]
+        silent = [n for n in counted if self._missing_count[n] >= bounds.missing_pdo_cycles]
         for node in silent:
             # every node silent at once points at the bus or the devices' host, one at that node:
             # the stop's message (the first finding's) names the others
@@ -97,38 +106,44 @@ class Supervisor:
             findings.append(Finding(FindingCode.PDO_MISSING, f"{node}: no process data for "
                                     f"{self._missing_count[node]} cycles"
                                     + (f" ({', '.join(others)} silent too)" if others else ""), node=node))
-        for i in np.flatnonzero(m.joints_faulted):
-            findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
-        low = m.q < lim.q_min - lim.position_margin
-        high = m.q > lim.q_max + lim.position_margin
-        for i in np.flatnonzero(low | high):
-            bound = lim.q_min[i] if low[i] else lim.q_max[i]
-            findings.append(Finding(FindingCode.POSITION_LIMIT, f"{self.names[i]}: position {m.q[i]:.4f} rad "
-                                    f"beyond limit {bound:.4f} rad", joint=self.names[i]))
-        for i in np.flatnonzero(np.abs(m.dq) > lim.v_max * (1.0 + lim.velocity_tolerance)):
-            findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} rad/s "
-                                    f"above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
+        # each array test first as one any(): the indices are looked up only for a finding
+        if m.joints_faulted.any():
+            for i in np.flatnonzero(m.joints_faulted):
+                findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
+        low = m.q < bounds.q_low
+        high = m.q > bounds.q_high
+        if low.any() or high.any():
+            for i in np.flatnonzero(low | high):
+                bound = lim.q_min[i] if low[i] else lim.q_max[i]
+                findings.append(Finding(FindingCode.POSITION_LIMIT, f"{self.names[i]}: position {m.q[i]:.4f} rad "
+                                        f"beyond limit {bound:.4f} rad", joint=self.names[i]))
+        fast = np.abs(m.dq) > bounds.v_high
+        if fast.any():
+            for i in np.flatnonzero(fast):
+                findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} "
+                                        f"rad/s above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
         if moving and last_target is not None and not m.bridged:    # bridged: the positions are stale
             error = np.abs(last_target - m.q)
-            window = np.broadcast_to(lim.following_error, error.shape)
-            for i in np.flatnonzero(error > window):
-                findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
-                                        f"{error[i]:.4f} rad above {window[i]:.4f} rad", joint=self.names[i]))
-        force = float(np.linalg.norm(m.wrench[:3]))
-        torque = float(np.linalg.norm(m.wrench[3:]))
+            behind = error > lim.following_error
+            if behind.any():
+                window = np.broadcast_to(lim.following_error, error.shape)
+                for i in np.flatnonzero(behind):
+                    findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
+                                            f"{error[i]:.4f} rad above {window[i]:.4f} rad", joint=self.names[i]))
+        force = _norm(m.wrench[:3])
+        torque = _norm(m.wrench[3:])
         if m.wrench_overload:
             findings.append(Finding(FindingCode.FT_OVERLOAD, "force/torque sensor: overload flag set"))
-        elif force > lim.wrench_force_limit or torque > lim.wrench_torque_limit:
+        elif force > bounds.wrench_force_limit or torque > bounds.wrench_torque_limit:
             findings.append(Finding(FindingCode.FT_LIMIT, f"force/torque {force:.1f} N / {torque:.2f} N m above "
-                                    f"limits {lim.wrench_force_limit:.0f} N / {lim.wrench_torque_limit:.0f} N m"))
-        findings.extend(self._check_ft_signal(m))
+                                    f"limits {bounds.wrench_force_limit:.0f} N / {bounds.wrench_torque_limit:.0f} N m"))
+        findings.extend(self._check_ft_signal(m, bounds))
         return findings
 
-    def _check_ft_signal(self, m: Measurement) -> list[Finding]:
+    def _check_ft_signal(self, m: Measurement, lim: "_Bounds") -> list[Finding]:
         """Jump and frozen checks on the F/T reading. A cycle with any node's data missing
         repeats the last received values: it is no evidence either way, so the frozen count is
         held (a reset there let a loaded machine's occasional late TPDO postpone the stop)."""
-        lim = self.limits
         last, self._last_wrench = self._last_wrench, m.wrench.copy()
         if last is None:
             self._wrench_same = 0
@@ -137,12 +152,12 @@ class Supervisor:
             return []
         findings = []
         step = m.wrench - last
-        df, dt = float(np.linalg.norm(step[:3])), float(np.linalg.norm(step[3:]))
+        df, dt = _norm(step[:3]), _norm(step[3:])
         if df > lim.ft_jump_force or dt > lim.ft_jump_torque:
             findings.append(Finding(FindingCode.FT_JUMP, f"force/torque sensor: reading jumped by {df:.1f} N / "
                                     f"{dt:.2f} N m in one cycle (limits {lim.ft_jump_force:.0f} N / "
                                     f"{lim.ft_jump_torque:.0f} N m)"))
-        if np.array_equal(step, np.zeros(6)):
+        if not step.any():      # every component exactly 0 (a NaN counts as a change, as in array_equal)
             self._wrench_same += 1
             if not self._ft_live:
                 self._wrench_changes = 0
@@ -154,3 +169,24 @@ class Supervisor:
             findings.append(Finding(FindingCode.FT_FROZEN, f"force/torque sensor: reading frozen (identical for "
                                     f"{self._wrench_same} cycles)"))
         return findings
+
+
+class _Bounds:
+    """A SupervisionLimits' thresholds as the cycle compares them (the settings' attributes
+    read once, not through SupervisionLimits.__getattr__ every cycle)."""
+
+    def __init__(self, limits: SupervisionLimits):
+        self.limits = limits
+        self.q_low = limits.q_min - limits.position_margin
+        self.q_high = limits.q_max + limits.position_margin
+        self.v_high = limits.v_max * (1.0 + limits.velocity_tolerance)
+        for name in ("missing_pdo_cycles", "wrench_force_limit", "wrench_torque_limit", "ft_jump_force",
+                     "ft_jump_torque", "ft_live_changes", "ft_frozen_cycles"):
+            setattr(self, name, getattr(limits, name))
+
+
+def _norm(v: np.ndarray) -> float:
+    """np.linalg.norm of a vector without its Python-level dispatch: the same square root of
+    the same dot product (numpy computes it so for a 1-D float array), so the same float."""
+    v = np.asarray(v, dtype=float)
+    return math.sqrt(v.dot(v))

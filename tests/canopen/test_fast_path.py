@@ -128,3 +128,41 @@ def test_settings_cache_follows_every_write():
         assert node.param(od.MAX_TORQUE) == before
     finally:
         sim.stop()
+
+
+def test_queued_and_inline_frames_decode_a_tpdo_alike_and_bad_frames_only_count():
+    """The network's listener takes frames as python-can Messages (loopback, SocketCAN, the
+    in-process bus's queued fallback) and as plain values (inline): one receive path decodes
+    both, and a short, remote or extended frame is counted, never raised."""
+    nets = [ArmNetwork("virtual:unused", load_bus_config()) for _ in range(2)]   # not connected
+    spec = nets[0].drivers["joint_1"].tpdos[0]
+    data = bytes(range(1, spec.length + 1))
+    queued, inline = (net.network.listeners[0] for net in nets)
+    queued.on_message_received(can.Message(arbitration_id=spec.cob_id, data=data, is_extended_id=False))
+    inline.on_frame(spec.cob_id, data, 0.0)
+    assert nets[0].drivers["joint_1"].values == nets[1].drivers["joint_1"].values != {}
+    queued.on_message_received(can.Message(arbitration_id=spec.cob_id, data=data[:-1], is_extended_id=False))
+    queued.on_message_received(can.Message(arbitration_id=spec.cob_id, is_remote_frame=True, is_extended_id=False))
+    queued.on_message_received(can.Message(arbitration_id=0x1ABCDE, data=data, is_extended_id=True))
+    inline.on_frame(spec.cob_id, b"", 0.0)
+    stats = [vars(net.stats) for net in nets]
+    assert [(s["rx_frames"], s["tpdos"], s["malformed"], s["ignored"]) for s in stats] == [(4, 1, 1, 2), (2, 1, 1, 0)]
+
+
+def test_a_new_layout_is_compiled_for_the_frames_that_follow():
+    """Codecs are built with the layout, not per frame: a driver given another mapping decodes
+    and encodes by that one from the next frame on."""
+    net = ArmNetwork("virtual:unused", load_bus_config())
+    driver = net.drivers["joint_1"]
+    rpdos, tpdos = driver.rpdos, driver.tpdos
+    swapped = [type(tpdos[0])(s.kind, s.number, s.cob_id, list(reversed(s.entries))) for s in tpdos]
+    driver.set_layout(rpdos, swapped)
+    spec = swapped[0]
+    data = bytes(range(1, spec.length + 1))
+    driver.decode(spec, data)
+    offset, expected = 0, {}
+    for e in spec.entries:
+        expected[(e.index, e.sub)] = e.var.decode_raw(data[offset:offset + e.size])
+        offset += e.size
+    assert {k: driver.values[k] for k in expected} == expected
+    assert driver.tpdo_codecs[spec.cob_id].spec is spec and driver.tpdos == tuple(swapped)
