@@ -235,12 +235,12 @@ def compare(a: dict, b: dict) -> bool:
         if len(x["cycles"]) != len(y["cycles"]):
             problems.append(f"{len(x['cycles'])} vs {len(y['cycles'])} recorded cycles")
         for i, (c, d) in enumerate(zip(x["cycles"], y["cycles"])):
-            if c != d:
+            if repr(c) != repr(d):     # repr: a float's sign of zero too
                 problems.append(f"/cycle record {i} differs: " + ", ".join(
-                    f"{k}" for k in c if c[k] != d.get(k)))
+                    f"{k}" for k in c if repr(c[k]) != repr(d.get(k))))
                 break
         for i, (c, d) in enumerate(zip(x["per_cycle"], y["per_cycle"])):
-            if c[1] != d[1]:
+            if repr(c[1]) != repr(d[1]):
                 problems.append(f"plant state after cycle {i} differs")
                 break
         frames = [(i, f, g) for i, (f, g) in enumerate(zip(x["frames"], y["frames"])) if f != g]
