@@ -31,6 +31,7 @@ from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 
 from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
+from spacearm.firmware_sim.od_cyclic import CyclicObjects
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -50,6 +51,10 @@ class JointDriveNode(SimNode):
         self.joint = plant.joints[joint_index]
         super().__init__(node_id, eds_path, name, plant)
         self.joint.controller = self._servo
+        self._actual_values = CyclicObjects(self, [
+            (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0), (od.POSITION_ACTUAL, 0), (od.POSITION_DEMAND, 0),
+            (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.FOLLOWING_ERROR_ACTUAL, 0), (od.DRIVE_TEMPERATURE, 0),
+            (od.BRAKE_STATUS, 0), (od.ERROR_CODE, 0)])
 
     # ------------------------------------------------------------------ state
     def reset_application(self) -> None:
@@ -217,7 +222,7 @@ class JointDriveNode(SimNode):
         if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
-        self._update_od()
+        self._update_od(self._k)
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint
@@ -236,8 +241,10 @@ class JointDriveNode(SimNode):
             self.state = State.FAULT if self.state == State.FAULT_REACTION_ACTIVE else State.SWITCH_ON_DISABLED
         self.joint.brake_engaged = engaged
 
-    def _update_od(self) -> None:
-        k = self._scale()
+    def _update_od(self, k: float | None = None) -> None:
+        """The actual values into the OD; k: this SYNC's increments per unit, if known."""
+        if k is None:
+            k = self._scale()
         j = self.joint
         sw = STATE_BITS[self.state] | SW_REMOTE
         if self.limit_active:
@@ -257,16 +264,16 @@ class JointDriveNode(SimNode):
             if self.target_reached:
                 sw |= SW_TARGET_REACHED
         rated = self._rated_torque()
-        self.put(od.STATUSWORD, 0, sw)
-        self.put(od.MODES_OF_OPERATION_DISPLAY, 0, self.mode)
-        self.put(od.POSITION_ACTUAL, 0, _i32(round(j.q_reported * k)))   # late by any feedback latency
-        self.put(od.POSITION_DEMAND, 0, _i32(round(self.q_ref * k)))
-        self.put(od.VELOCITY_ACTUAL, 0, _i32(round(j.qd_reported * k)))
-        self.put(od.TORQUE_ACTUAL, 0, max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))))
-        self.put(od.FOLLOWING_ERROR_ACTUAL, 0, _i32(round((self.q_ref - j.q_measured) * k)))
-        self.put(od.DRIVE_TEMPERATURE, 0, max(-32768, min(32767, round(j.temperature * 10.0))))
-        self.put(od.BRAKE_STATUS, 0, 1 if j.brake_engaged else 0)
-        self.put(od.ERROR_CODE, 0, self.error_code)
+        self._actual_values.write((
+            sw, self.mode,
+            _i32(round(j.q_reported * k)),     # late by any feedback latency
+            _i32(round(self.q_ref * k)),
+            _i32(round(j.qd_reported * k)),
+            max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))),
+            _i32(round((self.q_ref - j.q_measured) * k)),
+            max(-32768, min(32767, round(j.temperature * 10.0))),
+            1 if j.brake_engaged else 0,
+            self.error_code))
 
     # ------------------------------------------------------------------ state machine
     def _apply_controlword(self, cw: int) -> None:
