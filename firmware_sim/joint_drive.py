@@ -111,12 +111,28 @@ class JointDriveNode(SimNode):
     def _rated_torque(self) -> float:
         return self.param(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)
 
+    def _settings(self) -> tuple:
+        """(k, rated torque, max motor torque, quick-stop and slow-down decelerations, following
+        error window, quick-stop option): the settings every SYNC reads, derived again only
+        after a write or a reset dropped a cached value (ParamCache.epoch)."""
+        key = (self._params.epoch, self.joint.params)
+        if self._settings_key != key:
+            k, rated = self._scale(), self._rated_torque()
+            self._settings_values = (k, rated, self.param(od.MAX_TORQUE) / 1000.0 * rated,
+                                     self.param(od.QUICK_STOP_DECELERATION) / k,
+                                     self.param(od.PROFILE_DECELERATION) / k,
+                                     self.param(od.FOLLOWING_ERROR_WINDOW) / k, self.param(od.QUICK_STOP_OPTION))
+            self._settings_key = (self._params.epoch, self.joint.params)
+        return self._settings_values
+
+    _settings_key = None
+
     # ------------------------------------------------------------------ SYNC
     def on_sync_begin(self, dt: float) -> None:
         self._dt = dt
         self._h = dt / self.plant.config.substeps
-        self._k = self._scale()
-        k = self._k
+        k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = self._settings()
+        self._k = k
         cw = self.get(od.CONTROLWORD)
         self._apply_controlword(cw)
         mode = self.get(od.MODES_OF_OPERATION)
@@ -125,8 +141,8 @@ class JointDriveNode(SimNode):
             self.q_ref = self.q_start = self.joint.q_measured
             self.v_ref = 0.0
             self.pp_target = None
-        self.joint.max_motor_torque = self.param(od.MAX_TORQUE) / 1000.0 * self._rated_torque()
-        self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * self._rated_torque()
+        self.joint.max_motor_torque = max_motor_torque
+        self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * rated
         self.limit_active = False
         self.q_start = self.q_ref
         if self.state == State.OPERATION_ENABLED:
@@ -159,8 +175,6 @@ class JointDriveNode(SimNode):
                 self.pp_a = self.param(od.PROFILE_ACCELERATION) / k
                 self.pp_d = self.param(od.PROFILE_DECELERATION) / k
         self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
-        self.qs_dec = self.param(od.QUICK_STOP_DECELERATION) / k
-        self.slow_dec = self.param(od.PROFILE_DECELERATION) / k
         halt = bool(cw & CW_HALT) and self.state == State.OPERATION_ENABLED and self.mode == od.MODE_CSP
         if halt and not self.halt:
             option = self.param(HALT_OPTION) if HALT_OPTION in self.od else 1
@@ -208,7 +222,7 @@ class JointDriveNode(SimNode):
         self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
         err = self.q_ref - j.q_measured
-        window = self.param(od.FOLLOWING_ERROR_WINDOW) / self._k
+        window = self._fe_window
         if self.state == State.OPERATION_ENABLED and abs(err) > window:
             self.fe_time += dt
             self.following_error = True
@@ -222,14 +236,14 @@ class JointDriveNode(SimNode):
         if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
-        self._update_od(self._k)
+        self._update_od(self._k, self._settings_values[1])
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint
         until the brake has closed, then leaves operation; power off lets the joint go at once
         and the brake closes BRAKE_ENGAGE_TIME later."""
         at_rest = self.v_ref == 0.0 and not self._ramp_from_actual
-        option = self.param(od.QUICK_STOP_OPTION)
+        option = self._qs_option
         letting_go = (self.state == State.FAULT_REACTION_ACTIVE and at_rest) or \
                      (self.state == State.QUICK_STOP_ACTIVE and at_rest and option in (1, 2, 3, 4))
         if self.state not in ENERGISED or letting_go:
@@ -241,10 +255,10 @@ class JointDriveNode(SimNode):
             self.state = State.FAULT if self.state == State.FAULT_REACTION_ACTIVE else State.SWITCH_ON_DISABLED
         self.joint.brake_engaged = engaged
 
-    def _update_od(self, k: float | None = None) -> None:
-        """The actual values into the OD; k: this SYNC's increments per unit, if known."""
+    def _update_od(self, k: float | None = None, rated: float | None = None) -> None:
+        """The actual values into the OD; k, rated: this SYNC's scale and rated torque, if known."""
         if k is None:
-            k = self._scale()
+            k, rated = self._scale(), self._rated_torque()
         j = self.joint
         sw = STATE_BITS[self.state] | SW_REMOTE
         if self.limit_active:
@@ -263,7 +277,6 @@ class JointDriveNode(SimNode):
                 sw |= SW_OP_MODE_12
             if self.target_reached:
                 sw |= SW_TARGET_REACHED
-        rated = self._rated_torque()
         self._actual_values.write((
             sw, self.mode,
             _i32(round(j.q_reported * k)),     # late by any feedback latency

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 # the names this module had before the SDO server and the PDO engine left it (control.py, tests)
 _NodeTx, _Pdo = NodeTx, Pdo
-__all__ = ["Faults", "NodeStats", "SimNode", "SimLocalNode"]
+__all__ = ["Faults", "NodeStats", "ParamCache", "SimNode", "SimLocalNode"]
 
 
 @dataclass
@@ -45,6 +45,25 @@ class Faults:
     ignore_sync: bool = False       # TPDOs stop (node otherwise alive)
     frozen: bool = False            # sensor values stop updating, TPDOs go on (frozen sensor)
     ignore_quick_stop: bool = False # a joint drive stays in operation on a quick stop command
+
+
+class ParamCache(dict):
+    """param()'s cache. `epoch` moves whenever a cached value is dropped (a write to the object,
+    a reset): what a device derives from cached settings holds while the epoch stands still."""
+    epoch = 0
+
+    def pop(self, key, *default):
+        if key in self:
+            self.epoch += 1
+        return super().pop(key, *default)
+
+    def __delitem__(self, key) -> None:
+        self.epoch += 1
+        super().__delitem__(key)
+
+    def clear(self) -> None:
+        self.epoch += 1
+        super().clear()
 
 
 @dataclass
@@ -88,7 +107,7 @@ class SimNode:
         self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
-        self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
+        self._params = ParamCache()   # param() cache, dropped on writes to the object
         self._consumer_entries: tuple[dict[int, float], dict] | None = None   # consumer_entries(), what it read
         self.local.params_cache = self._params
 

@@ -44,6 +44,6 @@ class CyclicObjects:
             except struct.error:
                 raise ValueError(f"0x{index:04X}:{sub:02X}: {value!r} does not fit {pack.__self__.format}") from None
             entry[sub] = data
-            if params:
-                params.pop((index, sub), None)
+            if params and (index, sub) in params:
+                del params[(index, sub)]
             last_values[i], last_stored[i] = value, data
