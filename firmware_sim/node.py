@@ -113,8 +113,16 @@ class SimNode:
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
-        obj, codec, _ = self._codec(index, sub)
-        data = self.raw(index, sub)
+        entry = self._codecs.get((index, sub))
+        obj, codec, _ = entry if entry is not None else self._codec(index, sub)
+        local = self.local
+        data = None
+        if not local._read_callbacks:     # raw()'s fast path, inline: a few objects every SYNC
+            stored = local.data_store.get(index)
+            if stored is not None:
+                data = stored.get(sub)
+        if data is None:
+            data = local.get_data(index, sub)
         if codec is not None and len(data) == codec.size:
             return codec.unpack(data)[0]
         return obj.decode_raw(data)

@@ -66,13 +66,13 @@ class PdoEngine:
         pdo = (self.rpdos or {}).get(cob_id)
         if pdo is None:
             return
-        if len(data) < pdo.length:
-            node.stats.malformed += 1
-            node.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
-            return
         codec = pdo.codec
         if codec is None:
             codec = pdo.codec = self._compile_rpdo(pdo)
+        if codec and len(data) < codec[-1][3]:    # the last entry's end: the mapped length
+            node.stats.malformed += 1
+            node.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
+            return
         local = node.local
         store = local.data_store
         callbacks = local._write_callbacks
