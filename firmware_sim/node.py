@@ -215,6 +215,20 @@ class SimNode:
             self.sdo_server.aborted()
         self._send(can_id, data)
 
+    def send_frames(self, frames: list[tuple[int, bytes]]) -> None:
+        """send() for each frame, in order, handed to the simulator at once (a SYNC's TPDOs;
+        none on the SDO answer's COB-ID, whose aborts send() counts)."""
+        if self.faults.silent or self._send is None or not self.powered:
+            return
+        if self._send_many is None:
+            for can_id, data in frames:
+                self._send(can_id, data)
+        else:
+            self._send_many(frames)
+        self.stats.tx_frames += len(frames)
+
+    _send_many = None   # set by the simulator: send_many([(can_id, data), ...])
+
     def heartbeat_period(self) -> float:
         return self.get(od.PRODUCER_HEARTBEAT) / 1000.0
 

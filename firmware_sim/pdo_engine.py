@@ -133,13 +133,26 @@ class PdoEngine:
         node.stats.syncs += 1
         if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
             return
+        tpdos = self._tpdo_table()
+        counter = self.sync_counter
+        due = [pdo for pdo in tpdos
+               if 0 <= pdo.transmission_type <= 240 and not (pdo.transmission_type > 1 and counter % pdo.transmission_type)]
+        if due:
+            # one lock and one hand-over to the simulator for the SYNC's frames (issue 35)
+            frames = [frame for frame in map(self._frame, self._sample(due)) if frame is not None]
+            if self._plain_cobs:
+                node.send_frames(frames)
+            else:                        # a TPDO on the SDO answer's COB-ID: send() counts its aborts
+                for frame in frames:
+                    node.send(*frame)
+
+    def _tpdo_table(self) -> list[Pdo]:
         if self.tpdos is None:
             self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self.tpdos:
-            t = pdo.transmission_type
-            if not (0 <= t <= 240) or (t > 1 and self.sync_counter % t):
-                continue
-            self._transmit(pdo)
+            self._plain_cobs = all(pdo.cob_id != od.SDO_TX_BASE + self.node.node_id for pdo in self.tpdos)
+        return self.tpdos
+
+    _plain_cobs = True
 
     @property
     def has_event_tpdos(self) -> bool:
@@ -155,9 +168,7 @@ class PdoEngine:
         node = self.node
         if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
             return
-        if self.tpdos is None:
-            self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self.tpdos:
+        for pdo in self._tpdo_table():
             if pdo.transmission_type < 254 or pdo.event_timer <= 0.0:
                 continue
             if pdo.next_event == 0.0:
@@ -167,6 +178,12 @@ class PdoEngine:
                 self._transmit(pdo)
 
     def _transmit(self, pdo: Pdo) -> None:
+        frame = self._frame(self._sample((pdo,))[0])
+        if frame is not None:
+            self.node.send(*frame)
+
+    def _sample(self, pdos) -> list[tuple[int, bytes]]:
+        """(COB-ID, the mapped objects' bytes) of each PDO, under the node's lock."""
         node = self.node
         local = node.local
         with node._lock:
@@ -174,19 +191,23 @@ class PdoEngine:
                 if local._read_callbacks:
                     raise KeyError
                 store = local.data_store
-                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
+                return [(pdo.cob_id, b"".join([store[index][sub] for index, sub, _ in pdo.entries])) for pdo in pdos]
             except KeyError:
-                data = b"".join([node.raw(index, sub) for index, sub, _ in pdo.entries])
-        faults = node.faults
+                raw = node.raw
+                return [(pdo.cob_id, b"".join([raw(index, sub) for index, sub, _ in pdo.entries])) for pdo in pdos]
+
+    def _frame(self, frame: tuple[int, bytes]) -> tuple[int, bytes] | None:
+        """The frame as the fault switches let it out: dropped (None) or one byte short."""
+        faults = self.node.faults
         if faults.drop_tx > 0:
             faults.drop_tx -= 1
-            node.stats.dropped_tx += 1
-            return
-        if faults.corrupt_tx > 0 and data:
+            self.node.stats.dropped_tx += 1
+            return None
+        if faults.corrupt_tx > 0 and frame[1]:
             faults.corrupt_tx -= 1
-            node.stats.corrupted_tx += 1
-            data = data[:-1]
-        node.send(pdo.cob_id, data)
+            self.node.stats.corrupted_tx += 1
+            return frame[0], frame[1][:-1]
+        return frame
 
     def _read_pdos(self, comm_base: int, map_base: int) -> list[Pdo]:
         get, dictionary = self.node.get, self.node.od
