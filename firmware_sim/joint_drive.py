@@ -221,7 +221,8 @@ class JointDriveNode(SimNode):
         j = self.joint
         self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
-        err = self.q_ref - j.q_measured
+        q_measured = j.q_measured
+        err = self.q_ref - q_measured
         window = self._fe_window
         if self.state == State.OPERATION_ENABLED and abs(err) > window:
             self.fe_time += dt
@@ -236,7 +237,7 @@ class JointDriveNode(SimNode):
         if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
-        self._update_od(self._k, self._settings_values[1])
+        self._update_od(self._k, self._settings_values[1], q_measured)
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint
@@ -255,11 +256,13 @@ class JointDriveNode(SimNode):
             self.state = State.FAULT if self.state == State.FAULT_REACTION_ACTIVE else State.SWITCH_ON_DISABLED
         self.joint.brake_engaged = engaged
 
-    def _update_od(self, k: float | None = None, rated: float | None = None) -> None:
-        """The actual values into the OD; k, rated: this SYNC's scale and rated torque, if known."""
+    def _update_od(self, k: float | None = None, rated: float | None = None, q_measured: float | None = None) -> None:
+        """The actual values into the OD; k, rated, q_measured: this SYNC's, if known."""
         if k is None:
             k, rated = self._scale(), self._rated_torque()
         j = self.joint
+        if q_measured is None:
+            q_measured = j.q_measured
         sw = STATE_BITS[self.state] | SW_REMOTE
         if self.limit_active:
             sw |= SW_INTERNAL_LIMIT
@@ -283,7 +286,7 @@ class JointDriveNode(SimNode):
             _i32(round(self.q_ref * k)),
             _i32(round(j.qd_reported * k)),
             max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))),
-            _i32(round((self.q_ref - j.q_measured) * k)),
+            _i32(round((self.q_ref - q_measured) * k)),
             max(-32768, min(32767, round(j.temperature * 10.0))),
             1 if j.brake_engaged else 0,
             self.error_code))

@@ -211,6 +211,9 @@ class JointModel:
     noise_rng: random.Random | None = None
     torque_reported: float = 0.0       # motor torque as the drive reports it (with sensor noise), N m
 
+    _quantum_of: JointParams | None = None    # q_measured's cache (class attributes, not fields)
+    _quantum = 0.0
+
     # Stiffness standing in for a rigid gear when only backlash is set (rad play needs a
     # motor-side state); stable with the default 1 ms..2 ms sub-step.
     RIGID_GEAR_STIFFNESS = 1.0e5
@@ -230,8 +233,11 @@ class JointModel:
 
     @property
     def q_measured(self) -> float:
-        q = self.q + self.params.encoder_bias
-        quantum = self.params.position_quantum
+        p = self.params
+        if p is not self._quantum_of:     # read a few times every SYNC: the step kept per params
+            self._quantum_of, self._quantum = p, p.position_quantum
+        q = self.q + p.encoder_bias
+        quantum = self._quantum
         if quantum <= 0.0:
             return q
         return round(q / quantum) * quantum
