@@ -327,6 +327,15 @@ class JointModel:
         inertia = self.effective_inertia
         te = (p.te_amplitude, p.te_harmonic, p.te_phase, gear_ratio) if p.te_amplitude > 0.0 else None
         q, qd, theta, thetad, tau_m = self.q, self.qd, self.theta, self.thetad, self.motor_torque
+        if held:             # braked or jammed: the servo runs on a position that stands still
+            x = q + bias
+            q_measured = x if quantum <= 0.0 else round(x / quantum) * quantum
+            for s in fractions:
+                tau_m = 0.0 if controller is None else controller(s, q_measured, qd)
+                tau_m = max(-limit, min(limit, tau_m))
+                qd = thetad = 0.0
+            self.qd, self.thetad, self.motor_torque = qd, thetad, tau_m
+            return
         for s in fractions:
             # drive_torque() and q_measured, inlined on the locals
             tau_m = 0.0
@@ -334,9 +343,6 @@ class JointModel:
                 x = q + bias
                 tau_m = controller(s, x if quantum <= 0.0 else round(x / quantum) * quantum, qd)
             tau_m = max(-limit, min(limit, tau_m))
-            if held:
-                qd = thetad = 0.0
-                continue
             drive = tau_m * gear_ratio * efficiency
             if not constant_load:
                 load = amplitude * math.cos(q + angle)
