@@ -182,6 +182,7 @@ class SimNode:
         with self._lock:
             self.nmt_state = od.NMT_STATE_BOOTUP
             self._params.clear()
+            self.store_generation += 1
             if application:
                 self.local.data_store.clear()
                 self.reset_application()
@@ -245,6 +246,7 @@ class SimNode:
         self._guard_toggle ^= 0x80
 
     _guard_toggle = 0
+    store_generation = 0    # counts the resets that empty (part of) the data store
 
     def emcy(self, code: int, register_bits: int = 0, info: bytes = b"") -> None:
         """Produce an EMCY; code 0 = error reset. Keeps 1001h and 1003h up to date."""

@@ -25,18 +25,22 @@ class CyclicObjects:
         self._layout = tuple(layout)
         self._values: list = [None] * len(layout)
         self._stored: list = [None] * len(layout)
+        self._generation = -1
+        self._entries: list = []      # the store's dict of each object's index, while the store lasts
 
     def write(self, values) -> None:
         """The objects' new values, in the order given at construction."""
         node = self._node
         store = node.local.data_store
         params = node._params
-        last_values, last_stored = self._values, self._stored
+        if self._generation != node.store_generation:    # a reset emptied the store
+            self._generation, self._entries = node.store_generation, [None] * len(self._layout)
+        entries, last_values, last_stored = self._entries, self._values, self._stored
         for i, value in enumerate(values):
             index, sub, pack = self._layout[i]
-            entry = store.get(index)
+            entry = entries[i]
             if entry is None:
-                entry = store[index] = {}
+                entry = entries[i] = store.setdefault(index, {})
             elif value == last_values[i] and entry.get(sub) is last_stored[i]:
                 continue
             try:

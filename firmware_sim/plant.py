@@ -332,7 +332,8 @@ class JointModel:
             q_measured = x if quantum <= 0.0 else round(x / quantum) * quantum
             for s in fractions:
                 tau_m = 0.0 if controller is None else controller(s, q_measured, qd)
-                tau_m = max(-limit, min(limit, tau_m))
+                tau_m = tau_m if tau_m < limit else limit      # min(limit, .), then max(-limit, .):
+                tau_m = tau_m if tau_m > -limit else -limit    # the same picks, NaN and zeros alike
                 qd = thetad = 0.0
             self.qd, self.thetad, self.motor_torque = qd, thetad, tau_m
             return
@@ -342,7 +343,8 @@ class JointModel:
             if controller is not None:
                 x = q + bias
                 tau_m = controller(s, x if quantum <= 0.0 else round(x / quantum) * quantum, qd)
-            tau_m = max(-limit, min(limit, tau_m))
+            tau_m = tau_m if tau_m < limit else limit
+            tau_m = tau_m if tau_m > -limit else -limit
             drive = tau_m * gear_ratio * efficiency
             if not constant_load:
                 load = amplitude * math.cos(q + angle)
