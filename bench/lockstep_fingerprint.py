@@ -139,22 +139,13 @@ def run_scenario(name: str, folder: Path) -> dict:
 
 
 def _determinism(folder):
-    def steps(script):
-        start = [j["q"] for j in script.daemon.status()["joints"]]
-        script.move_and_wait("move_joints", q=[0.3, -0.2, 1.2, -1.3, 0.4, -1.2])
-        script.move_and_wait("jog", joint=3, delta=0.05)
-        script.run(7)
-        script.call("stop")
-        script.run(40)
-        script.call("reset")
-        script.call("enable")
-        script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
-        script.move_and_wait("move_joints", q=start)
-        script.run(20)
-    return "configs/plant/oru_testbed_errors.toml", None, None, steps
+    from tests.daemon.test_lockstep_determinism import PLANT, moves
+    return PLANT, None, None, moves
 
 
 def _cell(folder):
+    from tests.daemon.test_lockstep_determinism import back_to_work
+
     def steps(script):
         home = [j["q"] for j in script.daemon.status()["joints"]]
         script.move_and_wait("jog", joint=1, delta=-0.12)
@@ -167,16 +158,13 @@ def _cell(folder):
         # a drive faults mid-motion: its fault reaction ramp, the others' quick stop
         script.daemon.plant_simulator.node("joint_3").inject_fault()
         script.run(80)
-        script.call("reset")
-        script.run(5)
-        script.call("enable")
-        script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
-        script.move_and_wait("move_joints", q=home)
+        back_to_work(script, home, settle=5)
         script.run(15)
     return "configs/plant/oru_cell_errors.toml", None, None, steps
 
 
 def _effects(folder):
+    from tests.daemon.test_lockstep_determinism import back_to_work
     plant = folder / "effects_plant.toml"
     plant.write_text(EFFECTS_PLANT)
 
@@ -188,10 +176,7 @@ def _effects(folder):
         script.run(10)
         script.call("stop")
         script.run(50)
-        script.call("reset")
-        script.call("enable")
-        script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
-        script.move_and_wait("move_joints", q=home)
+        back_to_work(script, home)
         script.run(10)
     return plant, None, None, steps
 
