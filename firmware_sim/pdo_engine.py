@@ -11,6 +11,7 @@ state, fault switches, statistics, lock and send(); it imports nothing of the no
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from operator import getitem
 
 from canopen import objectdictionary as odlib
 from canopen.sdo import SdoAbortedError
@@ -27,6 +28,7 @@ class Pdo:
     event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
     next_event: float = 0.0      # monotonic time of the next event-timer transmission
     codec: tuple | None = None   # RPDO: decoder compiled on first use (PdoEngine._compile_rpdo)
+    slots: tuple | None = None   # TPDO: (store generation, dicts, subindices) (PdoEngine._slots)
 
     @property
     def length(self) -> int:
@@ -185,16 +187,26 @@ class PdoEngine:
     def _sample(self, pdos) -> list[tuple[int, bytes]]:
         """(COB-ID, the mapped objects' bytes) of each PDO, under the node's lock."""
         node = self.node
-        local = node.local
         with node._lock:
-            try:     # hot path: every entry is a stored value and no read callback is installed
-                if local._read_callbacks:
-                    raise KeyError
-                store = local.data_store
-                return [(pdo.cob_id, b"".join([store[index][sub] for index, sub, _ in pdo.entries])) for pdo in pdos]
-            except KeyError:
-                raw = node.raw
-                return [(pdo.cob_id, b"".join([raw(index, sub) for index, sub, _ in pdo.entries])) for pdo in pdos]
+            if not node.local._read_callbacks:
+                try:     # hot path: every entry is a stored value and no read callback is installed
+                    return [(pdo.cob_id, b"".join(map(getitem, *self._slots(pdo)))) for pdo in pdos]
+                except KeyError:
+                    pass
+            raw = node.raw
+            return [(pdo.cob_id, b"".join([raw(index, sub) for index, sub, _ in pdo.entries])) for pdo in pdos]
+
+    def _slots(self, pdo: Pdo) -> tuple[tuple[dict, ...], tuple[int, ...]]:
+        """The data store's dict of each mapped object's index and its subindex: compiled once
+        per mapping (a new mapping is a new Pdo) and kept until a reset empties the store, so
+        a TPDO is sampled without a Python frame per entry. KeyError: not every object stored."""
+        generation = self.node.store_generation
+        slots = pdo.slots
+        if slots is None or slots[0] != generation:
+            store = self.node.local.data_store
+            slots = pdo.slots = (generation, tuple(store[index] for index, _, _ in pdo.entries),
+                                 tuple(sub for _, sub, _ in pdo.entries))
+        return slots[1], slots[2]
 
     def _frame(self, frame: tuple[int, bytes]) -> tuple[int, bytes] | None:
         """The frame as the fault switches let it out: dropped (None) or one byte short."""
