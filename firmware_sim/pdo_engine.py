@@ -79,12 +79,12 @@ class PdoEngine:
         store = local.data_store
         callbacks = local._write_callbacks
         write_rules = node._on_od_write
-        generic = callbacks != [write_rules]
+        generic = len(callbacks) != 1 or callbacks[0] != write_rules
         params = node._params
         with node._lock:
             node.in_rpdo = True
             try:
-                for index, sub, start, end, obj, size_ok in codec:
+                for index, sub, start, end, obj, size_ok, key in codec:
                     chunk = data[start:end]
                     if not size_ok:          # mapped size differs from the object's type
                         node.stats.malformed += 1
@@ -104,15 +104,16 @@ class PdoEngine:
                     if entry is None:
                         entry = store[index] = {}
                     entry[sub] = chunk
-                    if params and (index, sub) in params:
-                        del params[(index, sub)]
+                    if params and key in params:
+                        del params[key]
             finally:
                 node.in_rpdo = False
 
     def _compile_rpdo(self, pdo: Pdo) -> tuple:
         """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
         whether the mapped length fits the object's type (what LocalNode.set_data checks per
-        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
+        frame), and its param() cache key. Unknown objects are left out (set_data would abort:
+        counted as malformed)."""
         out, offset = [], 0
         for index, sub, size in pdo.entries:
             try:
@@ -121,9 +122,9 @@ class PdoEngine:
                 obj = None
             if obj is not None:
                 size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
-                out.append((index, sub, offset, offset + size, obj, size_ok))
+                out.append((index, sub, offset, offset + size, obj, size_ok, (index, sub)))
             else:
-                out.append((index, sub, offset, offset + size, None, False))
+                out.append((index, sub, offset, offset + size, None, False, (index, sub)))
             offset += size
         return tuple(out)
 
