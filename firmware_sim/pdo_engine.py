@@ -80,6 +80,7 @@ class PdoEngine:
         callbacks = local._write_callbacks
         write_rules = node._on_od_write
         generic = len(callbacks) != 1 or callbacks[0] != write_rules
+        on_write = node.on_write
         params = node._params
         with node._lock:
             node.in_rpdo = True
@@ -96,7 +97,7 @@ class PdoEngine:
                         elif index < 0x2000:   # communication area: the full write rules
                             write_rules(index, sub, obj, chunk)
                         else:                  # application objects: only the device's reaction
-                            node.on_write(index, sub, chunk)
+                            on_write(index, sub, chunk)
                     except SdoAbortedError:
                         node.stats.malformed += 1
                         continue
