@@ -307,7 +307,7 @@ class JointDriveNode(SimNode):
         cmd = decode_controlword(cw)
         if cmd == Command.QUICK_STOP and s == State.OPERATION_ENABLED and self.faults.ignore_quick_stop:
             return                                      # fault injection: a drive that does not stop
-        option = self.param(od.QUICK_STOP_OPTION)
+        option = self._qs_option           # this SYNC's (on_sync_begin, _settings)
         new = next_state(s, cmd, option)
         if new == State.QUICK_STOP_ACTIVE and s == State.OPERATION_ENABLED:     # 11: 605Ah's ramp
             self._start_ramp(quick=option not in (1, 5))
