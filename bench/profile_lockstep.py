@@ -70,7 +70,7 @@ PARTS = (
                                   "firmware_sim/contact")),
     ("simulator: drives (CiA 402, servo)", ("firmware_sim/joint_drive", "firmware_sim/cia402_state_machine",
                                             "firmware_sim/end_effector", "firmware_sim/ft_sensor")),
-    ("simulator: object dictionary, PDO/SDO engine", ("firmware_sim/node", "firmware_sim/pdo_engine",
+    ("simulator: object dictionary, PDO/SDO engine", ("firmware_sim/node", "firmware_sim/pdo_engine", "firmware_sim/od_cyclic",
                                                       "firmware_sim/sdo_server", "firmware_sim/sdo_session")),
     ("simulator: SYNC routing", ("firmware_sim/",)),
     ("bus: transport and frame delivery", ("base/transport", "site-packages/can/")),

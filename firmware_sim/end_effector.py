@@ -10,6 +10,7 @@ from __future__ import annotations
 from spacearm.base.canopen import od
 from spacearm.base.canopen.od import EeCommand, EeState
 from spacearm.firmware_sim.node import SimNode
+from spacearm.firmware_sim.od_cyclic import CyclicObjects
 
 STALL_TIMEOUT = 1.0   # s without progress while moving -> jam fault
 
@@ -19,6 +20,11 @@ MOVING = (EeState.CLOSING, EeState.LOCKING, EeState.UNLOCKING, EeState.OPENING)
 
 class EndEffectorNode(SimNode):
     device_type = "end_effector"
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._actual_values = CyclicObjects(self, [(od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0), (od.EE_SCREW_TORQUE, 0),
+                                                   (od.EE_SCREW_TURNS, 0), (od.EE_FAULT_CODE, 0)])
 
     def reset_application(self) -> None:
         ee = self.plant.ee
@@ -84,8 +90,8 @@ class EndEffectorNode(SimNode):
 
     def on_sync_end(self, dt: float) -> None:
         ee = self.plant.ee
-        lock_torque = self.get(od.EE_SCREW_TORQUE_LIMIT) / 1000.0
-        lock_turns = self.get(od.EE_LOCK_TURNS) / 1000.0
+        lock_torque = self.param(od.EE_SCREW_TORQUE_LIMIT) / 1000.0
+        lock_turns = self.param(od.EE_LOCK_TURNS) / 1000.0
         if self.state in MOVING:
             progress = (ee.grip, ee.turns)
             self.stall_time = 0.0 if progress != self._progress else self.stall_time + dt
@@ -121,8 +127,6 @@ class EndEffectorNode(SimNode):
 
     def _update_od(self) -> None:
         ee = self.plant.ee
-        self.put(od.EE_STATE, 0, int(self.state))
-        self.put(od.EE_GRIP_POSITION, 0, round(ee.grip * 1000))
-        self.put(od.EE_SCREW_TORQUE, 0, max(-32768, min(32767, round(ee.screw_torque * 1000))))
-        self.put(od.EE_SCREW_TURNS, 0, round(ee.turns * 1000))
-        self.put(od.EE_FAULT_CODE, 0, self.fault_code)
+        self._actual_values.write((int(self.state), round(ee.grip * 1000),
+                                   max(-32768, min(32767, round(ee.screw_torque * 1000))), round(ee.turns * 1000),
+                                   self.fault_code))

@@ -9,10 +9,15 @@ from __future__ import annotations
 
 from spacearm.base.canopen import od
 from spacearm.firmware_sim.node import SimNode
+from spacearm.firmware_sim.od_cyclic import CyclicObjects
 
 
 class FtSensorNode(SimNode):
     device_type = "ft_sensor"
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._readings = CyclicObjects(self, [(od.FT_VALUES, i) for i in range(1, 7)] + [(od.FT_STATUS, 0)])
 
     def reset_application(self) -> None:
         self.bias = [0.0] * 6
@@ -44,21 +49,23 @@ class FtSensorNode(SimNode):
         elif self.pending_tare == 2:
             self.bias, self.tared = [0.0] * 6, False
         self.pending_tare = None
-        kf = self.get(od.FT_FORCE_COUNTS_PER_N)
-        kt = self.get(od.FT_TORQUE_COUNTS_PER_NM)
-        flim = self.get(od.FT_OVERLOAD_LIMIT, 1)
-        tlim = self.get(od.FT_OVERLOAD_LIMIT, 2)
+        kf = self.param(od.FT_FORCE_COUNTS_PER_N)
+        kt = self.param(od.FT_TORQUE_COUNTS_PER_NM)
+        flim = self.param(od.FT_OVERLOAD_LIMIT, 1)
+        tlim = self.param(od.FT_OVERLOAD_LIMIT, 2)
         overload = False
+        values = []
         for i, value in enumerate(raw):
             value -= self.bias[i]
             scale, limit = (kf, flim) if i < 3 else (kt, tlim)
             counts = round(value * scale)
             if abs(value) > limit or not -32768 <= counts <= 32767:
                 overload = True
-            self.put(od.FT_VALUES, i + 1, max(-32768, min(32767, counts)))
+            values.append(max(-32768, min(32767, counts)))
         if overload and not self.overload:
             self.emcy(od.EMCY_FT_OVERLOAD, od.ERR_REG_MANUFACTURER)
         elif self.overload and not overload:
             self.emcy(od.EMCY_NO_ERROR)
         self.overload = overload
-        self.put(od.FT_STATUS, 0, (od.FT_STATUS_OVERLOAD if overload else 0) | (od.FT_STATUS_TARED if self.tared else 0))
+        values.append((od.FT_STATUS_OVERLOAD if overload else 0) | (od.FT_STATUS_TARED if self.tared else 0))
+        self._readings.write(values)

@@ -31,6 +31,7 @@ from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 
 from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
+from spacearm.firmware_sim.od_cyclic import CyclicObjects
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -50,6 +51,10 @@ class JointDriveNode(SimNode):
         self.joint = plant.joints[joint_index]
         super().__init__(node_id, eds_path, name, plant)
         self.joint.controller = self._servo
+        self._actual_values = CyclicObjects(self, [
+            (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0), (od.POSITION_ACTUAL, 0), (od.POSITION_DEMAND, 0),
+            (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.FOLLOWING_ERROR_ACTUAL, 0), (od.DRIVE_TEMPERATURE, 0),
+            (od.BRAKE_STATUS, 0), (od.ERROR_CODE, 0)])
 
     # ------------------------------------------------------------------ state
     def reset_application(self) -> None:
@@ -106,12 +111,28 @@ class JointDriveNode(SimNode):
     def _rated_torque(self) -> float:
         return self.param(od.MOTOR_RATED_TORQUE) / 1000.0   # mN m -> N m (motor side)
 
+    def _settings(self) -> tuple:
+        """(k, rated torque, max motor torque, quick-stop and slow-down decelerations, following
+        error window, quick-stop option): the settings every SYNC reads, derived again only
+        after a write or a reset dropped a cached value (ParamCache.epoch)."""
+        key = (self._params.epoch, self.joint.params)
+        if self._settings_key != key:
+            k, rated = self._scale(), self._rated_torque()
+            self._settings_values = (k, rated, self.param(od.MAX_TORQUE) / 1000.0 * rated,
+                                     self.param(od.QUICK_STOP_DECELERATION) / k,
+                                     self.param(od.PROFILE_DECELERATION) / k,
+                                     self.param(od.FOLLOWING_ERROR_WINDOW) / k, self.param(od.QUICK_STOP_OPTION))
+            self._settings_key = (self._params.epoch, self.joint.params)
+        return self._settings_values
+
+    _settings_key = None
+
     # ------------------------------------------------------------------ SYNC
     def on_sync_begin(self, dt: float) -> None:
         self._dt = dt
         self._h = dt / self.plant.config.substeps
-        self._k = self._scale()
-        k = self._k
+        k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = self._settings()
+        self._k = k
         cw = self.get(od.CONTROLWORD)
         self._apply_controlword(cw)
         mode = self.get(od.MODES_OF_OPERATION)
@@ -120,8 +141,8 @@ class JointDriveNode(SimNode):
             self.q_ref = self.q_start = self.joint.q_measured
             self.v_ref = 0.0
             self.pp_target = None
-        self.joint.max_motor_torque = self.param(od.MAX_TORQUE) / 1000.0 * self._rated_torque()
-        self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * self._rated_torque()
+        self.joint.max_motor_torque = max_motor_torque
+        self.torque_ff = self.get(od.TORQUE_OFFSET) / 1000.0 * rated
         self.limit_active = False
         self.q_start = self.q_ref
         if self.state == State.OPERATION_ENABLED:
@@ -154,8 +175,6 @@ class JointDriveNode(SimNode):
                 self.pp_a = self.param(od.PROFILE_ACCELERATION) / k
                 self.pp_d = self.param(od.PROFILE_DECELERATION) / k
         self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
-        self.qs_dec = self.param(od.QUICK_STOP_DECELERATION) / k
-        self.slow_dec = self.param(od.PROFILE_DECELERATION) / k
         halt = bool(cw & CW_HALT) and self.state == State.OPERATION_ENABLED and self.mode == od.MODE_CSP
         if halt and not self.halt:
             option = self.param(HALT_OPTION) if HALT_OPTION in self.od else 1
@@ -202,8 +221,9 @@ class JointDriveNode(SimNode):
         j = self.joint
         self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
-        err = self.q_ref - j.q_measured
-        window = self.param(od.FOLLOWING_ERROR_WINDOW) / self._k
+        q_measured = j.q_measured
+        err = self.q_ref - q_measured
+        window = self._fe_window
         if self.state == State.OPERATION_ENABLED and abs(err) > window:
             self.fe_time += dt
             self.following_error = True
@@ -217,14 +237,14 @@ class JointDriveNode(SimNode):
         if self.mode == od.MODE_PROFILE_POSITION and self.pp_target is not None:
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
-        self._update_od()
+        self._update_od(self._k, self._settings_values[1], q_measured)
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint
         until the brake has closed, then leaves operation; power off lets the joint go at once
         and the brake closes BRAKE_ENGAGE_TIME later."""
         at_rest = self.v_ref == 0.0 and not self._ramp_from_actual
-        option = self.param(od.QUICK_STOP_OPTION)
+        option = self._qs_option
         letting_go = (self.state == State.FAULT_REACTION_ACTIVE and at_rest) or \
                      (self.state == State.QUICK_STOP_ACTIVE and at_rest and option in (1, 2, 3, 4))
         if self.state not in ENERGISED or letting_go:
@@ -236,9 +256,13 @@ class JointDriveNode(SimNode):
             self.state = State.FAULT if self.state == State.FAULT_REACTION_ACTIVE else State.SWITCH_ON_DISABLED
         self.joint.brake_engaged = engaged
 
-    def _update_od(self) -> None:
-        k = self._scale()
+    def _update_od(self, k: float | None = None, rated: float | None = None, q_measured: float | None = None) -> None:
+        """The actual values into the OD; k, rated, q_measured: this SYNC's, if known."""
+        if k is None:
+            k, rated = self._scale(), self._rated_torque()
         j = self.joint
+        if q_measured is None:
+            q_measured = j.q_measured
         sw = STATE_BITS[self.state] | SW_REMOTE
         if self.limit_active:
             sw |= SW_INTERNAL_LIMIT
@@ -256,17 +280,16 @@ class JointDriveNode(SimNode):
                 sw |= SW_OP_MODE_12
             if self.target_reached:
                 sw |= SW_TARGET_REACHED
-        rated = self._rated_torque()
-        self.put(od.STATUSWORD, 0, sw)
-        self.put(od.MODES_OF_OPERATION_DISPLAY, 0, self.mode)
-        self.put(od.POSITION_ACTUAL, 0, _i32(round(j.q_reported * k)))   # late by any feedback latency
-        self.put(od.POSITION_DEMAND, 0, _i32(round(self.q_ref * k)))
-        self.put(od.VELOCITY_ACTUAL, 0, _i32(round(j.qd_reported * k)))
-        self.put(od.TORQUE_ACTUAL, 0, max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))))
-        self.put(od.FOLLOWING_ERROR_ACTUAL, 0, _i32(round((self.q_ref - j.q_measured) * k)))
-        self.put(od.DRIVE_TEMPERATURE, 0, max(-32768, min(32767, round(j.temperature * 10.0))))
-        self.put(od.BRAKE_STATUS, 0, 1 if j.brake_engaged else 0)
-        self.put(od.ERROR_CODE, 0, self.error_code)
+        self._actual_values.write((
+            sw, self.mode,
+            _i32(round(j.q_reported * k)),     # late by any feedback latency
+            _i32(round(self.q_ref * k)),
+            _i32(round(j.qd_reported * k)),
+            max(-32768, min(32767, round(j.torque_reported / rated * 1000.0))),
+            _i32(round((self.q_ref - q_measured) * k)),
+            max(-32768, min(32767, round(j.temperature * 10.0))),
+            1 if j.brake_engaged else 0,
+            self.error_code))
 
     # ------------------------------------------------------------------ state machine
     def _apply_controlword(self, cw: int) -> None:
@@ -284,7 +307,7 @@ class JointDriveNode(SimNode):
         cmd = decode_controlword(cw)
         if cmd == Command.QUICK_STOP and s == State.OPERATION_ENABLED and self.faults.ignore_quick_stop:
             return                                      # fault injection: a drive that does not stop
-        option = self.param(od.QUICK_STOP_OPTION)
+        option = self._qs_option           # this SYNC's (on_sync_begin, _settings)
         new = next_state(s, cmd, option)
         if new == State.QUICK_STOP_ACTIVE and s == State.OPERATION_ENABLED:     # 11: 605Ah's ramp
             self._start_ramp(quick=option not in (1, 5))

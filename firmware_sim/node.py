@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 # the names this module had before the SDO server and the PDO engine left it (control.py, tests)
 _NodeTx, _Pdo = NodeTx, Pdo
-__all__ = ["Faults", "NodeStats", "SimNode", "SimLocalNode"]
+__all__ = ["Faults", "NodeStats", "ParamCache", "SimNode", "SimLocalNode"]
 
 
 @dataclass
@@ -45,6 +45,25 @@ class Faults:
     ignore_sync: bool = False       # TPDOs stop (node otherwise alive)
     frozen: bool = False            # sensor values stop updating, TPDOs go on (frozen sensor)
     ignore_quick_stop: bool = False # a joint drive stays in operation on a quick stop command
+
+
+class ParamCache(dict):
+    """param()'s cache. `epoch` moves whenever a cached value is dropped (a write to the object,
+    a reset): what a device derives from cached settings holds while the epoch stands still."""
+    epoch = 0
+
+    def pop(self, key, *default):
+        if key in self:
+            self.epoch += 1
+        return super().pop(key, *default)
+
+    def __delitem__(self, key) -> None:
+        self.epoch += 1
+        super().__delitem__(key)
+
+    def clear(self) -> None:
+        self.epoch += 1
+        super().clear()
 
 
 @dataclass
@@ -88,14 +107,22 @@ class SimNode:
         self.consumer_excused: dict[int, float] = {}  # producer -> starvation excused from its silence
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
-        self._params: dict[tuple[int, int], object] = {}   # param() cache, dropped on writes to the object
+        self._params = ParamCache()   # param() cache, dropped on writes to the object
         self._consumer_entries: tuple[dict[int, float], dict] | None = None   # consumer_entries(), what it read
         self.local.params_cache = self._params
 
     # ------------------------------------------------------------------ OD access
     def get(self, index: int, sub: int = 0):
-        obj, codec, _ = self._codec(index, sub)
-        data = self.raw(index, sub)
+        entry = self._codecs.get((index, sub))
+        obj, codec, _ = entry if entry is not None else self._codec(index, sub)
+        local = self.local
+        data = None
+        if not local._read_callbacks:     # raw()'s fast path, inline: a few objects every SYNC
+            stored = local.data_store.get(index)
+            if stored is not None:
+                data = stored.get(sub)
+        if data is None:
+            data = local.get_data(index, sub)
         if codec is not None and len(data) == codec.size:
             return codec.unpack(data)[0]
         return obj.decode_raw(data)
@@ -155,6 +182,7 @@ class SimNode:
         with self._lock:
             self.nmt_state = od.NMT_STATE_BOOTUP
             self._params.clear()
+            self.store_generation += 1
             if application:
                 self.local.data_store.clear()
                 self.reset_application()
@@ -188,6 +216,20 @@ class SimNode:
             self.sdo_server.aborted()
         self._send(can_id, data)
 
+    def send_frames(self, frames: list[tuple[int, bytes]]) -> None:
+        """send() for each frame, in order, handed to the simulator at once (a SYNC's TPDOs;
+        none on the SDO answer's COB-ID, whose aborts send() counts)."""
+        if self.faults.silent or self._send is None or not self.powered:
+            return
+        if self._send_many is None:
+            for can_id, data in frames:
+                self._send(can_id, data)
+        else:
+            self._send_many(frames)
+        self.stats.tx_frames += len(frames)
+
+    _send_many = None   # set by the simulator: send_many([(can_id, data), ...])
+
     def heartbeat_period(self) -> float:
         return self.get(od.PRODUCER_HEARTBEAT) / 1000.0
 
@@ -204,6 +246,7 @@ class SimNode:
         self._guard_toggle ^= 0x80
 
     _guard_toggle = 0
+    store_generation = 0    # counts the resets that empty (part of) the data store
 
     def emcy(self, code: int, register_bits: int = 0, info: bytes = b"") -> None:
         """Produce an EMCY; code 0 = error reset. Keeps 1001h and 1003h up to date."""

@@ -11,6 +11,7 @@ state, fault switches, statistics, lock and send(); it imports nothing of the no
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from operator import getitem
 
 from canopen import objectdictionary as odlib
 from canopen.sdo import SdoAbortedError
@@ -27,6 +28,7 @@ class Pdo:
     event_timer: float = 0.0     # s (1800h.5); event-driven TPDOs (254/255) are sent at this period
     next_event: float = 0.0      # monotonic time of the next event-timer transmission
     codec: tuple | None = None   # RPDO: decoder compiled on first use (PdoEngine._compile_rpdo)
+    slots: tuple | None = None   # TPDO: (store generation, dicts, subindices) (PdoEngine._slots)
 
     @property
     def length(self) -> int:
@@ -66,23 +68,24 @@ class PdoEngine:
         pdo = (self.rpdos or {}).get(cob_id)
         if pdo is None:
             return
-        if len(data) < pdo.length:
-            node.stats.malformed += 1
-            node.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
-            return
         codec = pdo.codec
         if codec is None:
             codec = pdo.codec = self._compile_rpdo(pdo)
+        if codec and len(data) < codec[-1][3]:    # the last entry's end: the mapped length
+            node.stats.malformed += 1
+            node.emcy(od.EMCY_PDO_LENGTH, od.ERR_REG_COMMUNICATION)
+            return
         local = node.local
         store = local.data_store
         callbacks = local._write_callbacks
         write_rules = node._on_od_write
-        generic = callbacks != [write_rules]
+        generic = len(callbacks) != 1 or callbacks[0] != write_rules
+        on_write = node.on_write
         params = node._params
         with node._lock:
             node.in_rpdo = True
             try:
-                for index, sub, start, end, obj, size_ok in codec:
+                for index, sub, start, end, obj, size_ok, key in codec:
                     chunk = data[start:end]
                     if not size_ok:          # mapped size differs from the object's type
                         node.stats.malformed += 1
@@ -94,7 +97,7 @@ class PdoEngine:
                         elif index < 0x2000:   # communication area: the full write rules
                             write_rules(index, sub, obj, chunk)
                         else:                  # application objects: only the device's reaction
-                            node.on_write(index, sub, chunk)
+                            on_write(index, sub, chunk)
                     except SdoAbortedError:
                         node.stats.malformed += 1
                         continue
@@ -102,15 +105,16 @@ class PdoEngine:
                     if entry is None:
                         entry = store[index] = {}
                     entry[sub] = chunk
-                    if params and (index, sub) in params:
-                        del params[(index, sub)]
+                    if params and key in params:
+                        del params[key]
             finally:
                 node.in_rpdo = False
 
     def _compile_rpdo(self, pdo: Pdo) -> tuple:
         """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
         whether the mapped length fits the object's type (what LocalNode.set_data checks per
-        frame). Unknown objects are left out (set_data would abort: counted as malformed)."""
+        frame), and its param() cache key. Unknown objects are left out (set_data would abort:
+        counted as malformed)."""
         out, offset = [], 0
         for index, sub, size in pdo.entries:
             try:
@@ -119,9 +123,9 @@ class PdoEngine:
                 obj = None
             if obj is not None:
                 size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
-                out.append((index, sub, offset, offset + size, obj, size_ok))
+                out.append((index, sub, offset, offset + size, obj, size_ok, (index, sub)))
             else:
-                out.append((index, sub, offset, offset + size, None, False))
+                out.append((index, sub, offset, offset + size, None, False, (index, sub)))
             offset += size
         return tuple(out)
 
@@ -133,13 +137,26 @@ class PdoEngine:
         node.stats.syncs += 1
         if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
             return
+        tpdos = self._tpdo_table()
+        counter = self.sync_counter
+        due = [pdo for pdo in tpdos
+               if 0 <= pdo.transmission_type <= 240 and not (pdo.transmission_type > 1 and counter % pdo.transmission_type)]
+        if due:
+            # one lock and one hand-over to the simulator for the SYNC's frames (issue 35)
+            frames = [frame for frame in map(self._frame, self._sample(due)) if frame is not None]
+            if self._plain_cobs:
+                node.send_frames(frames)
+            else:                        # a TPDO on the SDO answer's COB-ID: send() counts its aborts
+                for frame in frames:
+                    node.send(*frame)
+
+    def _tpdo_table(self) -> list[Pdo]:
         if self.tpdos is None:
             self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self.tpdos:
-            t = pdo.transmission_type
-            if not (0 <= t <= 240) or (t > 1 and self.sync_counter % t):
-                continue
-            self._transmit(pdo)
+            self._plain_cobs = all(pdo.cob_id != od.SDO_TX_BASE + self.node.node_id for pdo in self.tpdos)
+        return self.tpdos
+
+    _plain_cobs = True
 
     @property
     def has_event_tpdos(self) -> bool:
@@ -155,9 +172,7 @@ class PdoEngine:
         node = self.node
         if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
             return
-        if self.tpdos is None:
-            self.tpdos = self._read_pdos(od.TPDO_COMM, od.TPDO_MAP)
-        for pdo in self.tpdos:
+        for pdo in self._tpdo_table():
             if pdo.transmission_type < 254 or pdo.event_timer <= 0.0:
                 continue
             if pdo.next_event == 0.0:
@@ -167,26 +182,46 @@ class PdoEngine:
                 self._transmit(pdo)
 
     def _transmit(self, pdo: Pdo) -> None:
+        frame = self._frame(self._sample((pdo,))[0])
+        if frame is not None:
+            self.node.send(*frame)
+
+    def _sample(self, pdos) -> list[tuple[int, bytes]]:
+        """(COB-ID, the mapped objects' bytes) of each PDO, under the node's lock."""
         node = self.node
-        local = node.local
         with node._lock:
-            try:     # hot path: every entry is a stored value and no read callback is installed
-                if local._read_callbacks:
-                    raise KeyError
-                store = local.data_store
-                data = b"".join([store[index][sub] for index, sub, _ in pdo.entries])
-            except KeyError:
-                data = b"".join([node.raw(index, sub) for index, sub, _ in pdo.entries])
-        faults = node.faults
+            if not node.local._read_callbacks:
+                try:     # hot path: every entry is a stored value and no read callback is installed
+                    return [(pdo.cob_id, b"".join(map(getitem, *self._slots(pdo)))) for pdo in pdos]
+                except KeyError:
+                    pass
+            raw = node.raw
+            return [(pdo.cob_id, b"".join([raw(index, sub) for index, sub, _ in pdo.entries])) for pdo in pdos]
+
+    def _slots(self, pdo: Pdo) -> tuple[tuple[dict, ...], tuple[int, ...]]:
+        """The data store's dict of each mapped object's index and its subindex: compiled once
+        per mapping (a new mapping is a new Pdo) and kept until a reset empties the store, so
+        a TPDO is sampled without a Python frame per entry. KeyError: not every object stored."""
+        generation = self.node.store_generation
+        slots = pdo.slots
+        if slots is None or slots[0] != generation:
+            store = self.node.local.data_store
+            slots = pdo.slots = (generation, tuple(store[index] for index, _, _ in pdo.entries),
+                                 tuple(sub for _, sub, _ in pdo.entries))
+        return slots[1], slots[2]
+
+    def _frame(self, frame: tuple[int, bytes]) -> tuple[int, bytes] | None:
+        """The frame as the fault switches let it out: dropped (None) or one byte short."""
+        faults = self.node.faults
         if faults.drop_tx > 0:
             faults.drop_tx -= 1
-            node.stats.dropped_tx += 1
-            return
-        if faults.corrupt_tx > 0 and data:
+            self.node.stats.dropped_tx += 1
+            return None
+        if faults.corrupt_tx > 0 and frame[1]:
             faults.corrupt_tx -= 1
-            node.stats.corrupted_tx += 1
-            data = data[:-1]
-        node.send(pdo.cob_id, data)
+            self.node.stats.corrupted_tx += 1
+            return frame[0], frame[1][:-1]
+        return frame
 
     def _read_pdos(self, comm_base: int, map_base: int) -> list[Pdo]:
         get, dictionary = self.node.get, self.node.od

@@ -150,20 +150,6 @@ def dynamics_for(plant_model: KinematicModel, arm: ArmConfig, arm_path: str, par
     return ArmDynamics(build_pinocchio_model(plant_model, list(arm.links), payload), params.gravity)
 
 
-def _drive_torque(joint: "JointModel", s: float) -> float:
-    """The drive's motor torque this sub-step (servo callback, saturated), stored on the joint."""
-    p = joint.params
-    tau_m = 0.0
-    if joint.controller is not None:
-        tau_m = joint.controller(s, joint.q_measured, joint.thetad if joint.two_mass else joint.qd)
-    limit = joint.max_motor_torque
-    if p.torque_limit > 0.0:
-        limit = min(limit, p.torque_limit)
-    tau_m = max(-limit, min(limit, tau_m))
-    joint.motor_torque = tau_m
-    return tau_m * p.gear_ratio * p.gear_efficiency
-
-
 def substep(plant: "Plant", dynamics: ArmDynamics, s: float, h: float) -> None:
     """One physics sub-step of every joint with the coupled arm dynamics."""
     joints = plant.joints
@@ -175,7 +161,7 @@ def substep(plant: "Plant", dynamics: ArmDynamics, s: float, h: float) -> None:
     armature = np.empty(n)
     bias = None
     for i, joint in enumerate(joints):
-        drive = _drive_torque(joint, s)
+        drive = joint.drive_torque(s)
         p = joint.params
         if joint.brake_engaged or joint.stalled:
             locked[i] = True

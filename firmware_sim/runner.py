@@ -106,6 +106,7 @@ class Simulator:
             else:
                 node = FtSensorNode(cfg.node_id, cfg.eds_path, cfg.name, self.plant)
             node._send = self._send
+            node._send_many = self._send_many
             node.pdo_changed_callback = self._mark_dirty
             self.nodes[cfg.node_id] = node
         self.control = None
@@ -229,6 +230,15 @@ class Simulator:
                 self._send_frame(can_id, data)
             except can.CanError as exc:
                 logger.warning("simulator: send failed: %s", exc)
+
+    def _send_many(self, frames: list[tuple[int, bytes]]) -> None:
+        if self.bus is None:
+            return
+        if self._batch is not None and self._batch_thread == threading.get_ident():
+            self._batch.extend(frames)
+            return
+        for can_id, data in frames:
+            self._send(can_id, data)
 
     def _flush_batch(self) -> None:
         frames, self._batch, self._batch_thread = self._batch, None, None

@@ -14,6 +14,27 @@ PLANT = "configs/plant/oru_testbed_errors.toml"    # friction, gravity, D-H erro
 WALL_CLOCK_FIELDS = {"period_error", "execution", "io_wait"}
 
 
+def moves(script) -> None:
+    """The scenario's commands on an enabled arm (bench/lockstep_fingerprint.py runs them too)."""
+    start = [j["q"] for j in script.daemon.status()["joints"]]
+    script.move_and_wait("move_joints", q=[0.3, -0.2, 1.2, -1.3, 0.4, -1.2])
+    script.move_and_wait("jog", joint=3, delta=0.05)
+    script.run(7)
+    script.call("stop")                     # mid-air protective stop, then back to work
+    script.run(40)
+    back_to_work(script, start)
+    script.run(20)
+
+
+def back_to_work(script, q, settle: int = 0) -> None:
+    """After a stop: reset, enable again, and move to q."""
+    script.call("reset")
+    script.run(settle)
+    script.call("enable")
+    script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
+    script.move_and_wait("move_joints", q=q)
+
+
 def scenario(runs, slow_down: float, stall_at: int | None = None) -> list[dict]:
     """slow_down: s slept after every cycle; stall_at: the cycle after which the process stands
     still for 1 s (a host pause, a swap-in), longer than 3 heartbeat periods of any node."""
@@ -24,17 +45,7 @@ def scenario(runs, slow_down: float, stall_at: int | None = None) -> list[dict]:
         time.sleep(1.0 if n == stall_at else slow_down)
     hook = hook if slow_down or stall_at is not None else None
     with scripted_daemon(PLANT, record_dir=runs, cycle_hook=hook) as script:
-        start = [j["q"] for j in script.daemon.status()["joints"]]
-        script.move_and_wait("move_joints", q=[0.3, -0.2, 1.2, -1.3, 0.4, -1.2])
-        script.move_and_wait("jog", joint=3, delta=0.05)
-        script.run(7)
-        script.call("stop")                     # mid-air protective stop, then back to work
-        script.run(40)
-        script.call("reset")
-        script.call("enable")
-        script.run_until(lambda s: s["state"] == "enabled", 500, "enabled again")
-        script.move_and_wait("move_joints", q=start)
-        script.run(20)
+        moves(script)
     [path] = runs.glob("*.mcap")
     return [{k: v for k, v in m.data.items() if k not in WALL_CLOCK_FIELDS}
             for m in read_recording(path).topic("/cycle")]

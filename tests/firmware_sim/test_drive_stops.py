@@ -116,3 +116,18 @@ def test_quick_stop_ramp_starts_from_the_joints_speed_not_the_interpolators(arm)
     positions, _ = _stop(net, 30)
     peak, _ = _ramp(positions)
     assert peak <= SPEED * 1.05
+
+
+def test_a_ramp_written_while_the_joint_moves_is_the_next_stops_ramp(arm):
+    """The drive derives its per-SYNC settings once and keeps them while nothing is written
+    (issue 35): a new 6085h and 605Ah written mid-motion still take effect at the next SYNC."""
+    net, sim = arm
+    net.sdo_write("joint_1", od.QUICK_STOP_OPTION, 0, 2)
+    _cruise(net)                                   # the settings of the quick ramp are in use
+    net.sdo_write("joint_1", od.QUICK_STOP_DECELERATION, 0, round(SLOW * K))
+    net.sdo_write("joint_1", od.QUICK_STOP_OPTION, 0, 6)
+    net.quick_stop(0)
+    positions, states = _stop(net, 80)
+    _, measured = _ramp(positions)
+    assert measured == pytest.approx(SLOW, rel=0.25)
+    assert states[-1] == State.QUICK_STOP_ACTIVE
