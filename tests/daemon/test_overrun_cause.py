@@ -82,45 +82,48 @@ def test_an_overrun_is_judged_a_cycle_later_with_its_parts():
     assert meter.causes == {"compute": 1} and "the controller's own computing" in overrun.describe()
 
 
-def test_a_late_wake_counts_what_delayed_it_and_the_sleep_is_planned_not_blocked():
+ON_TIME = {"work": dict(wall=0.002, cpu=0.002), "nodes": 0.004}
+
+
+def _after_on_time_cycles(n: int) -> tuple[_Script, OverrunMeter]:
     script = _Script()
     meter = script.meter()
-    on_time = {"work": dict(wall=0.002, cpu=0.002), "nodes": 0.004}
-    _run(script, meter, [on_time, on_time])
-    # cycle 3 wakes 25 ms late because another thread held the GIL, then does its usual work
-    script.cycle, script.wall = 3, 3 * PERIOD
-    script.advance(wall=0.025, others=0.024)
+    _run(script, meter, [ON_TIME] * n)
+    return script, meter
+
+
+def _late_wake(script: _Script, meter: OverrunMeter, cycle: int, delay: dict, counted_later: dict | None = None):
+    """Cycle `cycle` wakes after `delay` (advance() arguments), does its usual 6 ms of work and
+    ends; then three on-time cycles: the overruns judged meanwhile."""
+    script.cycle, script.wall = cycle, cycle * PERIOD
+    script.advance(**delay)
     script.advance(wall=0.006, cpu=0.002)
-    meter.end(3, 3 * PERIOD, 4 * PERIOD, 0.004)
-    _run(script, meter, [on_time] * 3)
-    [overrun] = meter.pop_judged()
+    meter.end(cycle, cycle * PERIOD, (cycle + 1) * PERIOD, 0.004)
+    script.advance(**(counted_later or {}))
+    _run(script, meter, [ON_TIME] * 3)
+    return meter.pop_judged()
+
+
+def test_a_late_wake_counts_what_delayed_it_and_the_sleep_is_planned_not_blocked():
+    script, meter = _after_on_time_cycles(2)
+    # cycle 3 wakes 25 ms late because another thread held the GIL, then does its usual work
+    [overrun] = _late_wake(script, meter, 3, dict(wall=0.025, others=0.024))
     assert overrun.cause == "gil" and overrun.blocked == pytest.approx(0.025)
 
 
 def test_a_held_vcpu_makes_the_overrun_the_hosts():
-    script = _Script()
-    meter = script.meter()
-    on_time = {"work": dict(wall=0.002, cpu=0.002), "nodes": 0.004}
-    _run(script, meter, [on_time] * 6)
-    script.cycle, script.wall = 7, 7 * PERIOD
-    script.advance(wall=0.100, queue=0.0)       # nothing of the process ran: the vCPU was held
-    script.advance(wall=0.006, cpu=0.002)
-    meter.end(7, 7 * PERIOD, 8 * PERIOD, 0.004)
-    script.advance(steal=0.100)                 # the guest counts it once the vCPU runs again
-    _run(script, meter, [on_time] * 3)
-    [overrun] = meter.pop_judged()
+    script, meter = _after_on_time_cycles(6)
+    # nothing of the process ran: the vCPU was held; the guest counts it once the vCPU runs again
+    [overrun] = _late_wake(script, meter, 7, dict(wall=0.100), counted_later=dict(steal=0.100))
     assert overrun.cause == "host" and overrun.stolen == pytest.approx(0.1)
 
 
 def test_time_lost_after_a_cycle_ended_on_time_is_judged_when_the_clock_finds_it():
-    script = _Script()
-    meter = script.meter()
-    on_time = {"work": dict(wall=0.002, cpu=0.002), "nodes": 0.004}
-    _run(script, meter, [on_time] * 3)
+    script, meter = _after_on_time_cycles(3)
     # cycle 3 ended on time; another thread then held the GIL 50 ms before the clock looked
     script.advance(wall=0.050, others=0.049)
     meter.overrun_found(4 * PERIOD)
-    _run(script, meter, [on_time] * 2)
+    _run(script, meter, [ON_TIME] * 2)
     [overrun] = meter.pop_judged()
     assert overrun.cycle == 3 and overrun.cause == "gil"
     assert overrun.lateness == pytest.approx(3 * PERIOD + 0.006 + 0.050 - 4 * PERIOD)
@@ -132,7 +135,7 @@ def test_an_overrun_found_at_a_cycles_end_is_not_counted_again_by_the_clock():
     on_time = {"work": dict(wall=0.002, cpu=0.002), "nodes": 0.004}
     _run(script, meter, [on_time, {"work": dict(wall=0.030, cpu=0.029), "nodes": 0.004}])
     meter.overrun_found(3 * PERIOD)
-    _run(script, meter, [on_time] * 2)
+    _run(script, meter, [ON_TIME] * 2)
     assert [o.cause for o in meter.pop_judged()] == ["compute"]
 
 
