@@ -137,8 +137,9 @@ class HealthMonitor:
         declared lost after heartbeat_loss_factor (< 3) periods of observed silence; the time
         excused per silence is capped at the margin up to 3 periods, so the bound of 3
         heartbeat periods holds whatever the load - but for one case: right after a starved
-        pass no silence is judged until some node is heard again (at most one period more;
-        _nobody_heard_since), since the nodes' host may have been starved with this process."""
+        pass a node's silence is not judged until it is heard again or has had one period to
+        send (at most one period more; _had_a_period_since), since the nodes' host may have
+        been starved with this process."""
         if self.timer_priority:
             self.timer_scheduling = use_fifo(self.timer_priority) or describe()
         factor = self.config.bus.heartbeat_loss_factor
@@ -176,11 +177,10 @@ class HealthMonitor:
                     continue
                 if self._line_switching(now):
                     continue        # silence of a bus line switch, bounded (drivers/line_redundancy.py)
-                if self._nobody_heard_since(starved_at, now):
-                    continue
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
-                    if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period:
+                    if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period \
+                            and self._had_a_period_since(cfg.heartbeat_period, h, starved_at, now):
                         h.alive = False
                         d = self.drivers[cfg.name]
                         self._event("heartbeat_lost", d,
@@ -189,16 +189,15 @@ class HealthMonitor:
                         self._expected = None
                         self._cv.notify_all()
 
-    def _nobody_heard_since(self, starved_at: float, now: float) -> bool:
-        """Right after a starved pass, one node's silence is evidence only once the path it
-        shares with the others is seen working: some node heard since. Until then (at most one
-        heartbeat period) the nodes may be catching up themselves - a simulator in this
-        process, or on the same held CPU, was starved too."""
-        longest = max((cfg.heartbeat_period for cfg in self.config.nodes), default=0.0)
-        if now - starved_at >= longest:
-            return False
-        return not any(h.last_heartbeat is not None and h.last_heartbeat > starved_at
-                       for h in self.health.values())
+    @staticmethod
+    def _had_a_period_since(period: float, h: NodeHealth, starved_at: float, now: float) -> bool:
+        """Right after a starved pass, a node's silence is evidence only once the node has been
+        heard since, or has had one whole heartbeat period to send one: until then it may be
+        catching up itself (a simulator in this process, or on the same held CPU, was starved
+        too). Per node: the other nodes' heartbeats coming back first says nothing of this one's
+        (a CI run declared every node lost 3 ms after a starved pass; another, every node but
+        the one first heard again)."""
+        return now - starved_at >= period or (h.last_heartbeat is not None and h.last_heartbeat > starved_at)
 
     def _lockstep_health(self, now: float) -> None:
         """Lockstep, at every SYNC (under the network's lock): the controller's heartbeat when

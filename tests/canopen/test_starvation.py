@@ -61,15 +61,18 @@ def test_excused_silence_is_capped_so_a_real_loss_is_declared_within_three_perio
 
 
 
-def test_after_starvation_silence_is_judged_once_some_node_is_heard_or_a_period_passed(booted):
-    """A CI run on a busy machine declared every node lost 3 ms after a starved pass: the
-    in-process simulator, starved as well, had not yet had the CPU to send its heartbeats."""
+def test_after_starvation_a_nodes_silence_is_judged_once_it_is_heard_or_had_a_period(booted):
+    """CI runs on a busy machine declared every node lost 3 ms after a starved pass, and later
+    every node but the first one heard again: the in-process simulator, starved as well, had
+    not yet had the CPU to send the others' heartbeats."""
     net: ArmNetwork = booted
     net._monitoring = False
-    period = max(cfg.heartbeat_period for cfg in net.config.nodes)
     with net._cv:
         starved_at = max(h.last_heartbeat for h in net.health.values()) + 0.001
-        assert net._nobody_heard_since(starved_at, starved_at + 0.003)
-        assert not net._nobody_heard_since(starved_at, starved_at + period)      # bounded
-        net.health["joint_2"].last_heartbeat = starved_at + 0.002               # the path works again
-        assert not net._nobody_heard_since(starved_at, starved_at + 0.003)
+        j1, j2 = net.health["joint_1"], net.health["joint_2"]
+        period = net.config.node("joint_1").heartbeat_period
+        assert not net._had_a_period_since(period, j1, starved_at, starved_at + 0.003)
+        assert net._had_a_period_since(period, j1, starved_at, starved_at + period)       # bounded
+        j2.last_heartbeat = starved_at + 0.002          # another node back says nothing of joint_1
+        assert not net._had_a_period_since(period, j1, starved_at, starved_at + 0.003)
+        assert net._had_a_period_since(period, j2, starved_at, starved_at + 0.003)
