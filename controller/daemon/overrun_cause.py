@@ -6,9 +6,10 @@ TPDOs (the bus or the simulator), waiting for a core (other processes, `--rt-pri
 waiting for the GIL (another thread of this process held it: move that work out of the process),
 or the host (the hypervisor held a vCPU: no priority helps).
 
-Over the cycle, from its wake to its end, the cycle thread was either running (its CPU time),
-runnable without a core (its run-queue delay, Linux schedstat) or off the CPU. Off-CPU time is
-the TPDO wait, measured by the hardware interface, or blocked: on the GIL when the process's
+Over the cycle, from the previous cycle's end to its own (so whatever delayed its wake counts),
+the cycle thread was sleeping until its deadline (planned), running (its CPU time), runnable
+without a core (its run-queue delay, Linux schedstat) or off the CPU otherwise: the TPDO
+wait, measured by the hardware interface, or blocked: on the GIL when the process's
 other threads ran meanwhile, else on a lock or I/O. The host's part is its steal of the most
 stolen vCPU (/proc/stat) over the cycle; the guest counts steal only once a held vCPU runs again,
 so the cycle's cause is judged one cycle later (SETTLE_CYCLES), over its own interval.
@@ -18,13 +19,11 @@ from __future__ import annotations
 import os
 import threading
 import time
-from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Callable
 
 from spacearm.base.runtime.host_cpus import host_steal, stolen_since
 
-CAUSES = ("compute", "nodes", "core", "gil", "blocked", "host")
 SETTLE_CYCLES = 1     # judge an overrun this many cycles after it (the guest counts steal late)
 
 
@@ -127,7 +126,6 @@ class OverrunMeter:
         self._judged: list[Overrun] = []
         self._ends = self._cycle = 0
         self._late = False       # the last cycle's overrun is already counted
-        self.causes: Counter = Counter()
 
     def _times(self) -> CycleTimes:
         cpu, queue = self._thread_times()
@@ -180,9 +178,7 @@ class OverrunMeter:
             now_steal = self._steal() if now_steal is None else now_steal
             stolen = stolen_since(base, now_steal) if base and now_steal else 0.0
             cause = judge(o.lateness, o.compute, o.nodes, o.core, o.others, o.blocked, stolen)
-            self._judged.append(Overrun(o.cycle, o.lateness, o.compute, o.nodes, o.core, o.others, o.blocked,
-                                        stolen, cause))
-            self.causes[cause] += 1
+            self._judged.append(replace(o, stolen=stolen, cause=cause))
 
     def pop_judged(self) -> list[Overrun]:
         judged, self._judged = self._judged, []
