@@ -3,6 +3,12 @@ a campaign killed half-way and resumed, and the same seeds giving the same resul
 the network-namespace cluster and replayed alone. Prints one table.
 
     .venv/bin/python bench/bench_campaign.py [--trials 12] [--rounds 2] [--cheap-trials 40] [--skip-netns]
+        [--against DIR]
+
+--against DIR: another checkout with its own .venv (set up by its `./scripts/run_tests.sh --co -q`),
+e.g. issue 35's tree 9e80b96 (`git worktree add DIR 9e80b96`): the same insertion campaign on 2
+workers through each tree's own `spacearm campaign run`, the trees alternating `--rounds` times,
+trials per minute of each, their ratio, and whether each seed gave the same result in both.
 
 Throughput uses the insertion trial of bench_oru (seconds each); the overhead and the
 kill/resume use the cheap EKF calibration trial (~0.05 s), where the scheduler's share shows.
@@ -85,6 +91,42 @@ def throughput(work: Path, trials: int, rounds: int, steal: CpuSteal) -> tuple[l
     return rows, dirs
 
 
+def against(work: Path, other: Path, trials: int, rounds: int, steal: CpuSteal) -> list[Row]:
+    """This tree's insertion campaign rate on 2 workers against another checkout's, alternating."""
+    python = other / ".venv" / "bin" / "python"
+    if not python.exists():
+        return [(f"against {other}", f"no {python}: set it up with its ./scripts/run_tests.sh --co -q", "", "")]
+    commit = subprocess.run(["git", "-C", str(other), "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip() or "?"
+    campaign = with_trials(INSERTION, trials, work / "insertion_against.toml")
+    trees = {"this tree": (ROOT, Path(sys.executable)), f"{other} ({commit})": (other, python)}
+    rates: dict[str, list[float]] = {name: [] for name in trees}
+    loads: list[str] = []
+    for r in range(rounds):
+        for name, (root, exe) in trees.items():
+            steal.fraction()
+            results = work / f"against_{len(rates[name])}_{'this' if root == ROOT else 'other'}"
+            out = subprocess.run([str(exe), "-m", "spacearm.console.main", "campaign", "run", str(campaign),
+                                  "--results", str(results), "--workers", "2", "--json", "--no-report"],
+                                 cwd=root, capture_output=True, text=True, timeout=3600)
+            if out.returncode != 0:
+                return [(f"against {name}", f"campaign failed: {out.stderr.strip()[-120:]}", "", conditions(steal))]
+            summary = json.loads(out.stdout)
+            rates[name].append(60.0 * summary["ran"] / summary["trials_time"])
+            loads.append(conditions(steal))
+    (mine, theirs) = rates.values()
+    same = deterministic(work / "against_0_this")
+    agree = sum(deterministic(work / "against_0_other").get(k) == v for k, v in same.items())
+    rows: list[Row] = [(f"insertion trials per minute, 2 workers, {name} ({trials} trials, {rounds} rounds)",
+                        "best {:.1f} /min (rounds {})".format(max(v), ", ".join(f"{x:.1f}" for x in v)), "-", "")
+                       for name, v in rates.items()]
+    per_round = ", ".join(f"{a / b:.2f}x" for a, b in zip(mine, theirs))
+    rows.append((f"  this tree / {commit}: best rate over best rate (per round)", f"{max(mine) / max(theirs):.2f}x ({per_round})",
+                 ">= 2x the issue-35 tree 9e80b96", "; ".join(loads)))
+    rows.append((f"  same seeds, this tree == {commit} (trials equal)", f"{agree}/{len(same)}", "all", conditions(steal)))
+    return rows
+
+
 def overhead(work: Path, trials: int, steal: CpuSteal) -> list[Row]:
     campaign = load_campaign(with_trials(EKF, trials, work / "ekf.toml"))
     steal.fraction()
@@ -153,14 +195,20 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rounds", type=int, default=2, help="throughput runs of 1 and 2 workers, in turn")
     parser.add_argument("--cheap-trials", type=int, default=40, help="EKF trials for overhead and kill/resume")
     parser.add_argument("--skip-netns", action="store_true", help="leave out the network-namespace cluster")
+    parser.add_argument("--against", type=Path, help="another checkout (with its .venv) to compare rates with")
+    parser.add_argument("--only-against", action="store_true", help="the --against rows alone")
     args = parser.parse_args(argv)
     steal = CpuSteal()
     with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
         work = Path(tmp)
-        rows, dirs = throughput(work, args.trials, args.rounds, steal)
-        rows += overhead(work, args.cheap_trials, steal)
-        rows += kill_and_resume(work, args.cheap_trials, steal)
-        rows += same_seeds(work, dirs, args.skip_netns, steal)
+        rows = []
+        if not args.only_against:
+            rows, dirs = throughput(work, args.trials, args.rounds, steal)
+            rows += overhead(work, args.cheap_trials, steal)
+            rows += kill_and_resume(work, args.cheap_trials, steal)
+            rows += same_seeds(work, dirs, args.skip_netns, steal)
+        if args.against:
+            rows += against(work, args.against.resolve(), args.trials, args.rounds, steal)
     width = max(len(r[0]) for r in rows)
     print(f"\nbench_campaign on {platform.node()} ({platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} cores), Python {platform.python_version()}")

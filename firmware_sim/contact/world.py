@@ -76,6 +76,7 @@ class ContactWorld:
         self.oru_tip = g.oru_tip()
         self.slot_T_oru = g.slot_T_oru()
         self.slots = {s.name: s.pose.matrix() @ s.true_offset.matrix() for s in self.scene.stores}
+        self._slot_inverse = {name: _rigid_inverse(slot) for name, slot in self.slots.items()}
         # Beyond this distance between an ORU's origin and a slot's, they cannot touch.
         self._slot_reach = float(np.hypot(self.slot.half_x + self.slot.chamfer + self.slot.rim,
                                           self.slot.half_y + self.slot.chamfer + self.slot.rim)
@@ -95,6 +96,7 @@ class ContactWorld:
         self.applied_wrench = np.zeros(6)          # base frame, force on the tool and torque about it
         self.applied_profile = None                # optional f(plant time) -> applied_wrench (tests)
         self.stats = WorldStats()
+        self._ee_centroid = np.asarray(config.ee_centroid, float)
         self.tool_pose = np.eye(4)
         self._previous: dict[str, np.ndarray] = {}
         self._near = True
@@ -195,26 +197,37 @@ class ContactWorld:
         p_tool, R_tool = T[:3, 3], T[:3, :3]
         force = self.applied_wrench[:3].copy()
         torque = self.applied_wrench[3:].copy()
+        contact = np.zeros(3)
 
         def add(points_b: np.ndarray, forces_b: np.ndarray) -> None:
             nonlocal force, torque
             force += forces_b.sum(axis=0)
             torque += _cross_sum(points_b - p_tool, forces_b)
 
-        contact = np.zeros(3)
+        def add_weight(point_b: np.ndarray, weight: float) -> None:
+            # add() of one point's force (0, 0, -weight) without its (1, 3) arrays: the same sums.
+            nonlocal force, torque
+            f = [0.0, 0.0, -weight]
+            force += f
+            torque += _cross((point_b - p_tool).tolist(), f)
+
         self.captured = None
+        tool_T_base = None
         for o in self.orus.values():
             if o.name == self.grasped:
                 continue
             tip = o.pose @ self.oru_tip
-            if np.linalg.norm(tip[:3, 3] - p_tool) > self.config.near:
+            if _distance(tip[:3, 3], p_tool) > self.config.near:
                 self._previous.pop("guide:" + o.name, None)
                 continue
             near = True
-            F_T_M = _rigid_inverse(T) @ tip
+            if tool_T_base is None:
+                tool_T_base = _rigid_inverse(T)
+            F_T_M = tool_T_base @ tip
             hit = box_in_cavity(self.guide, self.adapter_box, self.law, F_T_M,
                                 self._rate("guide:" + o.name, F_T_M, h))
-            if hit is not None:
+            # Zero forces add nothing (the sums start at +0.0, and adding +-0.0 keeps them).
+            if hit is not None and hit[1].any():
                 p, f = hit
                 fb = -(f @ R_tool.T)                      # reaction on the end effector
                 add(p @ R_tool.T + p_tool, fb)
@@ -227,14 +240,14 @@ class ContactWorld:
                 base_T_oru = T @ self.tool_T_oru
                 for name, slot in self.slots.items():
                     key = "slot:" + name
-                    if np.linalg.norm(base_T_oru[:3, 3] - slot[:3, 3]) > self._slot_reach:
+                    if _distance(base_T_oru[:3, 3], slot[:3, 3]) > self._slot_reach:
                         self._previous.pop(key, None)
                         continue
                     near = True
                     cavity = self.slot if self.occupant(name) is None else self.closed_slot
-                    F_T_M = _rigid_inverse(slot) @ base_T_oru
+                    F_T_M = self._slot_inverse[name] @ base_T_oru
                     hit = box_in_cavity(cavity, self.oru_box, self.law, F_T_M, self._rate(key, F_T_M, h))
-                    if hit is None:
+                    if hit is None or not hit[1].any():
                         continue
                     p, f = hit
                     fb = f @ slot[:3, :3].T
@@ -242,7 +255,7 @@ class ContactWorld:
                     contact += fb.sum(axis=0)
                 if self.config.gravity > 0.0:
                     c = base_T_oru @ np.array([0.0, 0.0, o.centroid_height, 1.0])
-                    add(c[None, :3], np.array([[0.0, 0.0, -o.mass * self.config.gravity]]))
+                    add_weight(c[:3], o.mass * self.config.gravity)
             else:
                 near = True
                 # Clamped on an adapter whose ORU the store still holds: a stiff spring.
@@ -253,18 +266,17 @@ class ContactWorld:
                 contact += f
         sensor_origin = p_tool - self.config.sensor_offset * R_tool[:, 2]
         if self.config.gravity > 0.0 and self.config.ee_mass > 0.0:
-            c = sensor_origin + R_tool @ np.asarray(self.config.ee_centroid)
-            add(c[None, :], np.array([[0.0, 0.0, -self.config.ee_mass * self.config.gravity]]))
+            add_weight(sensor_origin + R_tool @ self._ee_centroid, self.config.ee_mass * self.config.gravity)
         wrench = np.concatenate([force, torque])
         tau = -(J.T @ wrench)
         for joint, t in zip(plant.joints, tau):
             joint.external_torque = float(t)
-        torque_at_sensor = torque + _cross_sum((p_tool - sensor_origin)[None, :], force[None, :])
+        torque_at_sensor = torque + _cross((p_tool - sensor_origin).tolist(), force.tolist())
         plant.wrench[:3] = (R_tool.T @ force).tolist()
         plant.wrench[3:] = (R_tool.T @ torque_at_sensor).tolist()
         self._near = near
         self.stats.contact_force = contact
-        self.stats.peak_force = max(self.stats.peak_force, float(np.linalg.norm(contact)))
+        self.stats.peak_force = max(self.stats.peak_force, _distance(contact, 0.0))
         self._update_grip(plant)
         self._advance_latch(h)
 
@@ -286,6 +298,19 @@ def _rigid_inverse(T: np.ndarray) -> np.ndarray:
     out[:3, :3] = T[:3, :3].T
     out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
     return out
+
+
+def _distance(a: np.ndarray, b) -> float:
+    """|a - b| for 3-vectors: np.linalg.norm's own sum (sqrt of the dot product), without its checks."""
+    d = a - b
+    return math.sqrt(d.dot(d))
+
+
+def _cross(r: list[float], f: list[float]) -> list[float]:
+    """r x f in scalars: _cross_sum's arithmetic for one pair (a one-element sum is the element)."""
+    rx, ry, rz = r
+    fx, fy, fz = f
+    return [ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx]
 
 
 def _cross_sum(r: np.ndarray, f: np.ndarray) -> np.ndarray:

@@ -42,6 +42,33 @@ def test_no_contact_above_the_opening_or_beside_the_store():
     assert np.allclose(total(box_in_cavity(SLOT, ORU, LAW, pose(y=0.25, z=-0.01), np.zeros((4, 4)))), 0.0)
 
 
+def test_the_quick_no_contact_test_never_hides_a_force():
+    """box_in_cavity answers None without sampling when the box's corners show that nothing can
+    touch; over poses around every surface (walls, chamfers, floor, rim, beside, above, tilted),
+    each such None must be a pose the full computation also finds free of force."""
+    from spacearm.firmware_sim.contact.cavity import cavity_forces, sample_points
+    from spacearm.base.spatial import rotvec_to_matrix
+    rng = np.random.default_rng(5)
+    law = ContactLaw(2.5e3, 30.0, 0.15, 1e-3)
+    closed = Cavity(SLOT.half_x, SLOT.half_y, SLOT.chamfer, 0.0)
+    skipped = touching = 0
+    for k in range(3000):
+        cavity = closed if k % 4 == 0 else SLOT
+        T = pose(*rng.uniform((-0.2, -0.15, -0.05), (0.2, 0.15, 0.02)))
+        if k % 3:                                   # near the walls, where the decision is close
+            T[0, 3] = rng.choice((-1, 1)) * (0.0005 + rng.normal(0.0, 0.001))
+        T[:3, :3] = rotvec_to_matrix(rng.normal(0.0, 0.02, 3))
+        rate = np.zeros((4, 4))
+        rate[:3, 3] = rng.normal(0.0, 0.01, 3)
+        pm = sample_points(ORU, T, cavity.chamfer)
+        full = cavity_forces(cavity, law, pm @ T[:3, :3].T + T[:3, 3], pm @ rate[:3, :3].T + rate[:3, 3])
+        touching += bool(full.any())
+        if box_in_cavity(cavity, ORU, law, T, rate) is None:
+            skipped += 1
+            assert not full.any(), f"pose {k}: skipped, but the full computation gives {full.sum(axis=0)} N"
+    assert skipped > 500 and touching > 500          # both kinds were really tried
+
+
 def test_scene_geometry_places_a_captured_oru_in_its_slot():
     scene = load_scene()
     g = scene.geometry
