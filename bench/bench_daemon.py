@@ -23,20 +23,23 @@ run): process CPU per cycle as a share of a pure-Python loop's CPU, and as a mul
 PDO floor (the cycle's own frames packed and unpacked with precompiled struct).
 
 Where one lockstep cycle's thread CPU goes (8 nodes, virtual bus, recording on; cProfile own
-time grouped by part, `bench/profile_lockstep.py --record`; 2026-11-27, load 11.7, profiled
-14.8 ms per cycle, ~5x the unprofiled cost, 4085 Python calls per cycle):
+time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-28, load
+3.7, profiled 2.49 ms per cycle and 1982 Python calls per cycle, against 14.8 ms and 4085 calls
+at load 11.7 on 2026-11-27 before both halves were made cheaper):
 
-| part of the cycle | share |
-| --- | --- |
-| Python built-ins called from all parts (dict.get, min/max/round, getattr, struct) | 26 % |
-| simulator: object dictionary and PDO engine (node.put/get/param/_codec, 72 OD writes a cycle) | 18 % |
-| master: PDO decode/encode and device drivers (drivers/cyclic_io, devices) | 16 % |
-| simulator: plant physics (10 substeps x 6 joints, each a Python object) | 11 % |
-| simulator: drives (CiA 402 state machine, servo, OD update) | 9 % |
-| bus: transport and frame delivery (one can.Message per frame) | 9 % |
-| controller: daemon cycle, modes, planning, supervision | 6 % |
-| simulator: SYNC routing | 4 % |
-| controller: recording hand-off (the recorder thread's serialisation is off this thread) | 0.1 % |
+| part of the cycle | ms/cycle | share |
+| --- | --- | --- |
+| Python built-ins and libraries called from all parts (dict.get, min/max/round, struct) | 0.60 | 24 % |
+| simulator: object dictionary, PDO/SDO engine | 0.41 | 17 % |
+| master: PDO decode/encode, device drivers (drivers/cyclic_io, devices) | 0.40 | 16 % |
+| simulator: drives (CiA 402 state machine, servo) | 0.27 | 11 % |
+| bus: transport and frame delivery | 0.21 | 9 % |
+| simulator: plant physics (10 substeps x 6 joints) | 0.18 | 7 % |
+| controller: daemon cycle, modes, planning | 0.16 | 6 % |
+| simulator: SYNC routing | 0.14 | 6 % |
+| controller: recording hand-off (serialisation is in helper processes) | 0.05 | 2 % |
+| controller: supervision | 0.04 | 1.5 % |
+| other spacearm code | 0.03 | 1 % |
 
 Recording (issue 35): the cycle packs one fixed-size record (one precompiled struct into a
 reused buffer) and writes it to a pipe; MCAP is serialised by a writer process, the in-process
