@@ -196,8 +196,9 @@ class HealthMonitor:
         catching up itself (a simulator in this process, or on the same held CPU, was starved
         too). Per node: the other nodes' heartbeats coming back first says nothing of this one's
         (a CI run declared every node lost 3 ms after a starved pass; another, every node but
-        the one first heard again)."""
-        return now - starved_at >= period or (h.last_heartbeat is not None and h.last_heartbeat > starved_at)
+        the one first heard again). A sum, not a difference: the difference of two monotonic
+        times loses their last bits (39126.579 + 0.1 - 39126.579 < 0.1, a CI failure)."""
+        return now >= starved_at + period or (h.last_heartbeat is not None and h.last_heartbeat > starved_at)
 
     def _lockstep_health(self, now: float) -> None:
         """Lockstep, at every SYNC (under the network's lock): the controller's heartbeat when
