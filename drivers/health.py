@@ -245,6 +245,12 @@ class HealthMonitor:
         if self._hb_due_now:
             self._hb_due_now = False
             self._send_own_heartbeat()
+            # The timer's wall-clock heartbeat falls due one period after this one, so it is sent
+            # only while lockstep runs slower than real time or stands still. Sent between SYNCs
+            # as well, it would reach a SYNC-time consumer at SYNCs that follow the machine's
+            # speed, and move that node's consumer timeout (its line toggle) with it.
+            with self._own_heartbeat_lock:
+                self._next_own_heartbeat = time.monotonic() + self.config.bus.master_heartbeat_period
 
     def _own_heartbeat_if_due(self, now: float) -> float:
         """The controller's heartbeat on the wall clock, if due; returns when the next one is.

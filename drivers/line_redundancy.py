@@ -223,6 +223,8 @@ class LineRedundancyMaster:
                         and len(heard) == len(self.node_ids) and min(heard.values()) >= now
                         and (other_last is None or other_last <= now)):
                     events += self._decide(now)
+                    if self.clock is not time.monotonic:
+                        events += self._lost_check(now)     # lockstep: judged per SYNC only
         if events:
             self._emit(events)
 
@@ -295,14 +297,18 @@ class LineRedundancyMaster:
             self._checked_at = now
             events = self._absorb(now)
             events += self._decide(now)
-            heard = [t for t in self.line_last if t is not None]
-            if heard and self.operational and not self.lost and now - max(heard) > self.lost_after:
-                self.lost = True
-                events.append(LineEvent(now, LINES_LOST, self.bus.active,
-                                        f"both bus lines lost: no node frame on line A or B for "
-                                        f"{now - max(heard):.3f} s"))
+            events += self._lost_check(now)
         if events:
             self._emit(events)
+
+    def _lost_check(self, now: float) -> list[LineEvent]:
+        """Under the lock: both lines silent beyond the switch's bound is the network lost."""
+        heard = [t for t in self.line_last if t is not None]
+        if heard and self.operational and not self.lost and now - max(heard) > self.lost_after:
+            self.lost = True
+            return [LineEvent(now, LINES_LOST, self.bus.active,
+                              f"both bus lines lost: no node frame on line A or B for {now - max(heard):.3f} s")]
+        return []
 
     def bridging(self, now: float | None = None) -> bool:
         """Is a switch under way (missing process data is the switch, not node loss)?"""
@@ -347,8 +353,12 @@ class LineRedundancyMaster:
         """One pass of the timer, `late` s after it was due (an ArmNetwork's monitor runs it,
         standalone its own thread). A pass that wakes late (this process was starved: frames may
         wait unread) judges nothing; the time it lost is not silence of either line (as
-        health.py does)."""
-        if late > STARVED_SLACK and self.clock is time.monotonic:
+        health.py does). Beside a lockstep controller (its clock counts SYNCs) a pass judges
+        nothing either: where a wall-clock pass falls between two SYNCs follows the machine's
+        speed, so the rule is judged at each SYNC (on_tx) and by bridging() in the cycle."""
+        if self.clock is not time.monotonic:
+            return
+        if late > STARVED_SLACK:
             with self._lock:
                 for line in (0, 1):
                     if self.line_last[line] is not None:

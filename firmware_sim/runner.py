@@ -445,7 +445,9 @@ class Simulator:
                 if due_hb:
                     wake = min(wake, due_hb)
             selection = self.line_selection
-            if selection is not None and selection.timer_pass():
+            # on the SYNC time base the nodes toggle at a SYNC only (_sync_time_heartbeats): a
+            # wall-clock pass between two SYNCs would toggle them where the machine's speed says
+            if selection is not None and not self.sync_time_base and selection.timer_pass():
                 wake = min(wake, now + line_selection.TICK)
             if self.diag_node_id is not None:
                 if self.lateness.due(now):

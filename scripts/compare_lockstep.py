@@ -44,9 +44,9 @@ def use_tree(root: Path) -> None:
 
 def scenario_pair(script) -> None:
     """A redundant pair: other joints and moves, a Cartesian move, a protective stop mid-jog,
-    a disable and a re-enable. No line fault: when the master's line rule notices a cut
-    depends on its timer thread's wall-clock passes, so two runs of one tree already switch
-    a cycle or two apart (tests/redundancy judges the switch itself)."""
+    a disable and a re-enable. No line fault: in trees whose line rule still ran on the master's
+    wall-clock timer passes, two runs of one tree already switch a cycle or two apart
+    (tests/daemon/test_lockstep_determinism.py runs cuts, slowed and not)."""
     start = [j["q"] for j in script.daemon.status()["joints"]]
     script.move_and_wait("move_joints", q=[0.2, -0.35, 1.0, -1.1, 0.6, -0.8], speed=0.7)
     script.move_and_wait("move_pose", xyz=[0.0, 0.0, 0.02], rpy=[0.0, 0.0, 0.0], frame="tool", speed=0.3)
