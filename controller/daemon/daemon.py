@@ -122,7 +122,7 @@ class Daemon:
             RealTimeClock(options.period, on_overrun=self.overruns.overrun_found)
         # the nodes' answers in time (a starved simulator or hub shows here before it stops the arm);
         # lockstep waits as long as the nodes take, so only the heartbeats say anything there
-        self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0)
+        self.node_timing = NodeTiming(self.hardware.realtime_budget if not lockstep else 0.0, lockstep=lockstep)
         self._reported_level = "ok"
         # each node's health record and heartbeat period, as _watch_nodes reads them every cycle
         network = self.hardware.network

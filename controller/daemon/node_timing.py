@@ -26,6 +26,11 @@ for ~100 ms now and then (base/runtime/host_cpus.py), and whatever ran on it sta
 missing while the daemon saw a vCPU held, and a peer's late wake it measured as the host's, are
 said (the count and the cause) but are not "the nodes are late": no setting of this stack
 changes them, and an idle arm on such a machine would show a banner every few seconds.
+
+Lockstep: the cycle waits for every answer and the nodes keep SYNC time, so wall-clock
+heartbeat gaps follow the machine's speed, not the nodes (a lockstep run through a bus line
+cut said "heartbeats of joint_6 10.3 periods apart; run `spacearm sim` ... --rt-priority 50"
+of an in-process simulator). There only missing data is judged, and no scheduling advice given.
 """
 from __future__ import annotations
 
@@ -153,8 +158,9 @@ class NodeTimingSummary:
 
 
 class NodeTiming:
-    def __init__(self, budget: float, window: int = WINDOW):
+    def __init__(self, budget: float, window: int = WINDOW, lockstep: bool = False):
         self.budget = budget
+        self.lockstep = lockstep
         self._io_wait: deque[float] = deque(maxlen=window)
         self._missing: deque[bool] = deque(maxlen=window)
         self._late: deque[bool] = deque(maxlen=window)
@@ -189,7 +195,7 @@ class NodeTiming:
         self._bridged.append(bridged and not complete)
         self._since_stall = 0 if host_stalled or starved or bridged else self._since_stall + 1
         worst = (0.0, "", 0.0)
-        for name, (last, period) in heartbeats.items():
+        for name, (last, period) in heartbeats.items() if not self.lockstep else ():
             previous = self._last_heartbeat.get(name)
             if last is not None and previous is not None and last != previous and period > 0:
                 gap = (last - previous) / period
@@ -244,6 +250,8 @@ class NodeTiming:
             # they run real time and say they were on time: the delay is not theirs to fix
             advice = (f"the {' and the '.join(peers)} report{'s' if len(peers) == 1 else ''} on time at "
                       f"{'/'.join(sorted({p.scheduling for p in peers.values()}))}: look at the bus or this daemon's load")
+        elif self.lockstep:
+            advice = "in lockstep the cycle waited for them: the bus or the nodes, not scheduling"
         else:
             advice = ADVICE
         if behind:      # the host process is named first: the drives behind it are not at fault

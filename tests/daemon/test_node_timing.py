@@ -73,6 +73,18 @@ def test_heartbeats_in_bursts_are_late():
     assert summary.level == "late" and summary.worst_node == "joint_1" and summary.heartbeat_gap >= 1.9
 
 
+def test_in_lockstep_wall_clock_heartbeat_gaps_are_no_lateness_and_no_priority_is_advised():
+    """A lockstep run through a bus line cut said "heartbeats of joint_6 10.3 periods apart;
+    run `spacearm sim` ... with --rt-priority 50" of an in-process simulator on SYNC time."""
+    timing = NodeTiming(0.0, lockstep=True)
+    feed(timing, 250, 0.0, hb_every=0.2)
+    assert timing.summary().level == "ok" and timing.summary().heartbeat_gap == 0.0
+    feed(timing, 3, 0.0, complete=False)      # missing data is still judged: a cut line, a silent node
+    summary = timing.summary()
+    assert summary.level == "starved" and "3 of the last 250 cycles missed process data" in summary.message
+    assert "rt-priority" not in summary.message
+
+
 def test_missing_data_is_starved():
     timing = NodeTiming(BUDGET)
     feed(timing, 240, 0.001)
