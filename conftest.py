@@ -37,24 +37,15 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         f"load {_started['load']:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
 
 
-OWN_MACHINE = "hil_tests/test_vcan_suite.py"     # runs in its own VM
-
-
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """With pytest-xdist (the README's test command runs two workers): every HIL test on one
     worker, one after another in file order, while the unit tests share out over both. HIL
-    stacks time real motion on 2 cores and must not pile up on each other.
-
-    The vcan VM suite is the exception: its stacks run on the VM's own kernel and clock, so it
-    need not wait in the HIL line (it was 6 of the suite's 20 minutes at the end of it). As the
-    first one-test scope it starts at once on the other worker, beside the HIL line's start."""
+    stacks time real motion on 2 cores and must not pile up on each other."""
     from xdist.scheduler import LoadScopeScheduling
 
     class HilInOrder(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            if nodeid.startswith("hil_tests/") and not nodeid.startswith(OWN_MACHINE):
-                return "hil_tests"
-            return nodeid
+            return "hil_tests" if nodeid.startswith("hil_tests/") else nodeid
 
     return HilInOrder(config, log)
