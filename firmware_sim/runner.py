@@ -48,6 +48,7 @@ class SimStats:
     ignored: int = 0      # error, remote, extended-ID and FD frames
     internal_errors: int = 0
     starved_time: float = 0.0   # s the timer scheduler woke late beyond STARVED_SLACK (not counted as silence)
+    held_time: float = 0.0      # s a timer pass lasted beyond STARVED_SLACK (its toggles and checks came late)
 
 
 class _Listener(can.Listener):
@@ -462,6 +463,9 @@ class Simulator:
             # vCPU used nothing, and sleeping twice that wait would only make its heartbeats late.
             cpu = time.thread_time() - cpu_at_start
             end = time.monotonic()
+            # a pass preempted, or waiting for the SYNC lock behind a preempted thread, judged
+            # and toggled late without waking late (a CI run: a node's line toggle 200 ms late)
+            self.stats.held_time += max(0.0, end - now - STARVED_SLACK)
             due = max(wake, now + TIMER_MIN_SLEEP, end + cpu * TIMER_DUTY_SLEEP)
             self._stop.wait(max(0.0, due - end))
 

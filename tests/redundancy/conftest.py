@@ -32,8 +32,8 @@ class Pair:
         return time.monotonic()
 
     def starved(self) -> float:
-        """s the simulator's and the master's timers were starved so far (not silence)."""
-        return self.sim.stats.starved_time + self.net.stats.starved_time
+        """s the simulator's and the master's timers were starved or held so far (not silence)."""
+        return self.sim.stats.starved_time + self.sim.stats.held_time + self.net.stats.starved_time
 
     def within_heartbeat_periods(self, took: float, periods: float = 3.0) -> bool:
         """The switch took at most `periods` node heartbeat periods of time the processes could

@@ -28,6 +28,8 @@ def no_faults(pair, since: float) -> bool:
     margin = (3.0 - pair.net.config.bus.heartbeat_loss_factor) * 0.1
     if faults:
         print(f"{len(faults)} fault events with {1e3 * starved:.0f} ms starved: {faults[0]}")
+        print("node toggles since: " + ", ".join(f"{e.node} {1e3 * (e.time - since):.0f} ms"
+                                               for e in pair.selection.events if e.time >= since))
     return not faults or starved > margin
 
 
