@@ -32,6 +32,8 @@ from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rat
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
+from spacearm.offline.diagnosis.stiff_gear import fit_stiff_gear
+from spacearm.offline.diagnosis.stiff_gear import significant as stiff_significant
 from spacearm.offline.diagnosis.honesty import confirmed, count_reversals, equally_good, moved, uncertain
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.physical import parameter_violations
@@ -122,6 +124,7 @@ SMOOTH_RATIO_LIMIT = 0.6   # 0.5 s moving-average RMS / noise: 0.2-0.45 without 
 
 
 NULL_MARGIN = 2.0          # one draw of the null replay's average, scattered up to about 1.7x (measured)
+STIFF_GEAR_BETTER = 1.0     # a stiff gear replaces a law fitted first that explains the torque no better
 HUNTING_RATIO = 5.0        # residual RMS / median noise of the torque channels: a drive that hunts
 
 
@@ -368,6 +371,16 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                     fit = gear
         else:
             gears = []
+        if kinds[j] == "revolute" and (fit is None or not fit.by_envelope) and \
+                mismatch_statistic(residual, 1e-3, reference_noise=tau_noise) > 1.0:
+            # no ringing: a stiff gear's smooth, phase-locked torque term (a load law fitted to it
+            # explains the torque as well but moves the link, and is dropped later); the search
+            # range is a rotary gear's (N m/rad), so a linear rail is left out
+            stiff = fit_stiff_gear(nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual, j, train,
+                                   table.dq_cmd)
+            if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
+                                             fit.rms_heldout_after):
+                fit, alternatives[j] = stiff, []
         if fit is not None:
             if fit.by_envelope:
                 # play and a soft gear both make the drive hunt; where their envelopes fit alike

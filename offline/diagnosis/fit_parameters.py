@@ -100,7 +100,10 @@ def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversal
                          "drive hunts, torque ripple the nominal model lacks")
         elif effect == "elasticity":
             parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} "
-                         f"{u.stiffness}: the drive rings, torque ripple the nominal model lacks")
+                         f"{u.stiffness}: " + ("the motor runs ahead of the link by the gear's deflection, a "
+                                               "smooth torque term the nominal model lacks" if fit.judged_by ==
+                                               "stiff gear" else "the drive rings, torque ripple the nominal "
+                                               "model lacks"))
         elif effect == "ft_bias":
             parts.append(f"constant offset {p['bias']:.3g}{pm('bias')} {unit}")
         elif effect == "ft_drift":

@@ -72,7 +72,9 @@ class ChannelFit:
     def by_envelope(self) -> bool:
         """Judged on a statistic of the residual, not sample by sample: its RMS envelope (gear
         effects, whose ripple has no reproducible phase) or its breakaway peaks (stick-slip)."""
-        return self.judged_by != "samples" or self.effects[0] in ("backlash", "elasticity")
+        if self.judged_by == "samples":
+            return self.effects[0] in ("backlash", "elasticity")
+        return self.judged_by != "stiff gear"     # a stiff gear is judged sample by sample (stiff_gear)
 
 
 def correlation_length(x: np.ndarray, cap: int = 100) -> int:
