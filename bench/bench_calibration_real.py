@@ -184,6 +184,7 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
         versus = f", FIGAROH full_params {fig['valid'] * 1e3:.3f} mm in this run" if fig else ""
         print(f"  target ({ours['label']}): accepted fit, validation <= {TIAGO_TARGET_MM} mm and not worse than FIGAROH: "
               f"{ours['valid'] * 1e3:.3f} mm{versus} [{'ok' if ok else 'MISS'}]")
+        judged_row_setup(ours)
         if not ok:
             rep = ours["report"]
             sq = np.array([h.after ** 2 for h in rep.held_out])
@@ -206,6 +207,7 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
             print(f"  and the motion-capture frame moved between the days: the validation day's mean error is "
                   f"({', '.join(f'{v * 1e3:+.2f}' for v in mean)}) mm; re-registering the frame on that day alone "
                   f"(6 parameters fitted on the validation data: a diagnostic, not a figure) leaves {rereg * 1e3:.2f} mm")
+            training_cv_versus_other_day(steal)
             from spacearm.controller.calibration.tiago_mocap import day_to_day_repeatability
             rows, raw, rigid = day_to_day_repeatability()
             again = np.array([h.after for h in rep.held_out if h.index in set(rows.tolist())])
@@ -227,7 +229,50 @@ def bench_tiago(steal: CpuSteal, with_figaroh: bool) -> None:
                   "the leave-one-out (3.21 -> 2.76 mm on the identification day, 3.755 mm on the validation day), the "
                   "default prior (0.5 deg / 5 mm) under the group selection (2.98 mm on the identification day, 4.171 mm), "
                   "groups chosen by the error on each joint's outer 20 % of postures fitted from the rest, an "
-                  "extrapolation criterion (drops a_i and alpha_i: 3.463 mm)")
+                  "extrapolation criterion (drops a_i and alpha_i: 3.463 mm). In the session of 2026-11-29 (issue 30 "
+                  "report, not re-run): the four markers are one tracked rigid body (their distances agree to 1 um), so "
+                  "the wrist's orientation was fitted beside marker 1 (a pose block, the marker plate's frame estimated "
+                  "from the data): the full fit leaves 7.5-10.5 mrad of orientation error, far above the plate's "
+                  "~1-2 mrad, and validates at 3.20-3.33 mm (3.69-3.88 with the group selection) whether the orientation "
+                  "is weighted by a stated 3-10 mrad or by the 6x6 covariance estimated from the residuals; marker 1 "
+                  "weighted by its own 3x3 residual covariance (feasible GLS, 1-3 rounds): 2.94-3.35 mm, not monotone; "
+                  "the group selection averaged over 30 subsets of 80 % of the postures: 3.119 mm; the selection by "
+                  "delete-d Monte-Carlo cross-validation (training fraction 0.8 / 0.67 / 0.5): 2.956 / 3.463 / 3.463 mm; "
+                  "the D-H prior width by marginal likelihood on the identification day (registration and marker "
+                  "flat): 0.49 deg / 4.2 mm, the default's size, 3.754 mm (3.255 with the joint zeros theta_i free of "
+                  "it); joint compliance with the a_i dropped (k_3 2.5e-4 rad/(N m)): the leave-one-out 3.455 mm "
+                  "against 3.209 without, so not chosen, validates at 2.908 mm; a scale error of the torso's lift (a "
+                  "lead-screw pitch: q_1 (1 + s), profiled over s on the identification day): s = -1.0 % on the full set "
+                  "(leave-one-out 4.016 -> 3.712 mm, validation 3.063 -> 2.994 mm), -0.5 % with the a_i dropped (3.200 mm, "
+                  "validation 2.896 mm), but with it the selection drops alpha_i instead (3.150 mm, validation 3.965 mm): "
+                  "the a_i / alpha_i choice is a near-tie on the training day that the other day does not share")
+
+
+def judged_row_setup(ours: dict) -> None:
+    """What the judged row's fit is made of: the joint-compliance terms and the default D-H prior."""
+    from spacearm.controller.calibration.trusted_fit import WEAK_RATIO
+    rep, fit = ours["report"], ours["fit"]
+    kept = [n for n in rep.result.free if n.startswith("k_")]
+    compliance = ("among the candidates, kept: " + (", ".join(kept) or "none")) if fit.model.load is not None \
+        else "not among the candidates (row 'spacearm full + elasticity' has them)"
+    prior = ("the default D-H prior (weakly conditioned)" if rep.regularised else
+             f"no prior (regularise=auto adds the default D-H prior below a weakest-direction ratio of {WEAK_RATIO:g}; "
+             f"here {rep.weakest.sigma_ratio:.3g})")
+    print(f"  the judged row: joint compliance under gravity load (joint_load.py) {compliance}; {prior}")
+
+
+def training_cv_versus_other_day(steal: CpuSteal) -> None:
+    """The identification day's leave-one-out beside the other day's figure, for the default D-H
+    prior on and off: whether a choice made on the training day alone carries to the other day."""
+    from spacearm.controller.calibration.tiago_mocap import fit_tiago, training_loo
+    from spacearm.controller.calibration.trusted_fit import DEFAULT_PRIORS, FitOptions
+    t0 = time.perf_counter()
+    plain, prior = fit_tiago(), fit_tiago(opts=FitOptions(priors=DEFAULT_PRIORS))
+    print(f"  the training day's cross-validation does not carry to the other day: the default D-H prior "
+          f"(0.5 deg / 5 mm) on the full set lowers the identification day's leave-one-out from "
+          f"{training_loo(plain) * 1e3:.3f} to {training_loo(prior) * 1e3:.3f} mm and raises the validation from "
+          f"{plain.validation_rms * 1e3:.3f} to {prior.validation_rms * 1e3:.3f} mm "
+          f"({time.perf_counter() - t0:.1f} s, {conditions(steal)})")
 
 
 def per_joint(ours: dict | None) -> None:
@@ -251,6 +296,7 @@ def bench_fr3(steal: CpuSteal) -> None:
     _, med = fr3_study()
     _, gen = fr3_trusted_study()
     pos = med["full_pos"] * 1e3
+    # The judged figure is the lower of the two: the dedicated study (fr3_study) or the general pipeline.
     print(f"FR3 eye-in-hand (real), held-out position RMS, median of 10 splits: dedicated study {pos:.3f} mm, "
           f"general pipeline {gen['full_pos'] * 1e3:.3f} mm (target <= {FR3_TARGET_MM}) "
           f"[{'ok' if min(pos, gen['full_pos'] * 1e3) <= FR3_TARGET_MM else 'MISS'}] "
@@ -294,7 +340,8 @@ def bench_fr3(steal: CpuSteal) -> None:
               "scale on top of the board's pitch (1.279 mm), a robust loss (the Huber threshold of the view covariance "
               "1.0-3.5 or none: 1.314-1.380 mm without the board term), a once-per-turn error per joint on top of "
               "the board's pitch (a sin q or a cos q term: 1.403 / 1.367 mm, though it lowers the training "
-              "leave-one-out in most splits): none below 1.27 mm")
+              "leave-one-out in most splits); in the session of 2026-11-29 (not re-run): the joint zeros theta_i "
+              "free of the D-H prior (encoder zeros are set at homing, not machined): 1.272 mm: none below 1.27 mm")
 
 
 def bench_draw_wire(steal: CpuSteal, cases: int = 5) -> None:

@@ -108,6 +108,17 @@ def day_to_day_repeatability(tol: float = 1e-3) -> tuple[Array, float, float]:
     return rows, _rms_distance(B - A), _rms_distance(B - moved)
 
 
+def training_loo(fit: TiagoFit, sigma: float = SIGMA) -> float:
+    """The identification day's leave-one-posture-out position RMS of `fit` (m), linearised at its
+    estimate with its priors: the criterion the group selection minimises (trusted_fit's
+    loo_position_rms), so that a bench can set it beside the other day's figure."""
+    from spacearm.controller.calibration.trusted_fit import loo_position_rms
+    Qt, Pt = load_session(TRAINING)
+    rep = fit.report
+    problem = CompositeProblem(fit.model, [Block(PointModel(), Qt, Pt, sigma)], rep.result.free)
+    return loo_position_rms(problem, rep.result.x, rep.priors)
+
+
 def fit_tiago(registration_only: bool = False, tool_point: tuple[float, float, float] = (0.0, 0.0, 0.0),
               opts: FitOptions = FitOptions(), sigma: float = SIGMA, elastic: bool = False) -> TiagoFit:
     """Identify on the training day, score every posture of the validation day; `elastic`: with a

@@ -72,3 +72,15 @@ def test_the_identification_postures_repeat_on_the_validation_day_better_than_th
     assert len(rows) == 37 and len(set(rows.tolist())) == 37
     assert rigid < raw < 2.0e-3
     assert rigid < 0.75 * full.train_rms
+
+
+def test_training_loo_is_the_group_selections_criterion(full):
+    """The bench sets the identification day's leave-one-out beside the other day's figure; it must be
+    the number the group selection minimised, for the full set and for the selected one."""
+    from spacearm.controller.calibration.tiago_mocap import training_loo
+    from spacearm.controller.calibration.trusted_fit import FitOptions
+    sel = fit_tiago(opts=FitOptions(select_groups=True))
+    steps = sel.report.selection.steps
+    assert training_loo(full) == pytest.approx(steps[0][1], rel=1e-9)
+    assert training_loo(sel) == pytest.approx(steps[-1][1], rel=1e-9)
+    assert training_loo(sel) < training_loo(full) and training_loo(full) > 2 * full.train_rms
