@@ -352,7 +352,9 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             sticking = stiction_by_breakaway(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
                                              table.dq_cmd, table.tau[:, j], sim.tau[:, j], quiet.dq[:, j],
                                              np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train,
-                                             tau_noise)
+                                             tau_noise, table.dq[:, j],
+                                             tuple(a for a in alternatives.get(j, [])
+                                                   if set(a.effects) <= {"coulomb", "viscous"}))
             if sticking is not None:
                 fit, alternatives[j] = sticking, []
         residual = table.tau[:, j] - sim.tau[:, j]
