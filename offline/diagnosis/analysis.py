@@ -344,13 +344,17 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                               train & (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND), apply_fits, table.dq_cmd)
             fit = refine_stiction(fit, nominal, table.q_cmd, table.dt, table.q[0], table.tau[:, j], train, apply_fits,
                                   table.dq_cmd)
-            fit = at_breakaway(fit, table.tau[:, j] - quiet.tau[:, j], quiet.dq[:, j], train, table.dt, tau_noise)
+            running = (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND) & ~stuck(table.dq[:, j])
+            fit = at_breakaway(fit, table.tau[:, j] - quiet.tau[:, j], quiet.dq[:, j], train, table.dt, tau_noise,
+                               running)
         if fit is None or set(fit.effects) <= {"coulomb", "viscous"}:
             # a running law (or none) may miss stiction that shows only where the joint breaks free
             sticking = stiction_by_breakaway(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
                                              table.dq_cmd, table.tau[:, j], sim.tau[:, j], quiet.dq[:, j],
                                              np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train,
-                                             tau_noise)
+                                             tau_noise, table.dq[:, j],
+                                             tuple(a for a in alternatives.get(j, [])
+                                                   if set(a.effects) <= {"coulomb", "viscous"}))
             if sticking is not None:
                 fit, alternatives[j] = sticking, []
         residual = table.tau[:, j] - sim.tau[:, j]
