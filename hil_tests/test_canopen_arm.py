@@ -19,7 +19,7 @@ import pytest
 from spacearm.base.canopen import od
 from spacearm.base.config.bus import BusConfig, dump_toml, load_bus_config
 from spacearm.base.canopen.cia402_defs import State
-from spacearm.drivers.errors import BootError, SdoError
+from spacearm.drivers.errors import BootError, DriverError, SdoError
 from spacearm.drivers.devices import EeCommand, EeState
 from spacearm.drivers.network import ArmCommand, ArmNetwork
 from spacearm.drivers.sim_control import SimControl
@@ -158,7 +158,23 @@ def test_cia402_enable_csp_tracking_quick_stop_fault_and_reset(arm):
     state = arm.run_until(lambda s: s.joints[1].fault, 30, ArmCommand(joint_positions=[None, q + 0.05]))
     events = arm.poll_events()
     assert any(e.kind == "emcy" and e.node == "joint_2" and e.code == od.EMCY_FOLLOWING_ERROR for e in events)
-    state = arm.run_until(lambda s: s.joints[1].state == State.FAULT, 100)
+    seen = []                          # what joint 2 went through, for a failure to show
+
+    def in_fault(s):
+        j = s.joints[1]
+        seen.append((j.state.name, hex(j.error_code), s.complete, s.nodes["joint_2"].alive))
+        return j.state == State.FAULT
+    try:
+        state = arm.run_until(in_fault, 100)
+    except DriverError as exc:
+        runs = [[seen[0], 1]] if seen else []
+        for item in seen[1:]:
+            if item == runs[-1][0]:
+                runs[-1][1] += 1
+            else:
+                runs.append([item, 1])
+        raise AssertionError(f"{exc}; joint_2 (state, error, complete, alive) x cycles: {runs}; "
+                             f"events: {[(e.kind, e.node, e.code) for e in arm.poll_events()]}") from exc
     assert state.joints[1].error_code == od.EMCY_FOLLOWING_ERROR
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_WINDOW, 0, round(window * arm.joints[1].k))
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_TIMEOUT, 0, 100)
