@@ -2,9 +2,9 @@
 
 The cycle must not serialise MCAP (JSON per message, chunk compression, fsync): that cost
 was ~25 % of a lockstep cycle's process CPU (issue 35). Instead it packs one fixed-size
-binary record per cycle (numbers only, one precompiled struct into a reused buffer) and
-writes it to a pipe; the writer process (writer_process.py) turns the records back into the
-same /cycle JSON messages as before and writes the MCAP file in batches.
+binary record per cycle (numbers only, one precompiled struct straight into a shared-memory
+ring, record_ring.py); the writer process (writer_process.py) turns the records back into
+the same /cycle JSON messages as before and writes the MCAP file in batches.
 
 Record = FRAME (payload length, kind) + payload:
 
@@ -32,11 +32,10 @@ _COMPACT = (",", ":")
 _doubles: dict[int, struct.Struct] = {}
 
 
-def cycle_layout(joints: int, wrench: int) -> tuple[bytes, struct.Struct]:
-    """The daemon's side of a CYCLE record for an arm: its FRAME (the same for every cycle) and
-    one struct for CYCLE_HEAD and all 5n + w doubles, packed in one call."""
-    body = struct.Struct(CYCLE_HEAD.format + f"{5 * joints + wrench}d")
-    return FRAME.pack(body.size, CYCLE), body
+def cycle_layout(joints: int, wrench: int) -> struct.Struct:
+    """The daemon's side of a CYCLE record for an arm: one struct for the whole record, FRAME
+    (payload length, CYCLE), CYCLE_HEAD and all 5n + w doubles, packed in one call."""
+    return struct.Struct(FRAME.format + CYCLE_HEAD.format.lstrip("<") + f"{5 * joints + wrench}d")
 
 
 def _frame(kind: int, payload: bytes) -> bytes:

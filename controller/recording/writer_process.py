@@ -1,14 +1,16 @@
-"""The recording writer: a child process that turns the daemon's record stream (stdin,
-record_stream.py) into an MCAP file, so its serialisation never runs in the daemon's interpreter.
+"""The recording writer: a child process that turns the daemon's record stream
+(record_stream.py, carried by the shared-memory ring of record_ring.py) into an MCAP file, so
+its serialisation never runs in the daemon's interpreter.
 
-    python -m spacearm.controller.recording.writer_process OUT.mcap   # what the daemon starts
+    python -m spacearm.controller.recording.writer_process OUT.mcap RING_FD   # what the daemon starts
 
-It reads what has arrived every BATCH_PERIOD and writes it as one batch; McapRecorder closes
-a chunk (and fsyncs) once per second of recording time, and this process also once per
-FLUSH_WALL of wall clock, so a kill -9 of either process loses at most about a second. When
-the daemon ends the stream cleanly (CLOSE) the file gets its summary; when the stream just
-ends (the daemon died) everything received is flushed and the file stays without a footer,
-readable, saying the writer did not close it.
+Every BATCH_PERIOD it takes what the ring holds and writes it as one batch; McapRecorder
+closes a chunk (and fsyncs) once per second of recording time, and this process also once per
+FLUSH_WALL of wall clock, so a kill -9 of the writer loses at most about a second. Its stdin
+is the daemon's lifeline: nothing is written to it, and its end of file means the daemon has
+closed the recording or died. Then the writer takes everything the ring still holds: after a
+CLOSE record the file gets its summary; without one (the daemon died) every record handed over
+is flushed and the file stays without a footer, readable, saying the writer did not close it.
 """
 from __future__ import annotations
 
@@ -20,25 +22,28 @@ import time
 
 from spacearm.controller.recording.channels import CHANNELS
 from spacearm.controller.recording.mcap_recorder import McapRecorder
+from spacearm.controller.recording.record_ring import RingConsumer
 from spacearm.controller.recording.record_stream import CLOSE, SETUP, StreamDecoder
 
-BATCH_PERIOD = 0.05   # s between reads: one wake-up per batch of cycles, not per cycle
+BATCH_PERIOD = 0.05   # s between takes: one wake-up per batch of cycles, not per cycle
 FLUSH_WALL = 1.0      # s of wall clock between flushes at most (a paused lockstep run)
-READ_SIZE = 1 << 20
 NICENESS = 10         # the writer must never take CPU from the cycle
 
 
-def run(path: str, stream_fd: int) -> int:
+def run(path: str, lifeline_fd: int, ring_fd: int) -> int:
+    ring = RingConsumer(ring_fd)
     decoder = StreamDecoder()
     recorder: McapRecorder | None = None
     written_at_flush, flushed_at = 0, time.monotonic()
-    closed = False
-    while not closed:
-        # wait at most FLUSH_WALL for records: a paused run's last records still reach the disk
-        if not select.select([stream_fd], [], [], FLUSH_WALL)[0]:
-            data = b""
-        elif not (data := os.read(stream_fd, READ_SIZE)):
-            break                      # the daemon is gone without CLOSE
+    seen = ring.published()
+    closed = ended = False
+    while not (closed or ended):
+        if select.select([lifeline_fd], [], [], BATCH_PERIOD)[0]:
+            ended = not os.read(lifeline_fd, 4096)      # end of file: the daemon closed or died
+        published = ring.published()
+        # up to what was published a wake-up ago (record_ring.py), all of it once the daemon is gone
+        data = ring.take(published if ended else seen)
+        seen = published
         for kind, topic, time_s, message in decoder.feed(data):
             if kind == SETUP:
                 recorder = McapRecorder(path, flush_interval=message["flush_interval"],
@@ -49,12 +54,11 @@ def run(path: str, stream_fd: int) -> int:
                 closed = True
             elif recorder is not None:
                 recorder.write(topic, time_s, message)
+        ring.release()
         if recorder is not None and recorder.messages_written != written_at_flush \
                 and time.monotonic() - flushed_at >= FLUSH_WALL:
             recorder.flush()
             written_at_flush, flushed_at = recorder.messages_written, time.monotonic()
-        if data and not closed:
-            time.sleep(BATCH_PERIOD)
     if recorder is not None:
         if closed:
             recorder.close()
@@ -68,7 +72,7 @@ def main(argv: list[str] | None = None) -> int:
     # A terminal's Ctrl-C reaches the whole process group: the daemon closes the stream itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.nice(NICENESS)
-    return run(args[0], sys.stdin.fileno())
+    return run(args[0], sys.stdin.fileno(), int(args[1]))
 
 
 if __name__ == "__main__":

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from spacearm.controller.cycle import EndEffectorState, MachineState
-from spacearm.controller.daemon.recorder_process import RecorderProcess
+from spacearm.controller.daemon.recorder_process import WRITER_CHECK, RecorderProcess
 from spacearm.controller.recording import mcap_recorder
 from spacearm.controller.recording.mcap_reader import read_recording
 
@@ -85,6 +85,7 @@ def test_killed_writer_leaves_a_readable_file_and_the_cycle_carries_on(tmp_path)
     time.sleep(2.5)       # the writer flushes within ~2 s of wall clock however little recording time passed
     os.kill(recorder.helper_pids()[0], signal.SIGKILL)
     recorder._writer.wait(10)
+    time.sleep(WRITER_CHECK)       # the cycle looks at the writer this often (not a system call a cycle)
     for k in range(300, 400):      # never raises, never blocks: counted as dropped
         _put(recorder, _cycle(k))
     info = recorder.close()
@@ -95,7 +96,7 @@ def test_killed_writer_leaves_a_readable_file_and_the_cycle_carries_on(tmp_path)
 
 
 def test_killed_daemon_leaves_every_cycle_it_handed_over(tmp_path):
-    """SIGKILL of the daemon mid-run: the writer drains the pipe and flushes; the file has no
+    """SIGKILL of the daemon mid-run: the writer drains the ring and flushes; the file has no
     footer (nobody closed it) and holds every cycle handed over (the old in-process writer
     lost up to the last second)."""
     path, progress = tmp_path / "killed.mcap", tmp_path / "progress"
@@ -139,14 +140,14 @@ def test_killed_daemon_leaves_every_cycle_it_handed_over(tmp_path):
 
 def test_a_lockstep_recording_waits_for_a_starved_writer_instead_of_dropping(tmp_path):
     """Lockstep (lossless): a writer that gets no CPU (SIGSTOP stands in for a busy machine and
-    its niceness) fills the pipe; the cycle then waits for room, and every record reaches the
+    its niceness) lets the ring fill; the cycle then waits for room, and every record reaches the
     file once the writer runs again. A real-time recorder drops and counts instead."""
     import threading
     path = tmp_path / "lockstep.mcap"
-    recorder = RecorderProcess(path, {}, bus_spec=None, lossless=True)
+    recorder = RecorderProcess(path, {}, bus_spec=None, lossless=True, ring_bytes=1 << 20)
     writer = recorder.helper_pids()[0]
     os.kill(writer, signal.SIGSTOP)
-    n = 4000                      # ~1.6 MB of records: more than the 1 MiB pipe holds
+    n = 4000                      # ~1.4 MB of records: more than the 1 MiB ring holds
     done = threading.Event()
 
     def cycles():
