@@ -181,7 +181,6 @@ class LineSelection:
             original = getattr(node, name)
             setattr(node, name, self._gated(node, original))
         on_heartbeat = node.on_heartbeat
-        check_consumers = node.check_consumers
 
         rule = self.rules.get(node.node_id)
         own_line = rule if rule is not None else _ON_LINE_A
@@ -198,27 +197,21 @@ class LineSelection:
                     self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
-        # 1016h:1 as SimNode.param() last cached it, and the master it names: a timer pass (every
-        # node, several per SYNC period) parses it again only after a write or a reset dropped it
-        params = getattr(node, "_params", None)
-        master_key, master_read = (od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB), [None, None]
-
-        def consumers(now: float) -> None:
-            value = params.get(master_key) if params is not None else None
-            if value is None or value is not master_read[0]:
-                master_read[0], master_read[1] = value, rule.master()
-            master = master_read[1]
-            if master is not None:
-                last = node.consumer_last.get(master[0])
-                if last is not None and now - last > master[1]:
-                    del node.consumer_last[master[0]]    # the rule, not the EMCY, answers this timeout
-                    if node.nmt_state == od.NMT_STATE_OPERATIONAL:
-                        rule.master_missed(now, master[1])
-            check_consumers(now)
+        def master_timed_out(producer: int, now: float) -> None:
+            # the node's consumer check found a heartbeat timed out (nothing runs per timer pass:
+            # issue 34, a wrapper around the check cost every node every pass); the master's is
+            # the rule's to answer, not an EMCY's
+            master = rule.master()
+            if master is not None and producer == master[0]:
+                if node.nmt_state == od.NMT_STATE_OPERATIONAL:
+                    rule.master_missed(now, master[1])
+                return
+            timed_out(producer, now)
 
         node.on_heartbeat = heartbeat
-        if rule is not None:        # without the rule the node's own check is all there is
-            node.check_consumers = consumers
+        if rule is not None:        # without the rule the node's own reaction is all there is
+            timed_out = node.consumer_timed_out
+            node.consumer_timed_out = master_timed_out
 
     def _gated(self, node, original):
         own_line = self.rules.get(node.node_id, _ON_LINE_A)
