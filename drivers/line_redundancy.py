@@ -29,8 +29,12 @@ come back is still lost within the usual bounds.
 
 What it reads per frame (a second line must cost a cycle almost nothing, issue 34): a node
 frame on the active line is one set insertion (`_seen`), folded into the rule at the next
-SYNC and timer pass, where the rule judges anyway (`_absorb`); heartbeats and every frame of
-the standby line are judged as they come. Of the standby line only heartbeats (boot-ups) and
+SYNC and timer pass (`_absorb`); heartbeats and every frame of the standby line are judged as
+they come. What it judges per SYNC and pass: nothing while it is quiet (`_calm`: every node
+heard on the active line, none on the other since, no switch under way, fewer than two SYNCs
+unanswered: no answer but "stay" is possible before the active line's silence or loss time).
+In real time each of those passes runs cold after its sleep, where a few lines of Python cost
+ten times their price in a lockstep loop. Of the standby line only heartbeats (boot-ups) and
 EMCYs reach the network's handlers (`standby_passes`): the nodes' life and their error
 reports, never process data or SDO answers of a line the master does not drive.
 
@@ -398,7 +402,15 @@ class LineRedundancyMaster:
                     for node in self.heard[line]:
                         self.heard[line][node] += late
             return
-        self.check()
+        now, seen = time.monotonic(), self._seen
+        if not seen[0] and not seen[1]:
+            # check()'s own path when nothing was noted and the rule is quiet, in one call (the
+            # usual pass between two SYNCs' answers runs cold: its cost is what it touches)
+            with self._lock:
+                if not seen[0] and not seen[1] and self._quiet_at(now):
+                    self._checked_at = now
+                    return
+        self.check(now)
 
     def stop(self) -> None:
         for observers, observer in ((self.bus.rx_observers, self.on_rx),

@@ -28,11 +28,13 @@ from __future__ import annotations
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
+from operator import attrgetter
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen import redundancy_object as rdn
 from spacearm.base.transport.redundant import LINE_NAMES, rx_line, rx_state
 
+_TOGGLE_AT = attrgetter("toggle_at")
 TICK = 0.002   # s: the toggle timer's resolution while a node searches (the simulator's timer runs it)
 
 
@@ -130,6 +132,7 @@ class LineSelection:
             if rdn.REDUNDANCY in node.od and od.CONSUMER_HEARTBEAT in node.od:
                 self.rules[node.node_id] = NodeLineRule(node)
             self._gate(node)
+        self._rule_list = list(self.rules.values())     # (the rules are fixed here)
         self.bus.tx_router = self.tx_line
         self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
         self._lines_changed()
@@ -233,9 +236,10 @@ class LineSelection:
         """Toggle the nodes that are due: from the simulator's timer thread, and on the SYNC time
         base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock). Returns
         whether a node still searches (the timer then runs every TICK)."""
+        toggle_times = list(map(_TOGGLE_AT, self._rule_list))     # (in C: every timer pass runs it)
+        if toggle_times.count(None) == len(toggle_times):
+            return False        # the usual pass, no node due to toggle: nothing more than this
         searching = [(node_id, rule) for node_id, rule in self.rules.items() if rule.toggle_at is not None]
-        if not searching:
-            return False        # the usual pass: nothing more than this
         now = self.clock()
         for node_id, rule in searching:
             node = self.sim.nodes[node_id]
