@@ -326,7 +326,7 @@ class LineRedundancyMaster:
         of the active line only move those times later."""
         active = self.bus.active
         heard, last, other_last = self.heard[active], self.line_last[active], self.line_last[active ^ 1]
-        if self.lost or self.pending or last is None or len(heard) < len(self.node_ids) or (
+        if self.lost or self.pending or last is None or not heard or len(heard) < len(self.node_ids) or (
                 other_last is not None and other_last > min(heard.values())):
             return (active, float("-inf"))
         return (active, last + min(self.silence, self.lost_after))
