@@ -175,12 +175,17 @@ class HealthMonitor:
                     due = now + RECHECK_AFTER_STARVED
                     starved_at = now
                     continue
-                if self._line_switching(now):
-                    continue        # silence of a bus line switch, bounded (drivers/line_redundancy.py)
+                switching = None    # a bus line switch under way: asked once, when a node is to be lost
                 for cfg in self.config.nodes:
                     h = self.health[cfg.name]
                     if h.alive and h.last_heartbeat is not None and now - h.last_heartbeat > factor * cfg.heartbeat_period \
                             and self._had_a_period_since(cfg.heartbeat_period, h, starved_at, now):
+                        # (a redundant pair's rule is no longer asked every pass: issue 34, its cost;
+                        # the line's timer pass has just made its judgement)
+                        if switching is None:
+                            switching = self._line_switching(now)
+                        if switching:
+                            break   # silence of a bus line switch, bounded (drivers/line_redundancy.py)
                         h.alive = False
                         d = self.drivers[cfg.name]
                         self._event("heartbeat_lost", d,

@@ -29,8 +29,12 @@ come back is still lost within the usual bounds.
 
 What it reads per frame (a second line must cost a cycle almost nothing, issue 34): a node
 frame on the active line is one set insertion (`_seen`), folded into the rule at the next
-SYNC and timer pass, where the rule judges anyway (`_absorb`); heartbeats and every frame of
-the standby line are judged as they come. Of the standby line only heartbeats (boot-ups) and
+SYNC and timer pass (`_absorb`); heartbeats and every frame of the standby line are judged as
+they come. What it judges per SYNC and pass: nothing while it is quiet (`_calm`: every node
+heard on the active line, none on the other since, no switch under way, fewer than two SYNCs
+unanswered: no answer but "stay" is possible before the active line's silence or loss time).
+In real time each of those passes runs cold after its sleep, where a few lines of Python cost
+ten times their price in a lockstep loop. Of the standby line only heartbeats (boot-ups) and
 EMCYs reach the network's handlers (`standby_passes`): the nodes' life and their error
 reports, never process data or SDO answers of a line the master does not drive.
 
@@ -137,6 +141,10 @@ class LineRedundancyMaster:
         self.bridged_cycles = 0
         self.events: list[LineEvent] = []
         self._seen: tuple[set[int], set[int]] = (set(), set())   # COB-IDs on each line since the last _absorb
+        # (line, time): before that time the rule can decide nothing on that line while no frame
+        # of the other line, no switch and no second unanswered SYNC comes (_calm); the usual
+        # timer pass and SYNC then skip _decide and _lost_check (issue 34: their cost, every 10 ms)
+        self._quiet: tuple[int, float] = (0, float("-inf"))
         self._lock = threading.Lock()
         self._stop = threading.Event()
         bus.rx_observers.append(self.on_rx)
@@ -183,6 +191,7 @@ class LineRedundancyMaster:
         self.left_silent_at[line] = float("-inf")
         self.lost = False
         if line != self.bus.active:
+            self._quiet = (line ^ 1, float("-inf"))     # the other line's news: judged in full from now on
             return self._decide(now)
         if self.pending and not self.pending.isdisjoint(nodes):
             self.pending.difference_update(nodes)
@@ -218,13 +227,16 @@ class LineRedundancyMaster:
                 # this line as of now, fewer SYNCs than SYNCS_UNANSWERED unanswered, no frame of
                 # the other line newer, the network not lost: _decide could only say "stay" (no
                 # silence, no node ahead on the other line, no search)
+                # (in real time the timer pass took this line's frames already: the quiet time says it)
                 heard, other_last = self.heard[line], self.line_last[line ^ 1]
-                if not (self.unanswered[line] < SYNCS_UNANSWERED and not self.lost
+                if not self._quiet_at(now) and not (
+                        self.unanswered[line] < SYNCS_UNANSWERED and not self.lost
                         and len(heard) == len(self.node_ids) and min(heard.values()) >= now
                         and (other_last is None or other_last <= now)):
                     events += self._decide(now)
                     if self.clock is not time.monotonic:
                         events += self._lost_check(now)     # lockstep: judged per SYNC only
+                    self._quiet = self._calm()
         if events:
             self._emit(events)
 
@@ -272,6 +284,7 @@ class LineRedundancyMaster:
     def _switch(self, now: float, why: str) -> LineEvent:
         old = self.bus.active
         self.bus.active = old ^ 1
+        self._quiet = (old, float("-inf"))
         self.switches += 1
         if self.failed_at is None or not self.pending:
             self.failed_at = self.line_last[old] if self.line_last[old] is not None else now
@@ -296,10 +309,33 @@ class LineRedundancyMaster:
         with self._lock:
             self._checked_at = now
             events = self._absorb(now)
-            events += self._decide(now)
-            events += self._lost_check(now)
+            if not self._quiet_at(now):       # the usual pass: nothing to judge before the quiet time
+                events += self._decide(now)
+                events += self._lost_check(now)
+                self._quiet = self._calm()
         if events:
             self._emit(events)
+
+    def _calm(self) -> tuple[int, float]:
+        """Under the lock, after a judgement: (active line, until when _decide and _lost_check
+        must answer nothing) as long as no frame of the other line comes (_heard drops it), no
+        switch happens and no second SYNC goes unanswered (_quiet_at checks those). Calm: not lost,
+        no switch under way, every node heard on the active line and none on the other line since
+        (no node can have moved); the first thing that can happen then is silence of the active
+        line (`silence` after its last frame) or the loss of both (`lost_after` after it). Frames
+        of the active line only move those times later."""
+        active = self.bus.active
+        heard, last, other_last = self.heard[active], self.line_last[active], self.line_last[active ^ 1]
+        if self.lost or self.pending or last is None or not heard or len(heard) < len(self.node_ids) or (
+                other_last is not None and other_last > min(heard.values())):
+            return (active, float("-inf"))
+        return (active, last + min(self.silence, self.lost_after))
+
+    def _quiet_at(self, now: float) -> bool:
+        """Under the lock: can the rule decide nothing at `now` (see _calm)?"""
+        line, until = self._quiet
+        return now < until and line == self.bus.active and self.unanswered[line] < SYNCS_UNANSWERED \
+            and not self.lost and not self.pending
 
     def _lost_check(self, now: float) -> list[LineEvent]:
         """Under the lock: both lines silent beyond the switch's bound is the network lost."""
@@ -366,7 +402,15 @@ class LineRedundancyMaster:
                     for node in self.heard[line]:
                         self.heard[line][node] += late
             return
-        self.check()
+        now, seen = time.monotonic(), self._seen
+        if not seen[0] and not seen[1]:
+            # check()'s own path when nothing was noted and the rule is quiet, in one call (the
+            # usual pass between two SYNCs' answers runs cold: its cost is what it touches)
+            with self._lock:
+                if not seen[0] and not seen[1] and self._quiet_at(now):
+                    self._checked_at = now
+                    return
+        self.check(now)
 
     def stop(self) -> None:
         for observers, observer in ((self.bus.rx_observers, self.on_rx),

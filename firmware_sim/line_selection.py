@@ -28,11 +28,13 @@ from __future__ import annotations
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
+from operator import attrgetter
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen import redundancy_object as rdn
 from spacearm.base.transport.redundant import LINE_NAMES, rx_line, rx_state
 
+_TOGGLE_AT = attrgetter("toggle_at")
 TICK = 0.002   # s: the toggle timer's resolution while a node searches (the simulator's timer runs it)
 
 
@@ -130,6 +132,7 @@ class LineSelection:
             if rdn.REDUNDANCY in node.od and od.CONSUMER_HEARTBEAT in node.od:
                 self.rules[node.node_id] = NodeLineRule(node)
             self._gate(node)
+        self._rule_list = list(self.rules.values())     # (the rules are fixed here)
         self.bus.tx_router = self.tx_line
         self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
         self._lines_changed()
@@ -181,7 +184,6 @@ class LineSelection:
             original = getattr(node, name)
             setattr(node, name, self._gated(node, original))
         on_heartbeat = node.on_heartbeat
-        check_consumers = node.check_consumers
 
         rule = self.rules.get(node.node_id)
         own_line = rule if rule is not None else _ON_LINE_A
@@ -198,27 +200,21 @@ class LineSelection:
                     self.events.append(LineEvent(time.monotonic(), node.name, "master_found", rule.line))
             on_heartbeat(producer, now)
 
-        # 1016h:1 as SimNode.param() last cached it, and the master it names: a timer pass (every
-        # node, several per SYNC period) parses it again only after a write or a reset dropped it
-        params = getattr(node, "_params", None)
-        master_key, master_read = (od.CONSUMER_HEARTBEAT, rdn.MASTER_CONSUMER_SUB), [None, None]
-
-        def consumers(now: float) -> None:
-            value = params.get(master_key) if params is not None else None
-            if value is None or value is not master_read[0]:
-                master_read[0], master_read[1] = value, rule.master()
-            master = master_read[1]
-            if master is not None:
-                last = node.consumer_last.get(master[0])
-                if last is not None and now - last > master[1]:
-                    del node.consumer_last[master[0]]    # the rule, not the EMCY, answers this timeout
-                    if node.nmt_state == od.NMT_STATE_OPERATIONAL:
-                        rule.master_missed(now, master[1])
-            check_consumers(now)
+        def master_timed_out(producer: int, now: float) -> None:
+            # the node's consumer check found a heartbeat timed out (nothing runs per timer pass:
+            # issue 34, a wrapper around the check cost every node every pass); the master's is
+            # the rule's to answer, not an EMCY's
+            master = rule.master()
+            if master is not None and producer == master[0]:
+                if node.nmt_state == od.NMT_STATE_OPERATIONAL:
+                    rule.master_missed(now, master[1])
+                return
+            timed_out(producer, now)
 
         node.on_heartbeat = heartbeat
-        if rule is not None:        # without the rule the node's own check is all there is
-            node.check_consumers = consumers
+        if rule is not None:        # without the rule the node's own reaction is all there is
+            timed_out = node.consumer_timed_out
+            node.consumer_timed_out = master_timed_out
 
     def _gated(self, node, original):
         own_line = self.rules.get(node.node_id, _ON_LINE_A)
@@ -240,9 +236,10 @@ class LineSelection:
         """Toggle the nodes that are due: from the simulator's timer thread, and on the SYNC time
         base at every SYNC too (`locked`: the caller holds the simulator's SYNC lock). Returns
         whether a node still searches (the timer then runs every TICK)."""
+        toggle_times = list(map(_TOGGLE_AT, self._rule_list))     # (in C: every timer pass runs it)
+        if toggle_times.count(None) == len(toggle_times):
+            return False        # the usual pass, no node due to toggle: nothing more than this
         searching = [(node_id, rule) for node_id, rule in self.rules.items() if rule.toggle_at is not None]
-        if not searching:
-            return False        # the usual pass: nothing more than this
         now = self.clock()
         for node_id, rule in searching:
             node = self.sim.nodes[node_id]

@@ -108,7 +108,8 @@ class SimNode:
         self.pdo_changed_callback = None  # simulator: rebuild routing when RPDO COB-IDs change
         self._codecs: dict[tuple[int, int], tuple] = {}
         self._params = ParamCache()   # param() cache, dropped on writes to the object
-        self._consumer_entries: tuple[dict[int, float], dict] | None = None   # consumer_entries(), what it read
+        # consumer_entries(), what it read and the param() cache's epoch then
+        self._consumer_entries: tuple[dict[int, float], dict, int] | None = None
         self.local.params_cache = self._params
 
     # ------------------------------------------------------------------ OD access
@@ -333,9 +334,13 @@ class SimNode:
         """1016h: producer node ID -> timeout (s), for the active entries. Every consumed
         heartbeat and every timer pass asks, a write is rare: kept while the param() cache
         still holds the very values it was built from (a write or a reset drops them)."""
-        cached = self._consumer_entries
-        if cached is not None and self._params.items() >= cached[1].items():
-            return cached[0]
+        cached, params = self._consumer_entries, self._params
+        if cached is not None:
+            if cached[2] == params.epoch:     # no cached value dropped since: the values it read stand
+                return cached[0]
+            if params.items() >= cached[1].items():
+                self._consumer_entries = (cached[0], cached[1], params.epoch)
+                return cached[0]
         out = {}
         read = {}
         if od.CONSUMER_HEARTBEAT in self.od:     # else a device without a heartbeat consumer
@@ -345,11 +350,15 @@ class SimNode:
                 producer, ms = (value >> 16) & 0x7F, value & 0xFFFF
                 if producer and ms:
                     out[producer] = ms / 1000.0
-        self._consumer_entries = (out, read)
+        self._consumer_entries = (out, read, self._params.epoch)
         return out
 
     def on_heartbeat(self, producer: int, now: float) -> None:
-        if producer in self.consumer_entries():
+        # consumer_entries()'s usual answer inline: every node takes every master heartbeat,
+        # five times as often on a redundant pair (issue 34)
+        cached = self._consumer_entries
+        entries = cached[0] if cached is not None and cached[2] == self._params.epoch else self.consumer_entries()
+        if producer in entries:
             self.consumer_last[producer] = now    # monitoring starts with the first heartbeat
             self.consumer_excused.pop(producer, None)
 
@@ -374,8 +383,13 @@ class SimNode:
                 del self.consumer_last[producer]
             elif now - last > timeout:
                 del self.consumer_last[producer]        # re-armed by the next heartbeat
-                self.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([producer]))
-                self.on_heartbeat_lost(producer)
+                self.consumer_timed_out(producer, now)
+
+    def consumer_timed_out(self, producer: int, now: float) -> None:
+        """A consumed heartbeat timed out: EMCY 8130h, then the device's reaction. On a redundant
+        pair the line selection answers the master's own (firmware_sim/line_selection.py)."""
+        self.emcy(od.EMCY_HEARTBEAT_ERROR, od.ERR_REG_COMMUNICATION, bytes([producer]))
+        self.on_heartbeat_lost(producer)
 
     def on_heartbeat_lost(self, producer: int) -> None:
         """Device specific reaction to a consumer heartbeat timeout (after the EMCY)."""

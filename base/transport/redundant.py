@@ -295,6 +295,14 @@ class RedundantBus(can.BusABC):
                 self._senders[line](can_id, data)
                 return True
             return False
+        owners = self.tx_owners
+        owner = owners.get(can_id) if owners is not None else None
+        if owner is not None:           # a node's frame whose sender is known (its heartbeat, an answer)
+            line = owner.line
+            if self.faults[line].mode == "ok" and can_id not in self.tx_watch:   # _admit's usual answer
+                self.sent[line] += 1
+                self._senders[line](can_id, data)
+                return True
         entered = False
         for line in self._tx_lines(can_id):
             if self._admit(line, can_id, data):

@@ -149,3 +149,88 @@ def test_master_reports_both_lines_lost_once_then_searches_slowly():
 def test_settings_refuse_a_consumer_time_below_two_heartbeats():
     with pytest.raises(ValueError, match="two master heartbeat periods"):
         RedundancySettings(master_heartbeat_period=0.05, master_heartbeat_timeout=0.06)
+
+
+class JudgedEveryTime(LineRedundancyMaster):
+    """The master's rule as it was before its quiet time: every SYNC and every pass judged in full."""
+
+    def _quiet_at(self, now):
+        return False
+
+
+def _random_history(seed: int, steps: int = 400):
+    """What a master sees of three nodes, at random: heartbeats (some not OPERATIONAL), process
+    data noted on either line, SYNCs, timer passes, nodes moving to the other line, silences."""
+    import random
+
+    rng = random.Random(seed)
+    t, history, home = 0.0, [], {1: 0, 2: 0, 3: 0}
+    for _ in range(steps):
+        t += rng.choice((0.0, 0.001, 0.005, 0.01, 0.01, 0.02, 0.02, 0.05, 0.2))
+        r = rng.random()
+        if r < 0.03:
+            node = rng.choice((1, 2, 3))
+            home[node] ^= 1                       # this node now talks on the other line
+        elif r < 0.10:
+            node = rng.choice((1, 2, 3))
+            state = od.NMT_STATE_OPERATIONAL if rng.random() < 0.9 else od.NMT_STATE_PRE_OPERATIONAL
+            history.append(("hb", t, home[node], node, state))
+        elif r < 0.45 and rng.random() < 0.9:     # (sometimes nobody answers for a while)
+            nodes = [n for n in (1, 2, 3) if rng.random() < 0.9]
+            history.append(("pdo", t, nodes, dict(home)))
+        elif r < 0.7:
+            history.append(("sync", t))
+        else:
+            history.append(("pass", t))
+    return history
+
+
+def _replay(master, bus, clock, history):
+    seen = []
+    for step in history:
+        clock.t = step[1]
+        if step[0] == "hb":
+            master.on_rx(step[2], 0x700 + step[3], bytes([step[4]]), step[1])
+        elif step[0] == "pdo":
+            for node in step[2]:
+                line, cob = step[3][node], 0x180 + node
+                if line == bus.active:
+                    master._seen[line].add(cob)      # as the pair notes the active line's frames
+                else:
+                    master.on_rx(line, cob, b"\0" * 8, step[1])
+        elif step[0] == "sync":
+            master.on_tx(bus.active, 0x080)
+        else:
+            master.check(step[1])
+        seen.append((bus.active, master.lost, master.bridging(step[1]), len(master.events)))
+    return seen, [(e.time, e.code, e.line, e.duration) for e in master.events]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_master_quiet_time_skips_only_judgements_that_say_nothing(seed):
+    """The usual SYNC and timer pass skip _decide while the rule is quiet (issue 34: its cost);
+    over random histories the rule must switch, complete, lose and search exactly as when it
+    judges every time."""
+    fast, fast_bus, fast_clock = make_master()
+    full, full_bus, full_clock = make_master()
+    full.__class__ = JudgedEveryTime
+    history = _random_history(seed)
+    assert _replay(fast, fast_bus, fast_clock, history) == _replay(full, full_bus, full_clock, history)
+
+
+def test_master_quiet_time_is_taken_on_a_calm_network():
+    """A calm network (every node answering every SYNC on the active line) is not judged in full
+    at every SYNC and pass: between two answers only the quiet time is looked at."""
+    master, bus, clock = make_master()
+    hear(master, clock, 0, (1, 2, 3), 0.0)
+    judged = []
+    decide = master._decide
+    master._decide = lambda now: judged.append(now) or decide(now)
+    for k in range(1, 101):
+        clock.t = k * 0.02
+        master.on_tx(0, 0x080)
+        master._seen[0].update({0x181, 0x182, 0x183})
+        master.check(clock.t + 0.005)
+        master.check(clock.t + 0.015)
+    assert bus.active == 0 and not master.events
+    assert len(judged) <= 100 // 7 + 1       # one in the silence time (0.15 s) at most, not 300
