@@ -17,6 +17,7 @@ import pytest
 from spacearm.controller.recording.mcap_reader import read_recording
 from spacearm.controller.recording.record_ring import RingConsumer, RingProducer
 from spacearm.controller.recording.record_stream import CYCLE, StreamDecoder, cycle_layout, message_record
+from tests.recording.test_recorder_process import wait_until_ended
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -117,11 +118,7 @@ def test_a_daemon_killed_right_after_a_hand_over_leaves_every_record_it_handed_o
     proc = subprocess.Popen([sys.executable, "-c", daemon], cwd=ROOT, stdout=subprocess.PIPE, text=True)
     writer = int(proc.stdout.readline())
     assert proc.wait(60) == -signal.SIGKILL
-    deadline = time.monotonic() + 20
-    while Path(f"/proc/{writer}").exists() and Path(f"/proc/{writer}/stat").read_text().split()[2] != "Z":
-        if time.monotonic() > deadline:
-            pytest.fail("the writer did not end after its daemon died")
-        time.sleep(0.05)
+    wait_until_ended(writer, 20)
     recording = read_recording(path)
     assert not recording.complete and recording.problem
     cycles = recording.topic("/cycle")

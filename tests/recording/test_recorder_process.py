@@ -52,6 +52,15 @@ def _put(recorder: RecorderProcess, c: dict) -> None:
                        c["io_wait"], c["missing"])
 
 
+
+def wait_until_ended(writer: int, timeout: float) -> None:
+    """Wait for the writer process whose daemon was killed to end (exited, or a zombie)."""
+    deadline = time.monotonic() + timeout
+    while Path(f"/proc/{writer}").exists() and Path(f"/proc/{writer}/stat").read_text().split()[2] != "Z":
+        if time.monotonic() > deadline:
+            pytest.fail("the writer did not end after its daemon died")
+        time.sleep(0.05)
+
 def test_recorded_cycles_read_as_the_cycle_built_them_and_nothing_is_serialised_here(tmp_path, monkeypatch):
     def not_here(*args, **kwargs):
         raise AssertionError("MCAP serialised in the daemon's process")
@@ -127,11 +136,7 @@ def test_killed_daemon_leaves_every_cycle_it_handed_over(tmp_path):
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(10)
     last_reported = int(progress.read_text())
-    deadline = time.monotonic() + 10
-    while Path(f"/proc/{writer}").exists() and Path(f"/proc/{writer}/stat").read_text().split()[2] != "Z":
-        if time.monotonic() > deadline:
-            pytest.fail("the writer did not end after its daemon died")
-        time.sleep(0.05)
+    wait_until_ended(writer, 10)
     recording = read_recording(path)
     assert not recording.complete and recording.problem
     cycles = [m.data["cycle"] for m in recording.topic("/cycle")]
