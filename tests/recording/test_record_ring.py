@@ -9,10 +9,8 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
-import pytest
 
 from spacearm.controller.recording.mcap_reader import read_recording
 from spacearm.controller.recording.record_ring import RingConsumer, RingProducer
