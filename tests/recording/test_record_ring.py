@@ -11,7 +11,6 @@ import sys
 import textwrap
 from pathlib import Path
 
-
 from spacearm.controller.recording.mcap_reader import read_recording
 from spacearm.controller.recording.record_ring import RingConsumer, RingProducer
 from spacearm.controller.recording.record_stream import CYCLE, StreamDecoder, cycle_layout, message_record
