@@ -101,7 +101,10 @@ PANDA = ROOT.parent / "shared" / "data" / "panda_gaz2019" / "exciting_traj_1.csv
 
 def _panda_motion(rng: np.random.Generator, t: np.ndarray, n: int) -> np.ndarray:
     """The Panda's recorded joint motions (a random joint and start for each of ours), scaled so
-    the fastest speed is 0.5 x this arm's; centred on zero."""
+    the fastest speed is 0.5 x this arm's; centred on zero. A case longer than the recording
+    (21 s) plays it back the other way from its end (played forward again from its start, each
+    joint jumped by up to 2.8 rad in one row: that jump set the speed scale, and every Panda
+    case moved its joint 2-25 mrad in all, 2.4 of them in that one row)."""
     data = np.loadtxt(PANDA, delimiter=",", skiprows=1, usecols=range(8))
     src_t, src_q = data[:, 0], data[:, 1:8]
     keep = np.r_[True, np.diff(src_t) > 0]
@@ -110,7 +113,8 @@ def _panda_motion(rng: np.random.Generator, t: np.ndarray, n: int) -> np.ndarray
     for j in range(n):
         col = src_q[:, int(rng.integers(0, 7))]
         start = rng.uniform(0.0, max(src_t[-1] - t[-1], 0.0))
-        x = np.interp((start + t) % src_t[-1], src_t, col)
+        phase = (start + t) % (2 * src_t[-1])
+        x = np.interp(np.where(phase <= src_t[-1], phase, 2 * src_t[-1] - phase), src_t, col)
         v = np.max(np.abs(np.gradient(x, t[1] - t[0])))
         out[:, j] = (x - x.mean()) * 0.5 * VMAX / max(v, 1e-9)
     return out

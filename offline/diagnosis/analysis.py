@@ -347,8 +347,11 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             running = (np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND) & ~stuck(table.dq[:, j])
             fit = at_breakaway(fit, table.tau[:, j] - quiet.tau[:, j], quiet.dq[:, j], train, table.dt, tau_noise,
                                running)
-        if fit is None or set(fit.effects) <= {"coulomb", "viscous"}:
-            # a running law (or none) may miss stiction that shows only where the joint breaks free
+        if fit is None or set(fit.effects) <= {"coulomb", "viscous", "stribeck"}:
+            # a running law (or none) may miss stiction that shows only where the joint breaks free;
+            # and a Stribeck law sized row by row sits low where the joint sticks and slips (a slip
+            # replayed out of phase costs more the larger it is: 80 N m of stiction between
+            # point-to-point moves was stated 25 N m): its breakaway peaks size it there
             sticking = stiction_by_breakaway(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
                                              table.dq_cmd, table.tau[:, j], sim.tau[:, j], quiet.dq[:, j],
                                              np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train,

@@ -109,7 +109,8 @@ def stiction_by_breakaway(chosen: ChannelFit | None, j: int, nominal, apply_fits
                           train: np.ndarray, noise: float, recorded: np.ndarray | None = None,
                           rivals: tuple[ChannelFit, ...] = ()) -> ChannelFit | None:
     """A Stribeck fit (judged by its breakaway peaks) where the recording's starts and reversals
-    show stiction that `chosen` (a Coulomb/viscous fit, or None: the nominal) does not; else None.
+    show stiction that `chosen` (a Coulomb/viscous fit, a Stribeck fit sized row by row, or None:
+    the nominal) does not; else None.
     `j`: the joint (0-based).
     `tau_nominal`: the nominal replay's torque of the joint; `velocity`: the ideal-sensor
     replay's; `moving`: the rows where it moves (the running torque is judged there);

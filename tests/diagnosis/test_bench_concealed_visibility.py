@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_diagnosis_concealed.py"
 
@@ -40,3 +41,21 @@ def test_a_hunting_gear_is_visible_against_the_effect_free_noise() -> None:
     _, fair = bench.reference_figures(table, truth_plant, nominal, truths, noise)
     # the play's ripple is many times the sensor noise; against its own scatter it hides
     assert fair["tau_3"] >= 2.0 > own["tau_3"]
+
+
+def test_panda_family_moves_as_the_recording_does_without_a_wrap_jump() -> None:
+    """A 40 s case is longer than the Panda recording (21 s): wrapped back to its start, each
+    joint jumped in one row, that jump set the speed scale and the recorded motion shrank to a
+    few mrad. Every joint must move smoothly (no row's step above a few times the typical moving
+    step) and travel far enough for friction to show (well above diagnosis's 5 mrad)."""
+    bench = _bench()
+    for seed in (1, 2, 3):
+        t = np.arange(0.0, 40.0, bench.DT)
+        q = bench._panda_motion(np.random.default_rng(seed), t, 7)
+        step = np.abs(np.diff(q, axis=0))
+        for j in range(7):
+            moving = step[:, j][step[:, j] > 1e-6]
+            assert step[:, j].max() <= 5.0 * np.percentile(moving, 90), (seed, j)
+            assert np.ptp(q[:, j]) > 0.05, (seed, j, np.ptp(q[:, j]))
+            # the fastest speed is half the arm's, as the family says
+            assert np.max(np.abs(np.gradient(q[:, j], bench.DT))) == pytest.approx(0.5 * bench.VMAX, rel=1e-6)
