@@ -58,7 +58,9 @@ PEER_LATE = 0.020      # s: a wake this late (a whole 20 ms cycle) ...
 PEER_LATE_REPORTS = 3  # ... in this many of a peer's reports in its window makes it late
 PEER_SERIOUS = 0.100   # s: once is enough (5 cycles: the missing-data stop's reach)
 PEER_SILENT = 3.5      # s without a report from a peer that reported before: it is not running
-ADVICE = "run `spacearm sim` and `spacearm hub` with --rt-priority 50 (or lower the machine's load)"
+# neither peer has reported its scheduling (none yet, or an older one): the advice cannot know it
+ADVICE = ("no timing report from `spacearm sim` or `spacearm hub`: if they run at normal priority, start "
+          "them with --rt-priority 50; otherwise lower the machine's load")
 CAUSE_TEXT = {"core": "waited for a core", "gil": "waited for the GIL (another of its threads held it)",
               "stopped": "stopped (none of its threads ran)",
               "host": "the host did not run its vCPU (CPU steal)"}
@@ -228,7 +230,10 @@ class NodeTiming:
         gaps = sum(g > HEARTBEAT_GAP for g, _ in heartbeat_gaps)
         if missing >= MISSING_CYCLES or run >= MISSING_RUN:
             level, what = "starved", f"{missing} of the last {n} cycles missed process data"
-        elif n and late > LATE_CYCLES * n:
+        elif n and late > LATE_CYCLES * max(n, self._io_wait.maxlen or n):
+            # a share of the whole window, also while it fills: one late cycle in a window of three
+            # is not 5 % of anything (bench_realtime idle, load 2.5: 'the data of 1 of the last 3
+            # cycles came after the 8.0 ms wait' was an idle arm's only banner in 10 minutes)
             level = "late"
             what = (f"the data of {late} of the last {n} cycles came after the {1e3 * self.budget:.1f} ms "
                     "wait (those cycles ran on the previous data)")

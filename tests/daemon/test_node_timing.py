@@ -47,6 +47,19 @@ def test_data_after_the_wait_in_more_than_5_percent_of_cycles_is_reported_with_a
     assert few.summary().level == "ok"
 
 
+def test_a_window_still_filling_judges_late_answers_as_a_share_of_the_whole_window():
+    """One late cycle of the first three is no banner; as many late cycles as would make a full
+    window late still are, however early they come."""
+    timing = NodeTiming(BUDGET)
+    feed(timing, 2, 0.001)
+    answers_after_the_wait(timing, 1)
+    assert timing.summary().level == "ok"
+    early = NodeTiming(BUDGET)
+    answers_after_the_wait(early, 13)
+    summary = early.summary()
+    assert summary.level == "late" and "13 of the last 14 cycles" in summary.message
+
+
 def test_answers_inside_the_wait_are_on_time_however_late_in_it():
     """A simulator computing its physics answers 4-7 ms into the 8 ms wait on a loaded machine."""
     timing = NodeTiming(BUDGET)
