@@ -16,7 +16,8 @@ import pytest
 BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_diagnosis_concealed.py"
 
 
-def _bench():
+def load_concealed_bench():
+    """bench/bench_diagnosis_concealed.py as a module (bench/ is not a package)."""
     spec = importlib.util.spec_from_file_location("bench_diagnosis_concealed", BENCH)
     bench = importlib.util.module_from_spec(spec)
     sys.modules["bench_diagnosis_concealed"] = bench
@@ -25,7 +26,7 @@ def _bench():
 
 
 def test_a_hunting_gear_is_visible_against_the_effect_free_noise() -> None:
-    bench = _bench()
+    bench = load_concealed_bench()
     from spacearm.firmware_sim.plant import load_plant_config
     from spacearm.offline.diagnosis.trajectory import Trajectory
     nominal = bench.nominal_for(load_plant_config(bench.base.NOMINAL), 6)
@@ -48,7 +49,7 @@ def test_panda_family_moves_as_the_recording_does_without_a_wrap_jump() -> None:
     joint jumped in one row, that jump set the speed scale and the recorded motion shrank to a
     few mrad. Every joint must move smoothly (no row's step above a few times the typical moving
     step) and travel far enough for friction to show (well above diagnosis's 5 mrad)."""
-    bench = _bench()
+    bench = load_concealed_bench()
     for seed in (1, 2, 3):
         t = np.arange(0.0, 40.0, bench.DT)
         q = bench._panda_motion(np.random.default_rng(seed), t, 7)

@@ -11,29 +11,16 @@ on the six-joint test bed, stiction on joint 2.
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from spacearm.offline.diagnosis.analysis import diagnose
 from spacearm.offline.diagnosis.physical import parameter_violations
 from spacearm.firmware_sim.plant import load_plant_config
-
-BENCH = Path(__file__).resolve().parents[2] / "bench" / "bench_diagnosis_concealed.py"
-
-
-def _bench():
-    spec = importlib.util.spec_from_file_location("bench_diagnosis_concealed", BENCH)
-    bench = importlib.util.module_from_spec(spec)
-    sys.modules["bench_diagnosis_concealed"] = bench
-    spec.loader.exec_module(bench)
-    return bench
+from tests.diagnosis.test_bench_concealed_visibility import load_concealed_bench
 
 
 def test_large_stiction_between_moves_is_sized_by_its_breakaway_peaks() -> None:
-    bench = _bench()
+    bench = load_concealed_bench()
     nominal = bench.nominal_for(load_plant_config(bench.base.NOMINAL), 6)
     _, traj = bench.trajectory(np.random.default_rng(104), 6, 40.0, ("point_to_point",))
     truth = {"stribeck_friction": 80.0, "stribeck_velocity": 0.025}
