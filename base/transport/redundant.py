@@ -285,24 +285,22 @@ class RedundantBus(can.BusABC):
     def send_frame(self, can_id: int, data: bytes) -> bool:
         """Send one frame; False if a line fault kept it off every line it was sent on. A real
         controller knows this too: a frame nobody received is never acknowledged."""
-        if self.tx_router is None:      # the master: the active line only
+        master = self.tx_router is None
+        if master:                      # the master: the active line only
             line = self.active
-            if self.faults[line].mode == "ok" and can_id not in self.tx_watch:   # _admit's usual answer
-                self.sent[line] += 1
-                self._senders[line](can_id, data)
-                return True
+        else:                           # a node's frame whose sender is known (its heartbeat, an answer)
+            owners = self.tx_owners
+            owner = owners.get(can_id) if owners is not None else None
+            line = owner.line if owner is not None else None
+        if line is not None and self.faults[line].mode == "ok" and can_id not in self.tx_watch:
+            self.sent[line] += 1        # _admit's usual answer, without its call
+            self._senders[line](can_id, data)
+            return True
+        if master:
             if self._admit(line, can_id, data):
                 self._senders[line](can_id, data)
                 return True
             return False
-        owners = self.tx_owners
-        owner = owners.get(can_id) if owners is not None else None
-        if owner is not None:           # a node's frame whose sender is known (its heartbeat, an answer)
-            line = owner.line
-            if self.faults[line].mode == "ok" and can_id not in self.tx_watch:   # _admit's usual answer
-                self.sent[line] += 1
-                self._senders[line](can_id, data)
-                return True
         entered = False
         for line in self._tx_lines(can_id):
             if self._admit(line, can_id, data):
