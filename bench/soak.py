@@ -127,6 +127,17 @@ def _kind(reason: str) -> str:
     return reason[:40]
 
 
+def recording_mb(recording: dict | None) -> float:
+    """The recording file's size; 0 before its writer process (a child of the daemon, which
+    may still be starting on a busy machine) has created it."""
+    if recording is None:
+        return float("nan")
+    try:
+        return Path(recording["path"]).stat().st_size / 1e6
+    except FileNotFoundError:
+        return 0.0
+
+
 def slope_per_hour(ts: list[float], ys: list[float]) -> float:
     if len(ts) < 3:
         return float("nan")
@@ -157,7 +168,7 @@ def run(duration: float, sample_every: float, csv: Path | None, quiet: bool = Fa
                 st, rec = s["stats"], s["recording"]
                 samples.append(Sample(
                     time.monotonic() - t0, proc_rss_mb(pid), open_files(pid),
-                    Path(rec["path"]).stat().st_size / 1e6 if rec else float("nan"),
+                    recording_mb(rec),
                     s["cycle"], st["overruns"], st["skipped_cycles"], st["period_error_p99"] * 1e3,
                     st["execution_p99"] * 1e3, s["network"]["tpdo_timeouts"],
                     s["network"]["expected_tpdos"], s["network"]["tpdos"], poller.polls,

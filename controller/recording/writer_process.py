@@ -37,13 +37,16 @@ def run(path: str, lifeline_fd: int, ring_fd: int) -> int:
     written_at_flush, flushed_at = 0, time.monotonic()
     seen = ring.published()
     closed = ended = False
+    # the first take at once: the set-up record was published before this process was started
+    # (a system call lies between), and with it the file exists as soon as the writer runs
+    wait = 0.0
     while not (closed or ended):
-        if select.select([lifeline_fd], [], [], BATCH_PERIOD)[0]:
+        if select.select([lifeline_fd], [], [], wait)[0]:
             ended = not os.read(lifeline_fd, 4096)      # end of file: the daemon closed or died
         published = ring.published()
         # up to what was published a wake-up ago (record_ring.py), all of it once the daemon is gone
         data = ring.take(published if ended else seen)
-        seen = published
+        seen, wait = published, BATCH_PERIOD
         for kind, topic, time_s, message in decoder.feed(data):
             if kind == SETUP:
                 recorder = McapRecorder(path, flush_interval=message["flush_interval"],
