@@ -49,6 +49,11 @@ class RealTimeClock:
         self.overruns = 0
         self.skipped_cycles = 0
 
+    @property
+    def next_deadline(self) -> float | None:
+        """Monotonic time of the next deadline (in the past while a cycle overruns); None before the first tick."""
+        return None if self._start is None else self._start + (self._cycle + 1) * self.period
+
     def next_tick(self) -> Tick:
         now = self._now()
         if self._start is None:

@@ -24,6 +24,7 @@ from spacearm.controller.daemon.command_api import ApiAddress, ApiError, Command
 from spacearm.controller.daemon.core import ControllerCore, Event
 from spacearm.controller.daemon.cycle_stats import CycleStats, CycleThresholds
 from spacearm.controller.daemon.hardware import CanopenHardware, with_drive_limits
+from spacearm.controller.daemon.idle_gate import IdleGate
 from spacearm.controller.daemon.leases import ControlLease
 from spacearm.controller.daemon.node_timing import NodeTiming
 from spacearm.controller.daemon.overrun_cause import Overrun, OverrunMeter
@@ -141,7 +142,9 @@ class Daemon:
         self._last_stats_time = -1.0
         # A lockstep cycle's wall time is the machine's speed, not a fault: there the timeout only
         # tells a console that the cycle is not running at all.
-        self.handlers = CommandHandlers(self.core, self.lease, self.planner, self.status,
+        # the API's status waits for the cycle's idle time (idle_gate.py); in-process callers do not
+        self.idle_gate = IdleGate()
+        self.handlers = CommandHandlers(self.core, self.lease, self.planner, self._status_when_idle,
                                         RecordingControl(self), self.model.nq,
                                         cycle_timeout=LOCKSTEP_CYCLE_TIMEOUT if lockstep else REALTIME_CYCLE_TIMEOUT)
         # Named postures for `move joints NAME`: the arm file's [postures], and "home" from the
@@ -249,6 +252,7 @@ class Daemon:
     # ---- the cycle ---------------------------------------------------------------------
     def cycle_once(self) -> Snapshot:
         tick = self.clock.next_tick()
+        self.idle_gate.cycle_started()
         measurement = self.hardware.read(tick.time)
         if self.vision is not None:
             self.vision.on_cycle(measurement.sync_counter)
@@ -258,6 +262,7 @@ class Daemon:
             self.core.answer_commands()     # a cycle that raised still answers what it took
             if self.overruns is not None:
                 self._judge_overruns(tick)
+            self.idle_gate.cycle_ended(getattr(self.clock, "next_deadline", None))
 
     def _judge_overruns(self, tick: Tick) -> None:
         self.overruns.end(tick.cycle, tick.deadline, tick.deadline + self.clock.period, self.hardware.last_io_wait)
@@ -385,6 +390,10 @@ class Daemon:
             "bringup": self.hardware.bringup_report(),
             "nodes": self.node_timing_summary().as_dict(),   # are the simulator/hub/bus answering in time
         }
+
+    def _status_when_idle(self) -> dict:
+        self.idle_gate.wait_for_idle()
+        return self.status()
 
     def node_timing_summary(self):
         """The daemon's view of the nodes' timing, with the simulator's and hub's own reports
