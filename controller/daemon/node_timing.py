@@ -132,7 +132,8 @@ def _peer_advice(name: str, peer: PeerTimingSummary) -> str:
         return ("the machine's host did not run it (CPU steal, ~100 ms at the host's CPU quota): no priority "
                 "helps; a machine with reserved CPUs does")
     if peer.cause == "stopped":
-        return f"`{command}` did not run at all: a debugger or SIGSTOP"
+        return (f"`{command}` did not run at all and did not wait for a core: a debugger or SIGSTOP, or the "
+                "host holding its vCPU for less than the 10 ms that CPU steal is counted in")
     if peer.scheduling == "normal":
         return f"run `{command}` with --rt-priority 50 (or lower the machine's load)"
     if peer.cause == "core":

@@ -124,6 +124,25 @@ def test_a_late_wake_inside_host_steal_is_the_hosts_whatever_the_guest_saw(monke
     assert decode(meter.report(1.5)).cause == "core"
 
 
+def test_a_wake_nothing_in_the_guest_explains_is_the_hosts_when_any_steal_was_counted(monkeypatch):
+    """Steal is counted in 10 ms ticks: a 23 ms stall may show one tick. A wake no thread of the
+    process ran or queued through ("stopped") with a tick of steal around it is the host's; the
+    same with a wait for a core keeps "core" (the half-the-lateness rule), and with no steal at
+    all it stays "stopped"."""
+    steal = [(5, 7)]
+    monkeypatch.setattr(peer_timing, "host_steal", lambda: steal[0])
+    meter = LatenessMeter(period=1.0, inhibit=0.1, late_wake=0.005)
+    meter.woke(0.001, 0.0)
+    meter.report(0.0)
+    for cause, stolen, named in (("stopped", 1, "host"), ("core", 1, "core"), ("stopped", 0, "stopped")):
+        meter.woke(0.001, 1.0)
+        meter._cause = lambda lateness, cause=cause: cause
+        meter.woke(0.023, 1.1)
+        steal[0] = (5, steal[0][1] + stolen)
+        assert decode(meter.report(1.2)).cause == named, (cause, stolen)
+        del meter._cause
+
+
 def test_the_host_cause_round_trips_and_an_unknown_one_is_none():
     frame = bytearray(LatenessMeter(measure_causes=False).report(0.0))
     frame[6] = (frame[6] & 3) | 4 << 2

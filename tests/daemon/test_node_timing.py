@@ -169,7 +169,7 @@ def test_a_wake_that_could_stop_the_arm_is_late_at_once():
 @pytest.mark.parametrize("cause, says, advises", [
     ("core", "waited for a core", "higher real-time priority took its core"),
     ("gil", "waited for the GIL", "held the GIL"),
-    ("stopped", "stopped (none of its threads ran)", "a debugger or SIGSTOP"),
+    ("stopped", "stopped (none of its threads ran)", "a debugger or SIGSTOP, or the host"),
 ])
 def test_the_advice_names_the_measured_cause_and_never_rt_priority_to_a_fifo_process(cause, says, advises):
     timing = NodeTiming(BUDGET)
