@@ -128,6 +128,9 @@ class LineSelection:
         self.rules: dict[int, NodeLineRule] = {}
         self.events: list[LineEvent] = []
         self._owners: dict[int, object] = {}     # COB-ID -> its sending node's rule (found once)
+        # per node, its entry points gated by line: installed only while frames of two lines
+        # can reach the nodes (the pair turns them on and off: base/transport/rx_gating.py)
+        self._gates: dict[int, dict[str, object]] = {}
         for node in sim.nodes.values():
             if rdn.REDUNDANCY in node.od and od.CONSUMER_HEARTBEAT in node.od:
                 self.rules[node.node_id] = NodeLineRule(node)
@@ -136,6 +139,7 @@ class LineSelection:
         self.bus.tx_router = self.tx_line
         self.bus.tx_owners = self._owners     # a burst looks its frames' lines up without a call
         self._lines_changed()
+        self.bus.gate_receivers(self._set_gates)
         # no thread of its own: the simulator's timer runs timer_pass() (a thread more would cost
         # every pass of peer_timing's per-thread scan, and a wake-up every TICK)
 
@@ -144,7 +148,7 @@ class LineSelection:
         """After a node's line changed (a rule toggles only in timer_pass): the line every node
         is on, if one, lets a burst skip the look-up per frame (RedundantBus.tx_common_line)."""
         lines = {self.line_of(node) for node in self.sim.nodes.values()}
-        self.bus.tx_common_line = lines.pop() if len(lines) == 1 else None
+        self.bus.set_common_line(lines.pop() if len(lines) == 1 else None)
 
     def line_of(self, node) -> int:
         rule = self.rules.get(node.node_id)
@@ -180,9 +184,7 @@ class LineSelection:
 
     # ------------------------------------------------------------------ the node's side
     def _gate(self, node) -> None:
-        for name in _GATED:
-            original = getattr(node, name)
-            setattr(node, name, self._gated(node, original))
+        self._gates[node.node_id] = {name: self._gated(node, getattr(node, name)) for name in _GATED}
         on_heartbeat = node.on_heartbeat
 
         rule = self.rules.get(node.node_id)
@@ -215,6 +217,17 @@ class LineSelection:
         if rule is not None:        # without the rule the node's own reaction is all there is
             timed_out = node.consumer_timed_out
             node.consumer_timed_out = master_timed_out
+
+    def _set_gates(self, on: bool) -> None:
+        """The pair's call: gate the nodes' entry points (frames of either line may come) or
+        not (every frame delivered is on the line every node listens on)."""
+        for node in self.sim.nodes.values():
+            gates = self._gates[node.node_id]
+            if on:
+                node.__dict__.update(gates)
+            else:
+                for name in gates:
+                    node.__dict__.pop(name, None)
 
     def _gated(self, node, original):
         own_line = self.rules.get(node.node_id, _ON_LINE_A)
