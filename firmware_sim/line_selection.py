@@ -265,9 +265,9 @@ class LineSelection:
             due.append((node, rule, master))
         if not due:
             return any(rule.toggle_at is not None for rule in self._rule_list)
-        # every node due toggles in one hold of the SYNC lock: a SYNC that took the lock between
-        # two toggles and was preempted there held the nodes after it on the old line for as
-        # long (CI: ft_sensor, the last node, toggled 200 ms after the others and was lost)
+        # every node due toggles in one hold of the SYNC lock: a SYNC that takes the lock between
+        # two toggles and is preempted there holds the nodes after it on the old line for as long
+        # (likely a CI run's ft_sensor, the last node: 200 ms after the others, and lost)
         with nullcontext() if locked else self.sim._sync_lock:
             for node, rule, master in due:
                 if not rule.due(now):
