@@ -15,7 +15,9 @@ within its handling) until it has been handled.
 
 Which receivers: those that say `rx_line_gated = True` (they read rx_line() only through those
 gates); every other listener of the pair gets every frame tagged as before. A receiver that
-reads no line (the master's) is none of this.
+reads no line (the master's) is none of this, and a pair with observers, a note set or a
+standby filter (the master's) never goes raw. A frame already on its way straight when a node
+toggles away still reaches that node, as a frame on the wire as the node switched would.
 """
 from __future__ import annotations
 
