@@ -52,6 +52,10 @@ class SimStats:
 
 
 class _Listener(can.Listener):
+    # on a redundant pair it reads rx_line() only in the line selection's gates, which the pair
+    # turns off while every node is on one line (base/transport/rx_gating.py)
+    rx_line_gated = True
+
     def __init__(self, sim: "Simulator"):
         self.sim = sim
 

@@ -54,6 +54,7 @@ class LineFault:
         self._lock = threading.Lock()
         self.frames_lost = 0      # frames this fault kept off the line
         self.flood_frames = 0     # babble frames delivered instead
+        self._watchers: list[Callable[[], None]] = []
 
     def set(self, mode: str, loss: float | None = None, seed: int | None = None) -> None:
         if mode not in MODES:
@@ -66,9 +67,23 @@ class LineFault:
             self.mode, self.loss = mode, float(loss)
             if seed is not None:
                 self._rng.seed(seed)
+            watchers = list(self._watchers)
+        for watcher in watchers:        # outside the lock: a watcher may take locks of its own
+            watcher()
 
     def clear(self) -> None:
         self.set("ok")
+
+    def watch(self, callback: Callable[[], None]) -> None:
+        """`callback()` after every set(), in the setting thread (a pair that delivers frames of
+        a sound line without checking the fault per frame: redundant.py)."""
+        with self._lock:
+            self._watchers.append(callback)
+
+    def unwatch(self, callback: Callable[[], None]) -> None:
+        with self._lock:
+            if callback in self._watchers:
+                self._watchers.remove(callback)
 
     @property
     def active(self) -> bool:

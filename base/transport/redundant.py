@@ -37,7 +37,9 @@ target), one fault check and the observers on top of one line; the thread-local 
 for listeners that read it (`needs_rx_line`, default True; the master's listener says False);
 a burst goes to its line in one call, with no per-frame routing (the master's: the active line;
 the nodes': `tx_common_line` while they are all on one line); an unwatched frame of the master
-on a sound line is sent without `_admit`.
+on a sound line is sent without `_admit`. While every simulated node is on one sound line,
+the simulator gets that line's frames with no per-frame function at all and its nodes'
+line gates are off (rx_gating.py: `gate_receivers`, `set_common_line`).
 
 Why a thread-local for the receive line: python-can's Listener API has no place for it,
 and the pair delivers each frame in the thread that reads it (the sender's thread on the
@@ -54,6 +56,7 @@ from operator import itemgetter
 import can
 
 from .line_faults import LineFault, line_fault
+from .rx_gating import RxGating
 
 PAIR_SEPARATOR = "+"
 LINE_NAMES = ("A", "B")
@@ -63,6 +66,7 @@ _can_id = itemgetter(0)
 
 class _RxState(threading.local):
     line: int | None = None     # every thread starts with it: a hot path reads `.line`, no getattr call
+    held: "RedundantBus | None" = None     # the pair whose frame this reader handed out under a hold
 
 
 _rx = _RxState()
@@ -106,16 +110,24 @@ class _LineListener(can.Listener):
 
     def __init__(self, pair: "RedundantBus", line: int, target: can.Listener):
         self.pair, self.line, self.target = pair, line, target
-        self.on_frame = self._frame_handler(getattr(target, "on_frame", None),
-                                            getattr(target, "needs_rx_line", True))
-
-    def _frame_handler(self, on_frame, tags: bool) -> Callable[[int, bytes, float], None]:
-        pair, line, target = self.pair, self.line, self.target
-        fault, blocked, rx = pair.faults[line], pair._rx_blocked, _rx
+        # it reads rx_line() only through gates the pair turns off while this line is raw (rx_gating.py)
+        self.gated = getattr(target, "rx_line_gated", False)
+        on_frame = getattr(target, "on_frame", None)
         if on_frame is None:     # a listener of Messages only: one built per frame
             def on_frame(can_id: int, data: bytes, timestamp: float) -> None:
                 target.on_message_received(can.Message(
                     timestamp=timestamp, arbitration_id=can_id, data=data, is_extended_id=False, check=False))
+        self.raw = on_frame
+        deliver = self._frame_handler(on_frame, getattr(target, "needs_rx_line", True))
+        self.on_frame = pair.rx_gating.held(deliver) if self.gated else deliver
+
+    def handler(self, raw_line: int | None) -> Callable[[int, bytes, float], None]:
+        """A gated receiver's handler while `raw_line` is the pair's raw line."""
+        return self.raw if self.line == raw_line else self.on_frame
+
+    def _frame_handler(self, on_frame, tags: bool) -> Callable[[int, bytes, float], None]:
+        pair, line = self.pair, self.line
+        fault, blocked, rx = pair.faults[line], pair._rx_blocked, _rx
 
         def deliver(can_id: int, data: bytes, timestamp: float) -> None:
             if fault.mode != "ok" and blocked(line):
@@ -150,11 +162,17 @@ class _LineListener(can.Listener):
         self.pair._observe(self.line, msg.arbitration_id, bytes(msg.data), msg.timestamp)
         if not self.pair._reaches_application(self.line, msg):
             return
+        gating = self.pair.rx_gating
+        hold = self.gated and self.line != gating.raw_line
+        if hold:
+            gating.hold()
         previous, _rx.line = rx_line(), self.line
         try:
             self.target.on_message_received(msg)
         finally:
             _rx.line = previous
+            if hold:
+                gating.release()
 
     def on_error(self, exc: Exception) -> None:
         self.target.on_error(exc)
@@ -185,6 +203,7 @@ class RedundantBus(can.BusABC):
         self.tx_owners: dict[int, object] | None = None
         self.tx_common_line: int | None = None
         self.tx_watch: dict[int, list[Callable[[int, int], None]]] = {}
+        self.rx_gating = RxGating(self)
         self.sent = [0, 0]
         self._senders = tuple(frame_sender(line) for line in self.lines)
         self._batch_senders = tuple(frames_sender(line) for line in self.lines)
@@ -235,13 +254,31 @@ class RedundantBus(can.BusABC):
         if self._reaches_application(line, msg):
             self._queue.put((line, msg))
 
+    def gate_receivers(self, gate: Callable[[bool], None]) -> None:
+        """Receivers that sort frames by rx_line() in gates of their own: `gate(on)` turns them
+        on or off (rx_gating.py; the simulator's line selection)."""
+        self.rx_gating.attach(gate)
+
+    def set_common_line(self, line: int | None) -> None:
+        """The line every node sending through this pair is on (None: they are split)."""
+        self.tx_common_line = line
+        self.rx_gating.refresh()
+
     def _recv_internal(self, timeout):
+        held = _rx.held
+        if held is not None:      # the frame it handed out last has been handled by now
+            _rx.held = None
+            held.rx_gating.release()
         try:
             line, msg = self._queue.get(timeout=timeout)
         except queue.Empty:
             return None, False
         if self._rx_blocked(line) and not msg.is_error_frame:
             return None, False
+        gating = self.rx_gating
+        if gating.gate is not None and line != gating.raw_line:
+            gating.hold()           # until this reader comes back for the next frame
+            _rx.held = self
         _rx.line = line
         msg.channel = self.line_channels[line]     # a trace of the pair names each frame's line
         return msg, False
@@ -355,6 +392,7 @@ class RedundantBus(can.BusABC):
         if self._closing.is_set():
             return
         self._closing.set()
+        self.rx_gating.detach()
         for reader in self._readers:
             reader.join(2 * _READ_POLL + 0.5)
         for line in self.lines:
@@ -382,6 +420,13 @@ class _LineQueue:
     def get(self, block: bool = True, timeout: float | None = None):
         raise queue.Empty     # the line is read through the pair
 
+    def set_handler(self, listener, on_frame) -> None:
+        """The function the line's senders call for `listener`'s frames (the in-process bus
+        keeps (on_frame, listener) pairs: base/transport add_inline_listener); replaced whole,
+        so a sender iterating it sees the old list or the new one."""
+        self.inline_handlers = [(on_frame if each is listener else handler, each)
+                                for handler, each in self.inline_handlers]
+
 
 class InlineRedundantBus(RedundantBus):
     """A pair of in-process buses: listeners may take frames inline in the sender's thread."""
@@ -397,7 +442,10 @@ class InlineRedundantBus(RedundantBus):
 
     def add_inline_listener(self, listener: can.Listener) -> None:
         for i, line in enumerate(self.lines):
-            line.add_inline_listener(_LineListener(self, i, listener))
+            line_listener = _LineListener(self, i, listener)
+            line.add_inline_listener(line_listener)
+            if line_listener.gated:
+                self.rx_gating.add(line.queue, line_listener)
 
 
 def open_pair(spec: str, open_line: Callable[..., can.BusABC], **kwargs) -> RedundantBus:
