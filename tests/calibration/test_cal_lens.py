@@ -63,8 +63,8 @@ def test_first_order_bias_matches_opencv_pnp(fr3_setup):
 
 def test_lens_jacobian_matches_finite_differences(fr3_setup):
     data, em = fr3_setup
-    model = LensModel(corners=F.FR3_BOARD, half_fov=F.D405_HALF_FOV, lens=LENS)
-    e = np.concatenate([[0.003, -0.002], TRUE])
+    model = LensModel(corners=F.FR3_BOARD, half_fov=F.D405_HALF_FOV, lens=LENS + ("k2",))
+    e = np.concatenate([[0.003, -0.002], TRUE, [0.01]])
     pr = CompositeProblem(em, [Block(model, data.Q[:8], model.predict(em.poses(em.nominal, data.Q[:8]), e), 1e-3)], [])
     x = pr.nominal()
     x[-len(e):] = 0.8 * e
