@@ -7,9 +7,10 @@ arm's modified D-H errors. Two fits per random 80/34 split:
   full          frames + the identifiable D-H parameters (identifiability on the training set),
 both weighted LM with noise levels re-estimated from the registration residuals, the full fit
 with a weak prior on the D-H errors (MAP) so that 80 postures do not overfit. By default each
-split's full fit is made with and without the board's pitch per axis (BoardScaleModel) and keeps
-the one with the lower leave-one-view-out error on its own training views (by MIN_GAIN), so the
-held-out views take no part in the choice.
+split's full fit is made with the camera models of CAMERA_CHAIN - rigid, the board's pitch per axis
+(BoardScaleModel), the lens's bias of the pose estimate (LensModel: focal lengths, principal point,
+radial distortion) - and keeps the richer one while it lowers the leave-one-view-out error on its
+own training views by MIN_GAIN, so the held-out views take no part in the choice.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from spacearm.controller.calibration.datafile import DataFileError
 from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.identifiability import find_identifiable
 from spacearm.controller.calibration.fit_checks import Priors
+from spacearm.controller.calibration.lens_model import LensModel, board_corners
 from spacearm.controller.calibration.measurement_models import BoardScaleModel, CameraPoseModel, PoseModel
 from spacearm.controller.calibration.residuals import Problem
 from spacearm.controller.calibration.solvers import CalibrationResult, lm
@@ -45,6 +47,17 @@ FR3_FLANGE = 0.107
 FR3_Q_MIN = [-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159]
 FR3_Q_MAX = [2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159]
 MIN_GAIN = 0.02      # a camera term must lower the training leave-one-out RMS by 2 % (as group_selection)
+# The board and the camera, for the lens model: not in the data file. The source's example script
+# (PhilNad/robot-arm-kinematic-calibration, Examples/FrankaReal.py) states a 0.5 m board of 25 mm
+# squares with its origin at the pattern's corner: 17 x 17 inner corners, running along -x and +y
+# of the board frame (the views aim at (-0.21, 0.23) m, the pattern's centre). The RealSense
+# D405's field of view is 87 x 58 deg (Intel's datasheet); x is the image's long side.
+FR3_BOARD = board_corners(0.025, 17, 17, sign=(-1.0, 1.0))
+D405_HALF_FOV = (float(np.tan(np.radians(87.0 / 2))), float(np.tan(np.radians(58.0 / 2))))
+# Nested camera models, each kept over the one before when it lowers the training leave-one-out
+# by MIN_GAIN: rigid, the board's pitch, the lens (pinhole + first radial term), the second radial term.
+CAMERA_CHAIN = ("rigid", "board", "lens", "lens_k2")
+LENS = {"lens": ("fx", "fy", "cx", "cy", "k1"), "lens_k2": ("fx", "fy", "cx", "cy", "k1", "k2")}
 
 
 def fr3_kinematics() -> KinematicModel:
@@ -122,6 +135,7 @@ class SplitResult:
     held_rot_rms: dict[str, float]    # rad
     held_pos_axes: dict[str, Array]   # m, RMS per board axis (x, y, z)
     train_loo: float = float("nan")   # m, the full fit's leave-one-view-out position RMS on its training views
+    camera: str = ""                  # the camera model of CAMERA_CHAIN fit_split_chosen kept
 
 
 def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
@@ -151,11 +165,20 @@ def camera_covariances(res: CalibrationResult, em: ErrorModel, Q: Array,
     return (Rb @ S @ np.swapaxes(Rb, 1, 2)) / w[:, None, None]
 
 
+def camera_model(depth_scale: bool = False, board_scale: bool = False,
+                 lens: tuple[str, ...] = ()) -> PoseModel | CameraPoseModel | BoardScaleModel:
+    if lens:
+        return LensModel(corners=FR3_BOARD, half_fov=D405_HALF_FOV, lens=lens)
+    return BoardScaleModel() if board_scale else CameraPoseModel() if depth_scale else PoseModel()
+
+
 def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.radians(0.5),
-              prior_length: float = 5e-3, depth_scale: bool = False, board_scale: bool = False) -> SplitResult:
+              prior_length: float = 5e-3, depth_scale: bool = False, board_scale: bool = False,
+              lens: tuple[str, ...] = ()) -> SplitResult:
     """`depth_scale`: the full fit also estimates the camera's depth scale (CameraPoseModel: a
     focal length error scales every view's depth), a term of the camera, not of the arm;
-    `board_scale`: the board's pitch along its x and y axes (BoardScaleModel) instead."""
+    `board_scale`: the board's pitch along its x and y axes (BoardScaleModel) instead; `lens`:
+    the board's pitch and these lens terms (LensModel: the pose estimate's bias from the lens)."""
     kin = fr3_kinematics()
     W0, cam0 = initial_frames(kin, data, train)
     em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board",
@@ -172,7 +195,7 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     free = ident.kept
     prior = np.array([np.inf if n in frames else (prior_length if n.split("_")[0] in ("a", "d")
                       else prior_angle) for n in free])
-    camera = BoardScaleModel() if board_scale else CameraPoseModel() if depth_scale else PoseModel()
+    camera = camera_model(depth_scale, board_scale, lens)
     full = dataclasses.replace(reg, x=np.concatenate([reg.x, camera.extra_nominal]))
     free, prior = free + list(camera.extra_names), np.concatenate([prior, np.full(len(camera.extra_names), np.inf)])
     for _ in range(3):
@@ -191,16 +214,22 @@ def fit_split(data: FR3Data, train: Array, test: Array, prior_angle: float = np.
     return SplitResult(reg, full, pos, rot, axes, loo)
 
 
-def fit_split_chosen(data: FR3Data, train: Array, test: Array) -> SplitResult:
-    """fit_split with or without the board's pitch per axis, whichever predicts the training
-    views better when each is left out (linearised leave-one-out, training views only)."""
-    rigid = fit_split(data, train, test)
-    board = fit_split(data, train, test, board_scale=True)
-    return board if board.train_loo < (1.0 - MIN_GAIN) * rigid.train_loo else rigid
+def fit_split_chosen(data: FR3Data, train: Array, test: Array, chain: tuple[str, ...] = CAMERA_CHAIN) -> SplitResult:
+    """fit_split with the camera models of `chain` in turn, each kept over the one kept before
+    when it predicts the training views better when each is left out (linearised leave-one-out,
+    training views only) by MIN_GAIN; the held-out views take no part."""
+    best = None
+    for name in chain:
+        r = fit_split(data, train, test, board_scale=name == "board", lens=LENS.get(name, ()))
+        r.camera = name
+        if best is None or r.train_loo < (1.0 - MIN_GAIN) * best.train_loo:
+            best = r
+    return best
 
 
-def _board_splits(results: list[SplitResult]) -> int:
-    return sum("camera_scale_x" in r.full.free for r in results)
+def _kept(results: list[SplitResult]) -> dict[str, int]:
+    """How many splits kept each camera model of the chain."""
+    return {name: sum(r.camera == name for r in results) for name in CAMERA_CHAIN if any(r.camera == name for r in results)}
 
 
 def _count_dh(names: list[str]) -> int:
@@ -208,9 +237,9 @@ def _count_dh(names: list[str]) -> int:
 
 
 def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
-              path: Path = DATA, depth_scale: bool = False, choose_camera: bool = True) -> tuple[str, dict]:
-    """`choose_camera`: each split picks the board-pitch term by its training views (fit_split_chosen);
-    `depth_scale` (the focal length term instead) or choose_camera=False: one model in every split."""
+              path: Path = DATA, depth_scale: bool = False, chain: tuple[str, ...] = CAMERA_CHAIN) -> tuple[str, dict]:
+    """Each split picks its camera model from `chain` by its training views (fit_split_chosen);
+    chain=("rigid",) or `depth_scale` (the focal length term): one model in every split."""
     data = load_fr3(path)
     kin = fr3_kinematics()
     em = ErrorModel.from_kinematics(kin)
@@ -220,8 +249,8 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
     results = []
     for _ in range(splits):
         perm = rng.permutation(N)
-        if choose_camera and not depth_scale:
-            results.append(fit_split_chosen(data, perm[:n_train], perm[n_train:]))
+        if not depth_scale:
+            results.append(fit_split_chosen(data, perm[:n_train], perm[n_train:], chain))
         else:
             results.append(fit_split(data, perm[:n_train], perm[n_train:], depth_scale=depth_scale))
     lines = [f"FR3 eye-in-hand real data: {N} postures, {splits} random {n_train}/{N - n_train} splits",
@@ -230,8 +259,8 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
              f"{sum(n.startswith(('board_', 'cam_')) for n in results[0].full.free)} frame (the other frame parameters "
              f"duplicate joint-1/joint-7 D-H ones) + {sum(n.startswith('camera_') for n in results[0].full.free)} camera",
              "weighted LM, noise covariance estimated in the camera frame, Huber IRLS, weak D-H prior",
-             f"board pitch per axis (x, y) kept by the training views' leave-one-out in {_board_splits(results)} "
-             f"of {splits} splits", "",
+             f"camera model kept by the training views' leave-one-out (of {', '.join(chain)}): "
+             + ", ".join(f"{k} in {v}" for k, v in _kept(results).items()) + f" of {splits} splits", "",
              f"{'split':<7}{'reg pos mm':>12}{'reg ori deg':>13}{'full pos mm':>13}{'full ori deg':>14}"]
     for k, r in enumerate(results):
         lines.append(f"{k:<7}{r.held_pos_rms['registration'] * 1e3:>12.3f}"
@@ -242,7 +271,10 @@ def fr3_study(splits: int = 10, n_train: int = 80, seed: int = 0,
     med["full_pos_axes"] = np.median([r.held_pos_axes["full"] for r in results], axis=0)
     med["depth_scale"] = np.array([r.full.estimate.get("camera_depth_scale", np.nan) for r in results])
     med["board_scale"] = np.array([[r.full.estimate.get(f"camera_scale_{a}", np.nan) for a in "xy"] for r in results])
-    med["board_splits"] = _board_splits(results)
+    med["kept"] = _kept(results)
+    med["split_pos"] = [r.held_pos_rms["full"] for r in results]
+    med["lens"] = [{n[len("camera_"):]: v for n, v in r.full.estimate.items() if n.startswith("camera_")}
+                   for r in results]
     lines.append(f"{'median':<7}{med['registration_pos'] * 1e3:>12.3f}{np.degrees(med['registration_rot']):>13.3f}"
                  f"{med['full_pos'] * 1e3:>13.3f}{np.degrees(med['full_rot']):>14.3f}")
     lines.append("(held-out RMS of the position error norm and of the rotation angle)")

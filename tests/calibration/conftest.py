@@ -45,3 +45,13 @@ def laser_setup():
 
 def laser_problem(em, plane, Q, measured, free, sigma=2e-4):
     return Problem(em, "plane", Q, measured, free, plane=plane, sigma=np.array([sigma]))
+
+
+@pytest.fixture(scope="session")
+def fr3_setup():
+    """The real FR3 views and an error model with the board and camera frames started from them."""
+    from spacearm.controller.calibration import fr3 as F
+    data = F.load_fr3()
+    kin = F.fr3_kinematics()
+    W0, cam0 = F.initial_frames(kin, data, np.arange(len(data.Q)))
+    return data, ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board", tool_prefix="cam")

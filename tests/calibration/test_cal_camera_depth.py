@@ -13,7 +13,6 @@ import pytest
 
 from spacearm.controller.calibration import fr3 as F
 from spacearm.controller.calibration.composite import Block, CompositeProblem
-from spacearm.controller.calibration.errormodel import ErrorModel
 from spacearm.controller.calibration.measurement_models import BoardScaleModel, CameraPoseModel
 
 pytestmark = pytest.mark.skipif(not F.DATA.exists(), reason="FR3 data not available")
@@ -21,18 +20,9 @@ TRUE_SCALE = 0.008           # a focal length 0.8 % off
 TRUE_PITCH = np.array([-0.008, -0.005])      # a board printed 0.8 % / 0.5 % small along x / y
 
 
-@pytest.fixture(scope="module")
-def setup():
-    data = F.load_fr3()
-    kin = F.fr3_kinematics()
-    W0, cam0 = F.initial_frames(kin, data, np.arange(len(data.Q)))
-    em = ErrorModel.from_kinematics(kin, world=W0, tool=cam0, world_prefix="board", tool_prefix="cam")
-    return data, em
-
-
 @pytest.mark.parametrize("model, e", [(CameraPoseModel(), [0.02]), (BoardScaleModel(), [0.012, -0.018])])
-def test_camera_term_jacobian_matches_finite_differences(setup, model, e):
-    data, em = setup
+def test_camera_term_jacobian_matches_finite_differences(fr3_setup, model, e):
+    data, em = fr3_setup
     rng = np.random.default_rng(4)
     seen = model.predict(em.poses(em.nominal, data.Q[:6]), 0.75 * np.array(e))   # near the prediction,
     pr = CompositeProblem(em, [Block(model, data.Q[:6], seen, 1e-3)], [])         # as at a solution
@@ -49,8 +39,8 @@ def test_camera_term_jacobian_matches_finite_differences(setup, model, e):
         np.testing.assert_allclose(got, want, atol=1e-8 * max(np.abs(want).max(), 1.0))
 
 
-def test_predicted_depth_is_scaled_along_the_optical_axis(setup):
-    data, em = setup
+def test_predicted_depth_is_scaled_along_the_optical_axis(fr3_setup):
+    data, em = fr3_setup
     T = em.poses(em.nominal, data.Q[:5])
     seen = CameraPoseModel().predict(T, np.array([TRUE_SCALE]))
     depth = lambda M: np.linalg.inv(M)[:, 2, 3]          # the target's depth in the camera  # noqa: E731
@@ -60,8 +50,8 @@ def test_predicted_depth_is_scaled_along_the_optical_axis(setup):
     np.testing.assert_allclose(seen[:, :3, :3], T[:, :3, :3])
 
 
-def test_a_focal_length_error_is_found_and_the_rigid_model_cannot_take_it(setup):
-    data, em = setup
+def test_a_focal_length_error_is_found_and_the_rigid_model_cannot_take_it(fr3_setup):
+    data, em = fr3_setup
     rng = np.random.default_rng(8)
     seen = CameraPoseModel().predict(em.poses(em.nominal, data.Q), np.array([TRUE_SCALE]))
     seen[:, :3, 3] += rng.normal(0.0, 1e-4, (len(seen), 3))
@@ -74,8 +64,8 @@ def test_a_focal_length_error_is_found_and_the_rigid_model_cannot_take_it(setup)
     assert rigid.held_pos_rms["full"] > 2 * camera.held_pos_rms["full"]
 
 
-def test_board_pitch_scales_the_position_along_the_board_axes_only(setup):
-    data, em = setup
+def test_board_pitch_scales_the_position_along_the_board_axes_only(fr3_setup):
+    data, em = fr3_setup
     T = em.poses(em.nominal, data.Q[:5])
     seen = BoardScaleModel().predict(T, TRUE_PITCH)
     np.testing.assert_allclose(seen[:, :2, 3], T[:, :2, 3] * (1 + TRUE_PITCH), rtol=1e-12)
@@ -89,8 +79,8 @@ def _pitched_views(data, em, pitch, seed):
     return F.FR3Data(data.Q, seen, data.base_T_flange)
 
 
-def test_training_views_choose_the_board_pitch_only_when_the_views_carry_it(setup):
-    data, em = setup
+def test_training_views_choose_the_board_pitch_only_when_the_views_carry_it(fr3_setup):
+    data, em = fr3_setup
     perm = np.random.default_rng(2).permutation(len(data.Q))
     pitched = F.fit_split_chosen(_pitched_views(data, em, TRUE_PITCH, 8), perm[:80], perm[80:])
     np.testing.assert_allclose([pitched.full.estimate.get(f"camera_scale_{a}", np.nan) for a in "xy"],
