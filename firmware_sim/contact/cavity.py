@@ -142,7 +142,27 @@ def _may_touch(cavity: Cavity, corners: np.ndarray) -> bool:
         return False              # wholly above the opening plane
     if -min(z) >= cavity.depth - CLEAR and _over(x, cavity.half_x) and _over(y, cavity.half_y):
         return True               # may reach the floor
+    # The wedges lie below the opening plane: only the long edges' part below z = CLEAR (hull of
+    # the corners there and the edges' crossings of that plane) can reach them. A part
+    # inserted within the clearance has its upper corners outside the slab and its lower ones
+    # below the funnel, but that part inside the slab.
+    x, y, z = _below_opening(x, y, z)
     return not (_free_of_wedge(x, z, cavity.half_x, cavity.chamfer) and _free_of_wedge(y, z, cavity.half_y, cavity.chamfer))
+
+
+def _below_opening(x: list[float], y: list[float], z: list[float]) -> tuple[list[float], ...]:
+    """Vertices of the long edges (corner i to corner i + 4) clipped to z <= CLEAR."""
+    xs, ys, zs = [], [], []
+    for a in range(4):
+        b = a + 4
+        za, zb = z[a], z[b]
+        for k in (a, b):
+            if z[k] <= CLEAR:
+                xs.append(x[k]), ys.append(y[k]), zs.append(z[k])
+        if (za <= CLEAR) != (zb <= CLEAR):
+            s = (CLEAR - za) / (zb - za)
+            xs.append(x[a] + s * (x[b] - x[a])), ys.append(y[a] + s * (y[b] - y[a])), zs.append(CLEAR)
+    return xs, ys, zs
 
 
 def _over(u: list[float], half: float) -> bool:

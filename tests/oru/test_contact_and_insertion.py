@@ -69,6 +69,34 @@ def test_the_quick_no_contact_test_never_hides_a_force():
     assert skipped > 500 and touching > 500          # both kinds were really tried
 
 
+def test_a_part_inserted_past_the_chamfer_is_skipped_only_when_it_touches_nothing():
+    """Inserted deeper than the chamfer within about the clearance, the box's upper corners
+    stand outside the wall's slab (above the opening) and its lower ones below the chamfer's
+    funnel: the quick test then looks at the edges' part below the opening. Every pose it
+    skips must be free of force in the full computation, and it must skip most of the free
+    ones (the corners' hull alone skipped 487 of these 702: 69 %)."""
+    from spacearm.firmware_sim.contact.cavity import cavity_forces, sample_points
+    from spacearm.base.spatial import rotvec_to_matrix
+    rng = np.random.default_rng(11)
+    law = ContactLaw(2.5e3, 30.0, 0.15, 1e-3)
+    clearance = SLOT.half_x - ORU.half_x
+    skipped = touching = 0
+    for k in range(2000):
+        T = pose(rng.choice((-1, 1)) * rng.uniform(0.0, 2.5 * clearance), rng.normal(0.0, 0.3 * clearance),
+                 rng.uniform(-SLOT.depth - 0.002, -SLOT.chamfer))
+        T[:3, :3] = rotvec_to_matrix(rng.normal(0.0, 0.002, 3))
+        rate = np.zeros((4, 4))
+        rate[:3, 3] = rng.normal(0.0, 0.01, 3)
+        pm = sample_points(ORU, T, SLOT.chamfer)
+        full = cavity_forces(SLOT, law, pm @ T[:3, :3].T + T[:3, 3], pm @ rate[:3, :3].T + rate[:3, 3])
+        touching += bool(full.any())
+        if box_in_cavity(SLOT, ORU, law, T, rate) is None:
+            skipped += 1
+            assert not full.any(), f"pose {k}: skipped, but the full computation gives {full.sum(axis=0)} N"
+    free = 2000 - touching
+    assert touching > 200 and skipped > 0.85 * free, f"{skipped} of {free} free poses skipped"
+
+
 def test_scene_geometry_places_a_captured_oru_in_its_slot():
     scene = load_scene()
     g = scene.geometry
