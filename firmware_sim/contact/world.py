@@ -229,9 +229,9 @@ class ContactWorld:
                 tool_T_base = _rigid_inverse(T)
             F_T_M = tool_T_base @ tip
             previous = self._moved("guide:" + o.name, F_T_M)
-            # Zero forces add nothing (the sums start at +0.0, and adding +-0.0 keeps them).
             if may_touch(self.guide, self.adapter_box, F_T_M):
                 p, f = box_contact(self.guide, self.adapter_box, self.law, F_T_M, _rate(F_T_M, previous, h))
+                # Zero forces add nothing (the sums start at +0.0, and adding +-0.0 keeps them).
                 if f.any():
                     add(p @ R_tool.T + p_tool, -(f @ R_tool.T))     # reaction on the end effector
             if self._is_captured(F_T_M):
