@@ -13,6 +13,21 @@ trials per minute of each, their ratio, and whether each seed gave the same resu
 Throughput uses the insertion trial of bench_oru (seconds each); the overhead and the
 kill/resume use the cheap EKF calibration trial (~0.05 s), where the scheduler's share shows.
 Overhead per trial = (first submit -> last result written) / trials - mean task time, one worker.
+
+Where one insertion trial's time goes (insertion_smoke trial 0, 570 cycles of 10 contact
+sub-steps; cProfile own time by module after a warm-up trial, load 13; CPU without the profiler):
+
+| part | 9e80b96 (2.25 s CPU) | wave-camp8 (0.97 s CPU) |
+|---|---|---|
+| contact world: pose, contacts, sums a sub-step (firmware_sim/contact/world.py) | 24 % | 24 % |
+| contact of a box in a slot or guide (firmware_sim/contact/cavity.py) | 19 % | 22 % |
+| numpy's C calls and Python wrappers (small arrays) | 32 % | 21 % |
+| joints' sub-steps: servo law, friction, integration (firmware_sim/plant.py, joint_drive) | 13 % | 12 % |
+| forward kinematics and Jacobian a sub-step (base/kinematics) | 7 % | 12 % |
+| impedance mode, its IK and the F/T read (controller/impedance, direct_loop) | 5 % | 9 % |
+
+A worker's first trial also imports the trial's modules (~0.6 s CPU, a third of it scipy's
+Rotation that controller/planning/cartesian_path.py imports for linear_move's `quintic`).
 """
 from __future__ import annotations
 
@@ -117,7 +132,9 @@ def against(work: Path, other: Path, trials: int, rounds: int, steal: CpuSteal) 
     (mine, theirs) = rates.values()
     same = deterministic(work / "against_0_this")
     agree = sum(deterministic(work / "against_0_other").get(k) == v for k, v in same.items())
-    rows: list[Row] = [(f"insertion trials per minute, 2 workers, {name} ({trials} trials, {rounds} rounds)",
+    tasks = {name: np.median(task_times(work / f"against_0_{tag}")) for name, tag in zip(rates, ("this", "other"))}
+    rows: list[Row] = [(f"insertion trials per minute, 2 workers, {name} ({trials} trials, {rounds} rounds; "
+                        f"task {tasks[name]:.2f} s median)",
                         "best {:.1f} /min (rounds {})".format(max(v), ", ".join(f"{x:.1f}" for x in v)), "-", "")
                        for name, v in rates.items()]
     per_round = ", ".join(f"{a / b:.2f}x" for a, b in zip(mine, theirs))

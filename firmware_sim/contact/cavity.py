@@ -56,6 +56,20 @@ class MaleBox:
         c.setflags(write=False)
         return c
 
+    @cached_property
+    def radius(self) -> float:
+        """m from the box's centre to its corners (every point of it is this close)."""
+        return math.sqrt(self.half_x ** 2 + self.half_y ** 2 + (0.5 * self.length) ** 2) * (1.0 + 1e-12)
+
+    @cached_property
+    def _samples(self) -> np.ndarray:
+        """sample_points' rows that do not depend on the pose: the corners, the long edges' x, y."""
+        out = np.empty((16, 3))
+        out[:8] = self._corners
+        out[8:12, :2] = out[12:, :2] = self._corners[:4, :2]
+        out.setflags(write=False)
+        return out
+
 
 @dataclass(frozen=True)
 class ContactLaw:
@@ -74,9 +88,7 @@ def sample_points(box: MaleBox, F_T_M: np.ndarray, chamfer: float) -> np.ndarray
     slope = R[2, 2]                       # dz_F per unit length along the edge
     if abs(slope) < 1e-6:
         return corners
-    out = np.empty((16, 3))
-    out[:8] = corners
-    out[8:12, :2] = out[12:, :2] = xy[:, :2]
+    out = box._samples.copy()
     out[8:12, 2] = _clip(-base_z / slope, 0.0, box.length)
     out[12:, 2] = _clip((-chamfer - base_z) / slope, 0.0, box.length)
     return out
@@ -142,7 +154,27 @@ def _may_touch(cavity: Cavity, corners: np.ndarray) -> bool:
         return False              # wholly above the opening plane
     if -min(z) >= cavity.depth - CLEAR and _over(x, cavity.half_x) and _over(y, cavity.half_y):
         return True               # may reach the floor
+    # The wedges lie below the opening plane: only the long edges' part below z = CLEAR (hull of
+    # the corners there and the edges' crossings of that plane) can reach them. A part
+    # inserted within the clearance has its upper corners outside the slab and its lower ones
+    # below the funnel, but that part inside the slab.
+    x, y, z = _below_opening(x, y, z)
     return not (_free_of_wedge(x, z, cavity.half_x, cavity.chamfer) and _free_of_wedge(y, z, cavity.half_y, cavity.chamfer))
+
+
+def _below_opening(x: list[float], y: list[float], z: list[float]) -> tuple[list[float], ...]:
+    """Vertices of the long edges (corner i to corner i + 4) clipped to z <= CLEAR."""
+    xs, ys, zs = [], [], []
+    for a in range(4):
+        b = a + 4
+        za, zb = z[a], z[b]
+        for k in (a, b):
+            if z[k] <= CLEAR:
+                xs.append(x[k]), ys.append(y[k]), zs.append(z[k])
+        if (za <= CLEAR) != (zb <= CLEAR):
+            s = (CLEAR - za) / (zb - za)
+            xs.append(x[a] + s * (x[b] - x[a])), ys.append(y[a] + s * (y[b] - y[a])), zs.append(CLEAR)
+    return xs, ys, zs
 
 
 def _over(u: list[float], half: float) -> bool:
@@ -155,19 +187,36 @@ def _free_of_wedge(u: list[float], z: list[float], half: float, chamfer: float) 
             or max(abs(a) - b for a, b in zip(u, z)) < half + chamfer - CLEAR)
 
 
-def box_in_cavity(cavity: Cavity, box: MaleBox, law: ContactLaw, F_T_M: np.ndarray,
-                  F_T_M_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Contact of the male box posed at F_T_M (moving at dF_T_M/dt) in the cavity.
+def may_touch(cavity: Cavity, box: MaleBox, F_T_M: np.ndarray) -> bool:
+    """False when no point of the box posed at F_T_M can touch the cavity: it is clearly above
+    the opening plane, wholly beside the body, or free inside the cavity (clear of its walls
+    and floor). Scalars first: a box far beside the body (the next slot of a store) is told by
+    its centre and half-diagonal, without its corners."""
+    (_, _, r02, tx), (_, _, r12, ty), (r20, r21, r22, tz) = F_T_M[:3].tolist()
+    reach = abs(r20) * box.half_x + abs(r21) * box.half_y
+    if tz - reach > 1e-4 and r22 > 0.0:
+        return False
+    half = 0.5 * box.length
+    if (abs(tx + half * r02) - box.radius > cavity.half_x + cavity.chamfer + cavity.rim + CLEAR
+            or abs(ty + half * r12) - box.radius > cavity.half_y + cavity.chamfer + cavity.rim + CLEAR):
+        return False
+    return _may_touch(cavity, box.corners() @ F_T_M[:3, :3].T + F_T_M[:3, 3])
 
-    Returns (points in F (n, 3), forces on the male part at those points in F (n, 3)), or
-    None when no point of the box can touch: it is clearly above the opening plane, wholly
-    beside the body, or free inside the cavity (clear of its walls and floor)."""
-    reach = abs(F_T_M[2, 0]) * box.half_x + abs(F_T_M[2, 1]) * box.half_y
-    if F_T_M[2, 3] - reach > 1e-4 and F_T_M[2, 2] > 0.0:
-        return None
-    if not _may_touch(cavity, box.corners() @ F_T_M[:3, :3].T + F_T_M[:3, 3]):
-        return None
+
+def box_contact(cavity: Cavity, box: MaleBox, law: ContactLaw, F_T_M: np.ndarray,
+                F_T_M_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(points in F (16, 3), forces on the male part at those points in F (16, 3)) of the male
+    box posed at F_T_M, moving at dF_T_M/dt."""
     pm = sample_points(box, F_T_M, cavity.chamfer)
     p = pm @ F_T_M[:3, :3].T + F_T_M[:3, 3]
     v = pm @ F_T_M_rate[:3, :3].T + F_T_M_rate[:3, 3]
     return p, cavity_forces(cavity, law, p, v)
+
+
+def box_in_cavity(cavity: Cavity, box: MaleBox, law: ContactLaw, F_T_M: np.ndarray,
+                  F_T_M_rate: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Contact of the male box posed at F_T_M (moving at dF_T_M/dt) in the cavity: box_contact,
+    or None when may_touch says no point of the box can touch."""
+    if not may_touch(cavity, box, F_T_M):
+        return None
+    return box_contact(cavity, box, law, F_T_M, F_T_M_rate)

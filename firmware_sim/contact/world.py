@@ -24,7 +24,7 @@ from spacearm.base.config.scene import SceneConfig, load_scene
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
-from spacearm.firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_in_cavity
+from spacearm.firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_contact, may_touch
 from spacearm.firmware_sim.contact.config import ContactConfig
 
 CAPTURE_LATERAL = 1.0e-3     # m beyond the guide clearance still counted as captured
@@ -77,6 +77,7 @@ class ContactWorld:
         self.slot_T_oru = g.slot_T_oru()
         self.slots = {s.name: s.pose.matrix() @ s.true_offset.matrix() for s in self.scene.stores}
         self._slot_inverse = {name: _rigid_inverse(slot) for name, slot in self.slots.items()}
+        self._slot_origin = {name: slot[:3, 3] for name, slot in self.slots.items()}
         # Beyond this distance between an ORU's origin and a slot's, they cannot touch.
         self._slot_reach = float(np.hypot(self.slot.half_x + self.slot.chamfer + self.slot.rim,
                                           self.slot.half_y + self.slot.chamfer + self.slot.rim)
@@ -99,6 +100,8 @@ class ContactWorld:
         self._ee_centroid = np.asarray(config.ee_centroid, float)
         self.tool_pose = np.eye(4)
         self._previous: dict[str, np.ndarray] = {}
+        self._tips: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        self._centroids: dict[str, np.ndarray] = {}
         self._near = True
         self._pose_time = -1.0
         self._J: np.ndarray | None = None
@@ -195,28 +198,29 @@ class ContactWorld:
         if self.applied_profile is not None:
             self.applied_wrench = np.asarray(self.applied_profile(plant.time), float)
         p_tool, R_tool = T[:3, 3], T[:3, :3]
-        force = self.applied_wrench[:3].copy()
-        torque = self.applied_wrench[3:].copy()
-        contact = np.zeros(3)
+        # The sums in scalars, each component the same additions in the same order as numpy's
+        # 3-vectors (issue 35: the arrays' calls were a third of a contact sub-step).
+        w = self.applied_wrench.tolist()
+        force, torque, contact = w[:3], w[3:], [0.0, 0.0, 0.0]
 
         def add(points_b: np.ndarray, forces_b: np.ndarray) -> None:
-            nonlocal force, torque
-            force += forces_b.sum(axis=0)
-            torque += _cross_sum(points_b - p_tool, forces_b)
+            total = forces_b.sum(axis=0).tolist()
+            force[:] = _plus(force, total)
+            torque[:] = _plus(torque, _cross_sum(points_b - p_tool, forces_b).tolist())
+            contact[:] = _plus(contact, total)
 
         def add_weight(point_b: np.ndarray, weight: float) -> None:
             # add() of one point's force (0, 0, -weight) without its (1, 3) arrays: the same sums.
-            nonlocal force, torque
             f = [0.0, 0.0, -weight]
-            force += f
-            torque += _cross((point_b - p_tool).tolist(), f)
+            force[:] = _plus(force, f)
+            torque[:] = _plus(torque, _cross((point_b - p_tool).tolist(), f))
 
         self.captured = None
         tool_T_base = None
         for o in self.orus.values():
             if o.name == self.grasped:
                 continue
-            tip = o.pose @ self.oru_tip
+            tip = self._tip(o)
             if _distance(tip[:3, 3], p_tool) > self.config.near:
                 self._previous.pop("guide:" + o.name, None)
                 continue
@@ -224,66 +228,77 @@ class ContactWorld:
             if tool_T_base is None:
                 tool_T_base = _rigid_inverse(T)
             F_T_M = tool_T_base @ tip
-            hit = box_in_cavity(self.guide, self.adapter_box, self.law, F_T_M,
-                                self._rate("guide:" + o.name, F_T_M, h))
-            # Zero forces add nothing (the sums start at +0.0, and adding +-0.0 keeps them).
-            if hit is not None and hit[1].any():
-                p, f = hit
-                fb = -(f @ R_tool.T)                      # reaction on the end effector
-                add(p @ R_tool.T + p_tool, fb)
-                contact += fb.sum(axis=0)
+            previous = self._moved("guide:" + o.name, F_T_M)
+            if may_touch(self.guide, self.adapter_box, F_T_M):
+                p, f = box_contact(self.guide, self.adapter_box, self.law, F_T_M, _rate(F_T_M, previous, h))
+                # Zero forces add nothing (the sums start at +0.0, and adding +-0.0 keeps them).
+                if f.any():
+                    add(p @ R_tool.T + p_tool, -(f @ R_tool.T))     # reaction on the end effector
             if self._is_captured(F_T_M):
                 self.captured = o.name
         if self.grasped is not None:
             o = self.orus[self.grasped]
             if o.where == "tool":
                 base_T_oru = T @ self.tool_T_oru
+                origin = base_T_oru[:3, 3]
                 for name, slot in self.slots.items():
                     key = "slot:" + name
-                    if _distance(base_T_oru[:3, 3], slot[:3, 3]) > self._slot_reach:
+                    if _distance(origin, self._slot_origin[name]) > self._slot_reach:
                         self._previous.pop(key, None)
                         continue
                     near = True
                     cavity = self.slot if self.occupant(name) is None else self.closed_slot
                     F_T_M = self._slot_inverse[name] @ base_T_oru
-                    hit = box_in_cavity(cavity, self.oru_box, self.law, F_T_M, self._rate(key, F_T_M, h))
-                    if hit is None or not hit[1].any():
+                    previous = self._moved(key, F_T_M)
+                    if not may_touch(cavity, self.oru_box, F_T_M):
                         continue
-                    p, f = hit
-                    fb = f @ slot[:3, :3].T
-                    add(p @ slot[:3, :3].T + slot[:3, 3], fb)
-                    contact += fb.sum(axis=0)
+                    p, f = box_contact(cavity, self.oru_box, self.law, F_T_M, _rate(F_T_M, previous, h))
+                    if f.any():
+                        add(p @ slot[:3, :3].T + slot[:3, 3], f @ slot[:3, :3].T)
                 if self.config.gravity > 0.0:
-                    c = base_T_oru @ np.array([0.0, 0.0, o.centroid_height, 1.0])
+                    c = base_T_oru @ self._centroid(o)
                     add_weight(c[:3], o.mass * self.config.gravity)
             else:
                 near = True
                 # Clamped on an adapter whose ORU the store still holds: a stiff spring.
                 err = twist_error(o.pose @ np.linalg.inv(self.tool_T_oru), T)
-                f = self.config.grasp_stiffness * err[:3]
-                force += f
-                torque += self.config.grasp_rot_stiffness * err[3:]
-                contact += f
+                f = (self.config.grasp_stiffness * err[:3]).tolist()
+                force[:] = _plus(force, f)
+                torque[:] = _plus(torque, (self.config.grasp_rot_stiffness * err[3:]).tolist())
+                contact[:] = _plus(contact, f)
         sensor_origin = p_tool - self.config.sensor_offset * R_tool[:, 2]
         if self.config.gravity > 0.0 and self.config.ee_mass > 0.0:
             add_weight(sensor_origin + R_tool @ self._ee_centroid, self.config.ee_mass * self.config.gravity)
-        wrench = np.concatenate([force, torque])
-        tau = -(J.T @ wrench)
+        tau = (J.T @ np.array(force + torque)).tolist()
         for joint, t in zip(plant.joints, tau):
-            joint.external_torque = float(t)
-        torque_at_sensor = torque + _cross((p_tool - sensor_origin).tolist(), force.tolist())
-        plant.wrench[:3] = (R_tool.T @ force).tolist()
-        plant.wrench[3:] = (R_tool.T @ torque_at_sensor).tolist()
+            joint.external_torque = -t
+        torque_at_sensor = _plus(torque, _cross((p_tool - sensor_origin).tolist(), force))
+        plant.wrench[:3] = (R_tool.T @ np.array(force)).tolist()
+        plant.wrench[3:] = (R_tool.T @ np.array(torque_at_sensor)).tolist()
         self._near = near
-        self.stats.contact_force = contact
-        self.stats.peak_force = max(self.stats.peak_force, _distance(contact, 0.0))
+        self.stats.contact_force = np.array(contact)
+        self.stats.peak_force = max(self.stats.peak_force, _distance(self.stats.contact_force, 0.0))
         self._update_grip(plant)
         self._advance_latch(h)
 
-    def _rate(self, key: str, F_T_M: np.ndarray, h: float) -> np.ndarray:
+    def _moved(self, key: str, F_T_M: np.ndarray) -> np.ndarray | None:
+        """The contact's pose one sub-step ago (None: not evaluated then); F_T_M from now on."""
         previous = self._previous.get(key)
         self._previous[key] = F_T_M
-        return np.zeros((4, 4)) if previous is None or h <= 0.0 else (F_T_M - previous) / h
+        return previous
+
+    def _tip(self, o: OruBody) -> np.ndarray:
+        """base_T_tip of an ORU's adapter, kept while its pose (replaced, never written) stays."""
+        kept = self._tips.get(o.name)
+        if kept is None or kept[0] is not o.pose:
+            kept = self._tips[o.name] = (o.pose, o.pose @ self.oru_tip)
+        return kept[1]
+
+    def _centroid(self, o: OruBody) -> np.ndarray:
+        c = self._centroids.get(o.name)
+        if c is None:
+            c = self._centroids[o.name] = np.array([0.0, 0.0, o.centroid_height, 1.0])
+        return c
 
     def _is_captured(self, F_T_M: np.ndarray) -> bool:
         x, y, z = F_T_M[:3, 3]
@@ -291,6 +306,14 @@ class ContactWorld:
                 and abs(y) < self.guide.half_y - self.adapter_box.half_y + CAPTURE_LATERAL
                 and z < -(self.guide.depth - CAPTURE_DEPTH)
                 and F_T_M[2, 2] > math.cos(CAPTURE_ANGLE))
+
+
+def _rate(F_T_M: np.ndarray, previous: np.ndarray | None, h: float) -> np.ndarray:
+    return np.zeros((4, 4)) if previous is None or h <= 0.0 else (F_T_M - previous) / h
+
+
+def _plus(a: list[float], b: list[float]) -> list[float]:
+    return [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 
 
 def _rigid_inverse(T: np.ndarray) -> np.ndarray:

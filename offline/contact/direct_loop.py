@@ -24,9 +24,11 @@ class DirectLoop:
         self.plant = plant
         self.period = period
         self.time = 0.0
-        self.q_start = plant.q_link.copy()
-        self.q_end = self.q_start.copy()
-        self.v_ff = np.zeros(len(plant.joints))
+        # The servo's targets as floats: numpy scalars would carry into the joint state and make
+        # every sub-step's arithmetic numpy's (the same values, several times slower).
+        self.q_start = plant.q_link.tolist()
+        self.q_end = list(self.q_start)
+        self.v_ff = [0.0] * len(plant.joints)
         for i, joint in enumerate(plant.joints):
             joint.brake_engaged = False
             joint.controller = self._servo(i)
@@ -44,8 +46,8 @@ class DirectLoop:
         for joint, value in zip(self.plant.joints, q):
             joint.q = joint.theta = float(value)
             joint.qd = joint.thetad = 0.0
-        self.q_start = np.array(q, float)
-        self.q_end = self.q_start.copy()
+        self.q_start = np.array(q, float).tolist()
+        self.q_end = list(self.q_start)
         if self.plant.environment is not None:
             self.plant.environment.step(self.plant, 0.0)   # the sensor reads the new pose at once
 
@@ -60,8 +62,8 @@ class DirectLoop:
                            wrench=np.round(raw * scale) / scale)
 
     def command(self, q: np.ndarray, dq: np.ndarray | None = None) -> None:
-        self.q_start, self.q_end = self.q_end, np.asarray(q, float).copy()
-        self.v_ff = np.zeros_like(self.q_end) if dq is None else np.asarray(dq, float)
+        self.q_start, self.q_end = self.q_end, np.asarray(q, float).tolist()
+        self.v_ff = [0.0] * len(self.q_end) if dq is None else np.asarray(dq, float).tolist()
 
     def cycle(self, mode: Mode) -> ModeOutput:
         """One read-update-write cycle of `mode` against the plant; the mode's output."""
