@@ -15,7 +15,7 @@ from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
 from spacearm.base.spatial import matrix_to_rotvec, rotvec_to_matrix
-from spacearm.controller.planning.cartesian_path import quintic
+from spacearm.controller.planning.quintic import quintic
 from spacearm.controller.planning.joint_move import JointSetpoint
 
 IK_DAMPING = 1.0e-3

@@ -12,20 +12,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from spacearm.controller.planning.errors import PlanningError
-
-# Peak of ds/dt and d2s/dt2 for s(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 on tau in [0, 1].
-QUINTIC_PEAK_VELOCITY = 1.875
-QUINTIC_PEAK_ACCELERATION = 10.0 / np.sqrt(3.0)
-
-
-def quintic(tau: float) -> tuple[float, float, float]:
-    """s, ds/dtau, d2s/dtau2 of the rest-to-rest quintic at tau in [0, 1]."""
-    tau = min(max(tau, 0.0), 1.0)
-    s = tau**3 * (10.0 - 15.0 * tau + 6.0 * tau**2)
-    ds = 30.0 * tau**2 * (1.0 - tau) ** 2
-    dds = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau)
-    return s, ds, dds
-
+from spacearm.controller.planning.quintic import QUINTIC_PEAK_ACCELERATION, QUINTIC_PEAK_VELOCITY, quintic  # noqa: F401 (re-exported)
 
 @dataclass(frozen=True)
 class CartesianLimits:
