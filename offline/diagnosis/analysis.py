@@ -32,7 +32,7 @@ from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rat
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
-from spacearm.offline.diagnosis.stiff_gear import fit_stiff_gear
+from spacearm.offline.diagnosis.stiff_gear import chatters_more, fit_chattering_gear, fit_stiff_gear
 from spacearm.offline.diagnosis.stiff_gear import significant as stiff_significant
 from spacearm.offline.diagnosis.honesty import confirmed, count_reversals, equally_good, moved, uncertain
 from spacearm.offline.diagnosis.joint_units import units_of
@@ -385,6 +385,15 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # range is a rotary gear's (N m/rad), so a linear rail is left out
             stiff = fit_stiff_gear(nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual, j, train,
                                    table.dq_cmd)
+            if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
+                                             fit.rms_heldout_after):
+                fit, alternatives[j] = stiff, []
+        if kinds[j] == "revolute" and (fit is None or not fit.by_envelope) and \
+                (fit is None or fit.effects != ("elasticity",)) and chatters_more(residual, chatter[j]):
+            # stiffer still, the gear shows in the drive's chatter, which only a replay with the
+            # nominal's resolver reproduces (stiff_gear.py)
+            stiff = fit_chattering_gear(nominal, table.q_cmd, table.dt, table.q[0], sim.tau[:, j], residual, j, train,
+                                        table.dq_cmd)
             if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
                                              fit.rms_heldout_after):
                 fit, alternatives[j] = stiff, []
