@@ -32,9 +32,10 @@ from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rat
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
 from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
-from spacearm.offline.diagnosis.stiff_gear import fit_stiff_gear
+from spacearm.offline.diagnosis.stiff_gear import chatters_more, fit_chattering_gear, fit_stiff_gear
 from spacearm.offline.diagnosis.stiff_gear import significant as stiff_significant
-from spacearm.offline.diagnosis.honesty import confirmed, count_reversals, equally_good, moved, uncertain
+from spacearm.offline.diagnosis.honesty import (confirmed, count_reversals, equally_good, moved,
+                                                stiction_unseparated, uncertain)
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.physical import parameter_violations
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
@@ -388,6 +389,15 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
                                              fit.rms_heldout_after):
                 fit, alternatives[j] = stiff, []
+        if kinds[j] == "revolute" and (fit is None or not fit.by_envelope) and \
+                (fit is None or fit.effects != ("elasticity",)) and chatters_more(residual, chatter[j]):
+            # stiffer still, the gear shows in the drive's chatter, which only a replay with the
+            # nominal's resolver reproduces (stiff_gear.py)
+            stiff = fit_chattering_gear(nominal, table.q_cmd, table.dt, table.q[0], sim.tau[:, j], residual, j, train,
+                                        table.dq_cmd)
+            if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
+                                             fit.rms_heldout_after):
+                fit, alternatives[j] = stiff, []
         if fit is not None:
             if fit.by_envelope:
                 # play and a soft gear both make the drive hunt; where their envelopes fit alike
@@ -505,12 +515,21 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
                 p, e = plant_parameters(alt)
                 alts.append(describe(alt, p, e, reversals, kind).split(": ", 1)[1] +
                             _why_alike(quiet.dq[:, fit.index], kind, fit, alt))
+            speed = stiction_unseparated(fit, quiet.dq[:, fit.index], alternatives.get(fit.index, []))
+            if speed is not None:
+                alts.append(STICTION_UNSEPARATED.format(speed=speed, unit=units_of(kind).velocity, events=reversals))
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
 
 
 MODEL_WRONG = "the model is wrong here"
+SPEEDS_EXPERIMENT = ("the experiment that separates them: dwells at rest, then moves both ways at several speeds "
+                     "from well below to several times this one (diagnose --run)")
+STICTION_UNSEPARATED = ("stiction (Stribeck friction) falling to this running level: not separable from it on this "
+                        "trajectory (at one speed, {speed:.3g} {unit}, the two differ only where the joint breaks "
+                        "free, here at {events} reversal(s), and no breakaway stood above the noise there); "
+                        + SPEEDS_EXPERIMENT)
 GEAR_ALIKE = 1.25            # held-out envelope errors of backlash and elasticity within this ratio: alike
 GEAR_EXPERIMENT = (" (both make the drive hunt and their envelopes fit alike; they differ in their signatures: "
                    "backlash is a dead band of fixed width at each reversal, elasticity a deflection that grows "
@@ -552,7 +571,7 @@ def _why_alike(dq: np.ndarray, kind: str = "revolute", best: ChannelFit | None =
     speed = single_speed(dq)
     if speed is not None:
         return (f" (the joint moved at one speed, about {speed:.3g} {units_of(kind).velocity}: these laws differ "
-                "only between speeds)")
+                f"only between speeds; {SPEEDS_EXPERIMENT})")
     if one_way(dq):
         return " (the joint moved one way only: the laws differ at reversals and starts from rest)"
     return " (the recording gives no strong evidence between them: BIC within 6)"

@@ -64,6 +64,19 @@ def equally_good(best: ChannelFit, ranked: list[ChannelFit], dq: np.ndarray) -> 
     return [f for f in out if not constant_force(f)][:2] + [f for f in out if constant_force(f)]
 
 
+def stiction_unseparated(best: ChannelFit, dq: np.ndarray, alternatives: list[ChannelFit]) -> float | None:
+    """The one speed of a joint whose running friction law (`best`, Coulomb or viscous) a
+    Stribeck law falling to the same level would fit as well, where none is named beside it
+    yet: at one speed the two differ only in the breakaway at the few starts and reversals, and
+    the diagnosis' breakaway test (stick_slip.py) did not find it there. None otherwise, and
+    on motion one way only: there a stiction law's size is not known at all (one start), and
+    such a law is not named beside the choice (analysis.py)."""
+    if best.channel != "tau" or not set(best.effects) <= {"coulomb", "viscous"} or count_reversals(dq) == 0 or \
+            any("stribeck" in f.effects for f in alternatives):
+        return None
+    return single_speed(dq)
+
+
 def constant_force(fit: ChannelFit) -> bool:
     """A load fitted as one constant force along a prismatic joint's axis."""
     return fit.effects == ("gravity_load",) and "load_force" in fit.columns
