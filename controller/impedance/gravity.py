@@ -12,12 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-def cross(a, b) -> np.ndarray:
-    """a x b of two 3-vectors: np.cross's products and differences in the same order (the same
-    bits), without its ~30 us of axis handling, twice a contact cycle (issue 35)."""
-    (ax, ay, az), (bx, by, bz) = np.asarray(a, float).tolist(), np.asarray(b, float).tolist()
-    return np.array([ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx])
+from spacearm.base.spatial import cross3
 
 
 @dataclass(frozen=True)
@@ -29,7 +24,7 @@ class GravityModel:
     def wrench(self, base_R_sensor: np.ndarray) -> np.ndarray:
         """Gravity wrench the sensor feels (sensor frame, about its origin)."""
         f = base_R_sensor.T @ np.array([0.0, 0.0, -self.mass * self.g])
-        return np.concatenate([f, cross(self.centroid, f)])
+        return np.concatenate([f, cross3(np.asarray(self.centroid, float).tolist(), f.tolist())])
 
     def compensate(self, measured: np.ndarray, base_R_sensor: np.ndarray) -> np.ndarray:
         return np.asarray(measured, float) - self.wrench(base_R_sensor)

@@ -26,12 +26,12 @@ from spacearm.controller.modes import ModeBase
 from spacearm.controller.cycle import Finding, FindingCode, Measurement
 from spacearm.controller.impedance.admittance import Admittance
 from spacearm.controller.impedance.config import ImpedanceParams
-from spacearm.controller.impedance.gravity import GravityModel, cross
+from spacearm.controller.impedance.gravity import GravityModel
 from spacearm.base.kinematics.forward import fk
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
-from spacearm.base.spatial import rotvec_to_matrix
+from spacearm.base.spatial import cross3, rotvec_to_matrix
 from spacearm.controller.planning.joint_move import JointSetpoint
 
 AXIS_MODES = ("impedance", "hold", "step")
@@ -155,7 +155,7 @@ class ImpedanceMode(ModeBase):
         sensor_origin = p - self.task.sensor_offset * R[:, 2]
         centre = p + R @ self.task.compliance_center
         f = R @ w_sensor[:3]
-        tau = R @ w_sensor[3:] + cross(sensor_origin - centre, f)
+        tau = R @ w_sensor[3:] + np.array(cross3((sensor_origin - centre).tolist(), f.tolist()))
         Rt = self.task.task_rotation
         return np.concatenate([Rt.T @ f, Rt.T @ tau])
 

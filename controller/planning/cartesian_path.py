@@ -12,7 +12,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from spacearm.controller.planning.errors import PlanningError
-from spacearm.controller.planning.quintic import QUINTIC_PEAK_ACCELERATION, QUINTIC_PEAK_VELOCITY, quintic  # noqa: F401 (re-exported)
+from spacearm.controller.planning.quintic import QUINTIC_PEAK_ACCELERATION, QUINTIC_PEAK_VELOCITY, quintic
+
 
 @dataclass(frozen=True)
 class CartesianLimits:

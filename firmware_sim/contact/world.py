@@ -24,6 +24,7 @@ from spacearm.base.config.scene import SceneConfig, load_scene
 from spacearm.base.kinematics.jacobian import fk_jacobian
 from spacearm.base.kinematics.model import KinematicData, KinematicModel
 from spacearm.base.kinematics.pose_error import twist_error
+from spacearm.base.spatial import cross3
 from spacearm.firmware_sim.contact.cavity import Cavity, ContactLaw, MaleBox, box_contact, may_touch
 from spacearm.firmware_sim.contact.config import ContactConfig
 
@@ -213,7 +214,7 @@ class ContactWorld:
             # add() of one point's force (0, 0, -weight) without its (1, 3) arrays: the same sums.
             f = [0.0, 0.0, -weight]
             force[:] = _plus(force, f)
-            torque[:] = _plus(torque, _cross((point_b - p_tool).tolist(), f))
+            torque[:] = _plus(torque, cross3((point_b - p_tool).tolist(), f))
 
         self.captured = None
         tool_T_base = None
@@ -272,7 +273,7 @@ class ContactWorld:
         tau = (J.T @ np.array(force + torque)).tolist()
         for joint, t in zip(plant.joints, tau):
             joint.external_torque = -t
-        torque_at_sensor = _plus(torque, _cross((p_tool - sensor_origin).tolist(), force))
+        torque_at_sensor = _plus(torque, cross3((p_tool - sensor_origin).tolist(), force))
         plant.wrench[:3] = (R_tool.T @ np.array(force)).tolist()
         plant.wrench[3:] = (R_tool.T @ np.array(torque_at_sensor)).tolist()
         self._near = near
@@ -327,13 +328,6 @@ def _distance(a: np.ndarray, b) -> float:
     """|a - b| for 3-vectors: np.linalg.norm's own sum (sqrt of the dot product), without its checks."""
     d = a - b
     return math.sqrt(d.dot(d))
-
-
-def _cross(r: list[float], f: list[float]) -> list[float]:
-    """r x f in scalars: _cross_sum's arithmetic for one pair (a one-element sum is the element)."""
-    rx, ry, rz = r
-    fx, fy, fz = f
-    return [ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx]
 
 
 def _cross_sum(r: np.ndarray, f: np.ndarray) -> np.ndarray:
