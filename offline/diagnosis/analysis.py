@@ -386,8 +386,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # range is a rotary gear's (N m/rad), so a linear rail is left out
             stiff = fit_stiff_gear(nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], residual, j, train,
                                    table.dq_cmd)
-            if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
-                                             fit.rms_heldout_after):
+            if _stiff_gear_wins(stiff, fit):
                 fit, alternatives[j] = stiff, []
         if kinds[j] == "revolute" and (fit is None or not fit.by_envelope) and \
                 (fit is None or fit.effects != ("elasticity",)) and chatters_more(residual, chatter[j]):
@@ -395,8 +394,7 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
             # nominal's resolver reproduces (stiff_gear.py)
             stiff = fit_chattering_gear(nominal, table.q_cmd, table.dt, table.q[0], sim.tau[:, j], residual, j, train,
                                         table.dq_cmd)
-            if stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
-                                             fit.rms_heldout_after):
+            if _stiff_gear_wins(stiff, fit):
                 fit, alternatives[j] = stiff, []
         if fit is not None:
             if fit.by_envelope:
@@ -521,6 +519,13 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
         findings.append(Finding(fit, explained / ch.noise ** 2, params, errs, text, _onset(t, before[name], ch.noise),
                                 alts))
     return findings, rejected
+
+
+def _stiff_gear_wins(stiff: ChannelFit | None, fit: ChannelFit | None) -> bool:
+    """A significant stiff-gear fit whose held-out torque error beats the joint's fit so far by
+    STIFF_GEAR_BETTER (or there is none)."""
+    return stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
+                                         fit.rms_heldout_after)
 
 
 MODEL_WRONG = "the model is wrong here"
