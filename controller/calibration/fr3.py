@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -229,7 +230,8 @@ def fit_split_chosen(data: FR3Data, train: Array, test: Array, chain: tuple[str,
 
 def _kept(results: list[SplitResult]) -> dict[str, int]:
     """How many splits kept each camera model of the chain."""
-    return {name: sum(r.camera == name for r in results) for name in CAMERA_CHAIN if any(r.camera == name for r in results)}
+    counts = Counter(r.camera for r in results)
+    return {name: counts[name] for name in CAMERA_CHAIN if counts[name]}
 
 
 def _count_dh(names: list[str]) -> int:
