@@ -15,6 +15,7 @@ from scipy.optimize import minimize_scalar
 
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, block_jackknife_stderr
+from spacearm.offline.diagnosis.running_mean import running_mean
 from spacearm.firmware_sim.plant import PlantConfig
 
 # Play below about three resolver quanta (25 arcsec each) hunts no differently from the
@@ -28,7 +29,7 @@ JACKKNIFE_GRID = np.linspace(-0.3, 0.3, 13)   # log sizes around the fit simulat
 
 
 def envelope(x: np.ndarray, window: int = WINDOW) -> np.ndarray:
-    return np.sqrt(np.convolve(x ** 2, np.ones(window) / window, mode="same"))
+    return np.sqrt(running_mean(x ** 2, window))
 
 
 def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray,

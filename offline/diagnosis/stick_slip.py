@@ -32,6 +32,7 @@ from scipy.optimize import minimize
 from spacearm.offline.diagnosis.breakaway import MOVING, start_events
 from spacearm.offline.diagnosis.direct_sim import simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit
+from spacearm.offline.diagnosis.running_mean import running_mean
 
 MIN_TRAIN_EVENTS = 3
 MIN_HELD_EVENTS = 2
@@ -100,7 +101,7 @@ def peak_windows(velocity: np.ndarray, window: int, recorded: np.ndarray | None 
 
 
 def _smoothed(x: np.ndarray) -> np.ndarray:
-    return np.convolve(x, np.ones(SMOOTH_ROWS) / SMOOTH_ROWS, mode="same")
+    return running_mean(x, SMOOTH_ROWS)
 
 
 def stiction_by_breakaway(chosen: ChannelFit | None, j: int, nominal, apply_fits,

@@ -89,6 +89,9 @@ ADVERSARIAL = {
     "quoted": b'"t","q_cmd_1","q_1"\n' + b"".join(f'"{k}","0","0"\n'.encode() for k in range(40)),
     "comments_and_blank": b"# logger v1\n\nt,q_cmd_1,q_1\n" + b"".join(f"{k},0,0\n\n".encode() for k in range(40)),
     "nine_rows": b"t,q_cmd_1,q_1\n" + b"".join(f"{k},0,0\n".encode() for k in range(9)),
+    # hypothesis's draw (delete 5 bytes at 459, truncate at 2772): ten 7-joint rows with a broken
+    # row, fewer than the gear fit's 25-row envelope window, which came back 25 long (IndexError)
+    "seven_joints_ten_rows": (lambda b: bytes(b[:459] + b[464:2777]))(valid_csv(rows=80)),
 }
 
 
