@@ -155,26 +155,10 @@ def test_cia402_enable_csp_tracking_quick_stop_fault_and_reset(arm):
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_WINDOW, 0, 1)
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_TIMEOUT, 0, 0)
     q = arm.read().joints[1].position
-    state = arm.run_until(lambda s: s.joints[1].fault, 30, ArmCommand(joint_positions=[None, q + 0.05]))
+    state = _run_showing_joint(arm, lambda s: s.joints[1].fault, 30, ArmCommand(joint_positions=[None, q + 0.05]))
     events = arm.poll_events()
     assert any(e.kind == "emcy" and e.node == "joint_2" and e.code == od.EMCY_FOLLOWING_ERROR for e in events)
-    seen = []                          # what joint 2 went through, for a failure to show
-
-    def in_fault(s):
-        j = s.joints[1]
-        seen.append((j.state.name, hex(j.error_code), s.complete, s.nodes["joint_2"].alive))
-        return j.state == State.FAULT
-    try:
-        state = arm.run_until(in_fault, 100)
-    except DriverError as exc:
-        runs = [[seen[0], 1]] if seen else []
-        for item in seen[1:]:
-            if item == runs[-1][0]:
-                runs[-1][1] += 1
-            else:
-                runs.append([item, 1])
-        raise AssertionError(f"{exc}; joint_2 (state, error, complete, alive) x cycles: {runs}; "
-                             f"events: {[(e.kind, e.node, e.code) for e in arm.poll_events()]}") from exc
+    state = _run_showing_joint(arm, lambda s: s.joints[1].state == State.FAULT, 100)
     assert state.joints[1].error_code == od.EMCY_FOLLOWING_ERROR
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_WINDOW, 0, round(window * arm.joints[1].k))
     arm.sdo_write("joint_2", od.FOLLOWING_ERROR_TIMEOUT, 0, 100)
@@ -183,6 +167,30 @@ def test_cia402_enable_csp_tracking_quick_stop_fault_and_reset(arm):
     state = arm.run_until(lambda s: s.all_enabled, 30)
     assert state.joints[1].error_code == 0
     assert "fault_cleared" in [e.kind for e in arm.poll_events()]
+
+
+def _run_showing_joint(arm, predicate, max_cycles, command=None, joint=1):
+    """arm.run_until, and when the condition is not reached, what the joint went through cycle by
+    cycle (runs of equal readings) and the events: a failure on a slow machine says why."""
+    seen = []
+
+    def watch(s):
+        j = s.joints[joint]
+        seen.append((j.state.name, hex(j.error_code), j.fault, round(j.following_error, 4), s.complete,
+                     s.nodes[f"joint_{joint + 1}"].alive))
+        return predicate(s)
+    try:
+        return arm.run_until(watch, max_cycles, command)
+    except DriverError as exc:
+        runs = []
+        for item in seen:
+            if runs and item == runs[-1][0]:
+                runs[-1][1] += 1
+            else:
+                runs.append([item, 1])
+        raise AssertionError(f"{exc}; joint_{joint + 1} (state, error, fault, following error, complete, "
+                             f"alive) x cycles: {runs}; events: "
+                             f"{[(e.kind, e.node, hex(e.code or 0)) for e in arm.poll_events()]}") from exc
 
 
 def _wait_events(arm, kind, names, timeout):
