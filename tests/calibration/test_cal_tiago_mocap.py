@@ -101,3 +101,16 @@ def test_arm_6_compliance_chosen_on_the_identification_day_carries_to_the_other(
     assert rep.verdict.ok, rep.verdict.message()
     assert training_loo(sel) < 0.8 * training_loo(rigid)
     assert sel.validation_rms < rigid.validation_rms and sel.validation_rms <= 2.9e-3
+
+
+def test_the_marker_plates_orientation_points_at_arm_6s_drive():
+    # The identification day's plate orientation (unused by the marker-1 fits): what the rigid
+    # model leaves, resolved onto the wrist, is arm_6's angle in step with its gravity torque, at
+    # a slope of the size the marker-1 fit then estimates for k_7; arm_5 and arm_7 show no such thing.
+    from spacearm.controller.calibration.tiago_plate import plate_check
+    from spacearm.controller.calibration.trusted_fit import FitOptions
+    c = plate_check(fit_tiago(opts=FitOptions(select_groups=True)))
+    assert c.used + c.singular == 37 and c.used >= 30
+    assert c.orientation_rms > 5e-3                     # the plate itself is good to ~1-2 mrad
+    assert c.torque_correlation[1] > 0.5 and max(abs(c.torque_correlation[0]), abs(c.torque_correlation[2])) < 0.3
+    assert 0.01 < c.torque_slope[1] < 0.05
