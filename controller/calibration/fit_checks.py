@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from spacearm.controller.calibration.composite import CompositeProblem
-from spacearm.controller.calibration.errormodel import COMPLIANCE
+from spacearm.controller.calibration.errormodel import COMPLIANCE, prismatic_joints
 from spacearm.controller.calibration.identifiability import IdentifiabilityReport, find_identifiable
 
 Array = NDArray[np.float64]
@@ -40,7 +40,10 @@ def group_of(name: str) -> str:
 class Bounds:
     """Largest physically plausible correction per group (SI). A fit beyond them is rejected.
     Joint angles: 5 deg (a real TIAGo's arm_5 zero is ~3 deg off, FIGAROH finds the same).
-    Joint compliance: 1e-3 rad/(N m), a stiffness of 1000 N m/rad, softer than any arm's gearing."""
+    Joint compliance: sized per joint by instrument_bounds as a deflection (the joint-angle or
+    joint-length bound under the joint's largest gravity load in the data), since a small wrist
+    drive gives tens of times more per N m than a shoulder; `joint_compliance` (1e-3 rad/(N m))
+    only where the data put no load on the joint."""
     joint_angle: float = np.radians(5.0)
     joint_length: float = 0.05
     joint_compliance: float = 1e-3
@@ -97,7 +100,8 @@ INSTRUMENT_RELATIVE_BOUND = 0.25
 
 
 def instrument_bounds(problem: CompositeProblem, bounds: Bounds) -> Bounds:
-    """`bounds` with the instrument's and registration's length parameters scaled to their own size."""
+    """`bounds` with the instrument's and registration's length parameters scaled to their own size
+    and each joint compliance to the deflection it may cause (compliance_bounds)."""
     reach = float(getattr(problem.model.kin, "reach", 1.0))
     x0 = problem.x0
     extra: list[tuple[str, float]] = []
@@ -111,9 +115,32 @@ def instrument_bounds(problem: CompositeProblem, bounds: Bounds) -> Bounds:
     world = problem.model.pre[:3, 3]
     for n in problem.model.frame_names("world")[:3]:
         extra.append((n, max(bounds.frame_length, INSTRUMENT_RELATIVE_BOUND * (float(np.linalg.norm(world)) + reach))))
+    extra += compliance_bounds(problem, bounds)
     given = dict(bounds.by_name)
     return dataclasses.replace(bounds, by_name=tuple((n, given.get(n, v)) for n, v in extra)
                                + tuple((n, v) for n, v in bounds.by_name if n not in dict(extra)))
+
+
+def compliance_bounds(problem: CompositeProblem, bounds: Bounds) -> list[tuple[str, float]]:
+    """Per joint compliance k_j: the one that deflects the joint by the joint-angle bound (joint-length
+    bound, prismatic) under its largest gravity load over the problem's postures. A bound on what
+    the joint does, not a universal stiffness: TIAGo's arm_6 carries ~1 N m and gives ~0.03 rad/(N m)
+    on real data, thirty times a fixed 1e-3 that kept it out of the fit. Joints the data do not
+    load keep `bounds.joint_compliance` (their column is zero: never estimated)."""
+    load = problem.model.load
+    if load is None:
+        return []
+    Q = np.concatenate([b.Q for b in problem.blocks])
+    if not len(Q):
+        return []
+    peak = np.abs(load.torques(Q)).max(axis=0)
+    prismatic = prismatic_joints(problem.model.kin)
+    out = []
+    for j, t in enumerate(peak):
+        name = f"{COMPLIANCE}_{j + 1}"
+        if name in problem.names and t > 0.0:
+            out.append((name, (bounds.joint_length if prismatic[j] else bounds.joint_angle) / float(t)))
+    return out
 
 
 # An error of plausible size (its bound) must move the whitened readings by this many noise

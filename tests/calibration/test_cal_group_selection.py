@@ -1,4 +1,5 @@
-"""D-H groups chosen by leave-one-out error on the training postures only (`--select-groups`)."""
+"""D-H groups and joint compliances chosen by leave-one-out error on the training postures only
+(`--select-groups`)."""
 from __future__ import annotations
 
 import json
@@ -15,7 +16,7 @@ from spacearm.controller.calibration.datafile import write_measurements
 from spacearm.controller.calibration.group_selection import dh_group, select_groups
 from spacearm.controller.calibration.trusted_fit import FitOptions, fit_blocks
 
-SETUP = ["base_x", "base_rz", "marker_tx", "wire_l0", "k_3"]          # never a D-H group
+SETUP = ["base_x", "base_rz", "marker_tx", "wire_l0"]                 # the set-up's unknowns: never dropped
 DH = [f"{g}_{i}" for g in ("alpha", "a", "theta", "d") for i in (2, 3, 4)]
 
 
@@ -45,6 +46,21 @@ def test_backward_selection_takes_the_best_drop_and_stops_on_a_small_gain():
     assert select_groups(SETUP + DH, cv).kept == SETUP + DH
     sel = select_groups(SETUP + DH, lambda names: float("inf"))     # no fold can be fitted
     assert sel.dropped == () and sel.kept == SETUP + DH
+
+
+def test_each_compliance_is_kept_or_dropped_on_its_own():
+    # A compliance is one hypothesis per joint (this drive gives under its load), not a D-H kind:
+    # the same criterion drops the one the data only fit to noise and keeps the one they need.
+    cands = SETUP + DH + ["k_5", "k_7"]
+    table = {frozenset(): 4.0, frozenset({"a"}): 3.2, frozenset({"a", "k_5"}): 2.9, frozenset({"a", "k_7"}): 3.9}
+
+    def cv(names):
+        assert set(SETUP) <= set(names), names
+        return table.get(frozenset({dh_group(n) for n in cands} - {dh_group(n) for n in names}), 5.0)
+    sel = select_groups(cands, cv)
+    assert sel.dropped == ("a", "k_5") and "k_7" in sel.kept and "k_5" not in sel.kept
+    assert sel.summary().endswith("dropped a_i, k_5")
+    assert dh_group("k_7") == "k_7" and dh_group("a_3") == "a" and dh_group("base_x") is None
 
 
 def _point_blocks(n=36, n_valid=20, seed=4):
