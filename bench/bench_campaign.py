@@ -35,6 +35,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import signal
 import subprocess
 import sys
@@ -116,11 +117,13 @@ def against(work: Path, other: Path, trials: int, rounds: int, steal: CpuSteal) 
     campaign = with_trials(INSERTION, trials, work / "insertion_against.toml")
     trees = {"this tree": (ROOT, Path(sys.executable)), f"{other} ({commit})": (other, python)}
     rates: dict[str, list[float]] = {name: [] for name in trees}
+    cpu: dict[str, list[float]] = {name: [] for name in trees}     # s of CPU per trial, whole process tree
     loads: list[str] = []
     for r in range(rounds):
         for name, (root, exe) in trees.items():
             steal.fraction()
             results = work / f"against_{len(rates[name])}_{'this' if root == ROOT else 'other'}"
+            used = _children_cpu()
             out = subprocess.run([str(exe), "-m", "spacearm.console.main", "campaign", "run", str(campaign),
                                   "--results", str(results), "--workers", "2", "--json", "--no-report"],
                                  cwd=root, capture_output=True, text=True, timeout=3600)
@@ -128,6 +131,7 @@ def against(work: Path, other: Path, trials: int, rounds: int, steal: CpuSteal) 
                 return [(f"against {name}", f"campaign failed: {out.stderr.strip()[-120:]}", "", conditions(steal))]
             summary = json.loads(out.stdout)
             rates[name].append(60.0 * summary["ran"] / summary["trials_time"])
+            cpu[name].append((_children_cpu() - used) / summary["ran"])
             loads.append(conditions(steal))
     (mine, theirs) = rates.values()
     same = deterministic(work / "against_0_this")
@@ -140,8 +144,20 @@ def against(work: Path, other: Path, trials: int, rounds: int, steal: CpuSteal) 
     per_round = ", ".join(f"{a / b:.2f}x" for a, b in zip(mine, theirs))
     rows.append((f"  this tree / {commit}: best rate over best rate (per round)", f"{max(mine) / max(theirs):.2f}x ({per_round})",
                  ">= 2x the issue-35 tree 9e80b96", "; ".join(loads)))
+    (cpu_mine, cpu_theirs) = (float(np.median(v)) for v in cpu.values())
+    rows.append((f"  CPU per trial, campaign process tree: this tree / {commit} (median of rounds)",
+                 f"{cpu_mine:.2f} / {cpu_theirs:.2f} s = {cpu_theirs / cpu_mine:.2f}x fewer (rounds "
+                 + ", ".join(f"{b / a:.2f}x" for a, b in zip(*cpu.values())) + ")",
+                 "- (the rate's cost, whatever else shares the cores)", "; ".join(loads)))
     rows.append((f"  same seeds, this tree == {commit} (trials equal)", f"{agree}/{len(same)}", "all", conditions(steal)))
     return rows
+
+
+def _children_cpu() -> float:
+    """CPU of every reaped descendant: the campaign CLI, its Dask nannies and workers, once
+    each level has waited for the one below (the cluster's close)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def overhead(work: Path, trials: int, steal: CpuSteal) -> list[Row]:
