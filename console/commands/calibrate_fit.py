@@ -44,9 +44,11 @@ def _groups(text: str, what: str, cls, prefixes: bool = False):
 
 
 def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, plane: str, anchor: str,
-           tool_point: str, register: bool, frames: bool, fix: str, validate: List[Path] = ()):
+           tool_point: str, register: bool, frames: bool, fix: str, validate: List[Path] = (),
+           elasticity: bool = False):
     """Kinematics, blocks, error model, candidate parameters and validation blocks (another
-    session's files, same instruments) from the command line."""
+    session's files, same instruments) from the command line; `elasticity`: a compliance per
+    joint under the gravity load of the arm file's links among the candidates."""
     from spacearm.controller.calibration.composite import CompositeProblem
     from spacearm.controller.calibration.errormodel import ErrorModel
     from spacearm.controller.calibration.fit_setup import (Instruments, SetupError, initial_registration, load_blocks,
@@ -59,9 +61,10 @@ def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, pl
                            parse_vector(tool_point, (3,), "--tool-point") or (0.0, 0.0, 0.0))
         blocks = load_blocks(data, kin, inst)
         vblocks = load_blocks(list(validate), kin, inst) if validate else []
-        em = ErrorModel.from_kinematics(kin)
+        load = _joint_load(model, kin) if elasticity else None
+        em = ErrorModel.from_kinematics(kin, load=load)
         if register:
-            em = ErrorModel.from_kinematics(kin, world=initial_registration(em, blocks))
+            em = ErrorModel.from_kinematics(kin, world=initial_registration(em, blocks), load=load)
     except SetupError as exc:
         raise BadInput(str(exc)) from None
     names = CompositeProblem(em, blocks, []).names
@@ -70,6 +73,20 @@ def _setup(data: List[Path], model: Path, sigma_pos: float, sigma_rot: float, pl
     cands = [n for n in names if (frames or register or n not in frame_names)
              and not any(n == f or n.startswith(f) for f in fixed)]
     return kin, em, blocks, cands, vblocks
+
+
+def _joint_load(model: Path, kin):
+    """Gravity load per joint from the arm file's [[links]] (mass, centre of mass per link)."""
+    from spacearm.base.config.arm import load_arm_config
+    from spacearm.controller.calibration.joint_load import JointLoad
+    links = load_arm_config(model).links
+    if not links or all(ln.mass == 0.0 for ln in links):
+        raise BadInput(f"--elasticity: {model} has no link masses ([[links]] mass, com), so no gravity load "
+                       f"to deflect the joints; `spacearm arm import` writes them from a URDF")
+    try:
+        return JointLoad.from_config(kin, links)
+    except ValueError as exc:
+        raise BadInput(f"--elasticity: {model}: {exc}") from None
 
 
 def register_fit(cal: typer.Typer) -> None:
@@ -104,6 +121,10 @@ def register_fit(cal: typer.Typer) -> None:
             select_groups: bool = typer.Option(False, "--select-groups", help="Drop D-H groups (alpha_i, a_i, ...) "
                                                "whose removal lowers the leave-one-out error on the training postures "
                                                "(few postures per parameter; the held-out figure stays honest)."),
+            elasticity: bool = typer.Option(False, "--elasticity", help="Also a compliance per joint under its "
+                                            "gravity load (the arm file's link masses), k_1..k_n in rad/(N m) or "
+                                            "m/N, each bounded by a 5 deg / 50 mm deflection; with --select-groups "
+                                            "each is kept or dropped on its own."),
             apply: Optional[Path] = typer.Option(None, "--apply", help="Write the calibrated arm file here."),
             as_json: bool = typer.Option(False, "--json")) -> None:
         """Identify, validate on held-out postures and judge a calibration from measurement files."""
@@ -117,7 +138,7 @@ def register_fit(cal: typer.Typer) -> None:
         except FitInputError as exc:
             raise BadInput(str(exc)) from None
         kin, em, blocks, cands, vblocks = _setup(data, model, sigma_pos, sigma_rot, plane, anchor, tool_point,
-                                                 register, frames, fix, validate)
+                                                 register, frames, fix, validate, elasticity)
         try:
             rep = fit_blocks(em, blocks, opts, candidates=cands, validation=vblocks or None)
         except FitInputError as exc:            # too few postures for what is identifiable

@@ -148,3 +148,50 @@ def test_calibration_table_frame_corrections_are_checked():
         Calibration(method="m", date="d", dtool=[0.0, 0.0])
     with pytest.raises(ValidationError, match="check units"):
         Calibration(method="m", date="d", dbase=[1500.0, 0, 0, 0, 0, 0])
+
+
+def _tiago_files(tmp_path):
+    """The real TIAGo mocap days as a user feeds them to `calibrate fit`: the arm imported from the
+    data's URDF with `arm import`, each day as q1..q8,x,y,z (marker 1)."""
+    from spacearm.console.main import app as main_app
+    from spacearm.controller.calibration.tiago_mocap import TRAINING, URDF, VALIDATION, load_session
+    arm = tmp_path / "tiago.toml"
+    res = runner.invoke(main_app, ["arm", "import", str(URDF), "--base", "base_link", "--tip", "arm_7_link",
+                                   "--out", str(arm)])
+    assert res.exit_code == 0, res.output
+    days = []
+    for source in (TRAINING, VALIDATION):
+        Q, P = load_session(source)
+        days.append(tmp_path / source.name)
+        write_measurements(days[-1], Q, "position", P)
+    return arm, days
+
+
+def test_tiago_arm_6s_compliance_through_the_command_line(tmp_path):
+    """`--elasticity` puts the bench's judged TIAGo fit (identify 2021-11-30, validate 2021-11-26)
+    in a user's hands: arm_6's drive compliance k_7 is kept, the validation day is within the
+    issue's 2.9 mm, better than the rigid fit's; an arm file cannot carry it, so --apply refuses."""
+    arm, (train, valid) = _tiago_files(tmp_path)
+    base = ["calibrate", "fit", "--data", str(train), "--validate", str(valid), "--model", str(arm), "--register",
+            "--select-groups", "--sigma-pos", "1e-3", "--json"]
+    rigid = json.loads(runner.invoke(app, base).output)
+    res = runner.invoke(app, base + ["--elasticity"])
+    assert res.exit_code == 0, res.output
+    elastic = json.loads(res.output)
+    assert elastic["ok"] and "k_7" in elastic["estimate"] and elastic["estimate"]["k_7"] > 0
+    assert elastic["held_out_rms_after"] <= 2.9e-3 < rigid["held_out_rms_after"]
+    res = runner.invoke(app, base + ["--elasticity", "--apply", str(tmp_path / "out.toml")])
+    assert res.exit_code == 1 and "compliances" in res.output and not (tmp_path / "out.toml").exists()
+
+
+def test_elasticity_without_link_masses_is_one_line(tmp_path):
+    arm, (train, _) = _tiago_files(tmp_path)
+    import tomli_w
+    import tomllib
+    data = tomllib.loads(arm.read_text())
+    del data["links"]
+    bare = tmp_path / "bare.toml"
+    bare.write_text(tomli_w.dumps(data))
+    res = runner.invoke(app, ["calibrate", "fit", "--data", str(train), "--model", str(bare), "--register",
+                              "--elasticity"])
+    assert res.exit_code == 2 and res.output.count("\n") == 1 and "no link masses" in res.output, res.output
