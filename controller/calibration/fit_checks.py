@@ -183,6 +183,9 @@ def weakest_direction(problem: CompositeProblem, free: list[str]) -> WeakDirecti
 HELD_OUT_TOLERANCE = 0.01
 
 
+NEGATIVE_COMPLIANCE = 0.1     # of a compliance's bound: below minus this, physically impossible
+
+
 @dataclass
 class Verdict:
     ok: bool
@@ -208,6 +211,12 @@ def plausibility(status: str, message: str, names: list[str], corrections: Array
             reasons.append(f"{n} moved by {format_value(n, c)}, beyond its bound {format_value(n, b)}")
         if len(over) > 4:
             reasons.append(f"{len(over) - 4} more parameters beyond their bounds")
+        # A joint that gives way against its load is no joint: a negative compliance deflecting it
+        # visibly (a tenth of its bound) means the model is wrong there, whatever the fit gains.
+        for n, c in zip(names, corrections):
+            if group_of(n) == "joint_compliance" and c < -NEGATIVE_COMPLIANCE * bounds.of(n):
+                reasons.append(f"{n} is {format_value(n, c)}: a joint cannot be negatively compliant "
+                               f"(the model is wrong here)")
     if not np.isfinite(train_noise_ratio) or train_noise_ratio > max_noise_ratio:
         reasons.append(f"fit residuals are {train_noise_ratio:.1f}x the stated noise (limit {max_noise_ratio:g}x): "
                        "the measurement model does not describe the data")

@@ -117,3 +117,13 @@ def test_cli_select_groups_reports_the_dropped_groups(tmp_path):
     out = json.loads(res.output.splitlines()[0])
     assert isinstance(out["dropped_groups"], list)
     assert not any(n.split("_")[0] in out["dropped_groups"] for n in out["estimate"])
+
+
+def test_a_negative_compliance_is_rejected_as_impossible_a_small_one_is_noise():
+    from spacearm.controller.calibration.fit_checks import Bounds, plausibility
+    bounds = Bounds(by_name=(("k_8", 1.0), ("k_5", 0.01)))
+    verdict = plausibility("converged", "", ["k_5", "k_8"], np.array([-0.0002, -0.26]), bounds, 1.0, 1.0, 2e-3, 1.9e-3)
+    assert not verdict.ok and len(verdict.reasons) == 1 and "k_8" in verdict.reasons[0]
+    assert "negatively compliant" in verdict.reasons[0]
+    ok = plausibility("converged", "", ["k_5", "k_8"], np.array([-0.0002, 0.26]), bounds, 1.0, 1.0, 2e-3, 1.9e-3)
+    assert ok.ok
