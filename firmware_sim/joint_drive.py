@@ -32,6 +32,9 @@ from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
 from spacearm.firmware_sim.od_cyclic import CyclicObjects
+from spacearm.firmware_sim import simcore
+
+SERVO_OFF, SERVO_CSP = 0, 1    # the servo laws the compiled core runs (_simcore.c)
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -50,7 +53,9 @@ class JointDriveNode(SimNode):
     def __init__(self, node_id, eds_path, name, plant, joint_index: int):
         self.joint = plant.joints[joint_index]
         super().__init__(node_id, eds_path, name, plant)
-        self.joint.controller = self._servo
+        servo = self._servo
+        self.joint.controller = servo
+        self.joint.period_servo = (servo, self._period_law)
         self._actual_values = CyclicObjects(self, [
             (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0), (od.POSITION_ACTUAL, 0), (od.POSITION_DEMAND, 0),
             (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.FOLLOWING_ERROR_ACTUAL, 0), (od.DRIVE_TEMPERATURE, 0),
@@ -217,6 +222,25 @@ class JointDriveNode(SimNode):
                     self.q_ref += self.v_ref * h
         return servo_torque(self.joint, self.q_ref, self.v_ref, q_meas, qd) + self.torque_ff
 
+    def _period_law(self) -> tuple | None:
+        """_servo() for the whole period as the compiled core runs it (plant.JointModel.
+        _core_period): powered off, or CSP in operation without halt; None for the states the
+        core does not model (ramps, halt, profile position), which _servo() runs sub-step by
+        sub-step."""
+        state = self.state
+        if state not in ENERGISED:
+            kind = SERVO_OFF
+        elif state == State.OPERATION_ENABLED and not self.halt and self.mode == od.MODE_CSP:
+            kind = SERVO_CSP
+        else:
+            return None
+        p = self.joint.params
+        return (kind, self.q_start, self.q_end, self.v_ff, self.torque_ff, p.servo_bandwidth_hz, p.servo_damping,
+                self._end_period)
+
+    def _end_period(self, q_ref: float, v_ref: float) -> None:
+        self.q_ref, self.v_ref = q_ref, v_ref
+
     def on_sync_end(self, dt: float) -> None:
         j = self.joint
         self._stop_and_brake(dt)
@@ -280,6 +304,13 @@ class JointDriveNode(SimNode):
                 sw |= SW_OP_MODE_12
             if self.target_reached:
                 sw |= SW_TARGET_REACHED
+        core = simcore.core
+        if core is not None:
+            counts = core.actual_values(k, rated, j.q_reported, self.q_ref, j.qd_reported, j.torque_reported,
+                                        q_measured, j.temperature)
+            if counts is not None:      # None: a value round() raises on, below
+                self._actual_values.write((sw, self.mode, *counts, 1 if j.brake_engaged else 0, self.error_code))
+                return
         self._actual_values.write((
             sw, self.mode,
             _i32(round(j.q_reported * k)),     # late by any feedback latency

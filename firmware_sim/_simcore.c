@@ -1,0 +1,234 @@
+/* Compiled core of the simulator's SYNC hot path (issue 35): a rigid-gear joint's whole SYNC
+ * period of sub-steps with its drive's servo law, and the drive's actual values as integers.
+ *
+ * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
+ * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
+ * operations in the same order, built with -ffp-contract=off (no fused multiply-add), the
+ * same libm calls Python's math module makes (cos, sin, exp, pow), and Python's round()
+ * (half to even, nearbyint in the default rounding mode). Anything the Python path would
+ * raise on (round() of NaN or infinity) is handed back to Python, which raises it.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+
+/* servo kinds the Python side selects (joint_drive.JointDriveNode.period_servo) */
+enum { SERVO_OFF = 0, SERVO_CSP = 1 };
+
+static double py_round(double x) {
+    /* round() of a float in CPython: half away from zero, then back to even on a tie */
+    double r = round(x);
+    if (fabs(x - r) == 0.5)
+        r = 2.0 * round(x / 2.0);
+    return r;
+}
+
+static double friction_torque(double v, double coulomb, double viscous, double stribeck, double stribeck_velocity) {
+    double f = viscous * v;
+    if (v != 0.0 && (coulomb > 0.0 || stribeck > 0.0)) {
+        double level = coulomb;
+        if (stribeck > 0.0) {
+            /* Python's x ** 2 on a float is pow(|x|, 2) (float_pow negates odd powers only) */
+            double r = v / stribeck_velocity;
+            level += stribeck * exp(-pow(fabs(r), 2.0));
+        }
+        f += copysign(level, v);
+    }
+    return f;
+}
+
+#define N_ARGS 30
+
+/* rigid_period(fractions, kind, h, bias, quantum, limit, held, gear_ratio, efficiency, external,
+ *              amplitude, angle, constant_load, load, coulomb, viscous, stribeck, stribeck_velocity,
+ *              inertia, te_amplitude, te_harmonic, te_phase, q, qd, theta, thetad, tau_m,
+ *              q_start, q_end, v_ff, torque_ff, w, damping)
+ * -> (q, qd, theta, thetad, tau_m, q_ref, v_ref), or None when a measured position is not
+ * finite (Python's round() raises there: the caller reruns the period in Python).
+ * fractions: a list or tuple of floats (the servo's interpolation points). */
+static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != N_ARGS + 3) {
+        PyErr_Format(PyExc_TypeError, "rigid_period takes %d arguments (%zd given)", N_ARGS + 3, nargs);
+        return NULL;
+    }
+    PyObject *fractions = PySequence_Fast(args[0], "fractions must be a sequence");
+    if (fractions == NULL)
+        return NULL;
+    long kind = PyLong_AsLong(args[1]);
+    double a[N_ARGS + 1];
+    for (int i = 2; i < nargs; i++) {
+        a[i - 2] = PyFloat_AsDouble(args[i]);
+    }
+    if (PyErr_Occurred() || (kind != SERVO_OFF && kind != SERVO_CSP)) {
+        Py_DECREF(fractions);
+        if (!PyErr_Occurred())
+            PyErr_SetString(PyExc_ValueError, "unknown servo kind");
+        return NULL;
+    }
+    const double h = a[0], bias = a[1], quantum = a[2], limit = a[3];
+    const int held = a[4] != 0.0;
+    const double gear_ratio = a[5], efficiency = a[6];
+    const double external = a[7], amplitude = a[8], angle = a[9];
+    const int constant_load = a[10] != 0.0;
+    double load = a[11];
+    const double coulomb = a[12], viscous = a[13], stribeck = a[14], stribeck_velocity = a[15];
+    const double inertia = a[16], te_amplitude = a[17], te_harmonic = a[18], te_phase = a[19];
+    double q = a[20], qd = a[21], theta = a[22], thetad = a[23], tau_m = a[24];
+    const double q_start = a[25], q_end = a[26], v_ff = a[27], torque_ff = a[28], bandwidth_hz = a[29],
+                 damping = a[30];
+    const double static_ = coulomb + stribeck;       /* effects.static_friction */
+    const double w = 2.0 * M_PI * bandwidth_hz;      /* servo_torque's, in its order */
+    double q_ref = NAN, v_ref = NAN;
+
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fractions);
+    PyObject **items = PySequence_Fast_ITEMS(fractions);
+    if (n == 0)
+        goto python;
+    double held_measured = 0.0;
+    if (held) {
+        double x = q + bias;
+        if (quantum <= 0.0) {
+            held_measured = x;
+        } else {
+            double r = x / quantum;
+            if (!isfinite(r))
+                goto python;
+            held_measured = py_round(r) * quantum;
+        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double s = PyFloat_AsDouble(items[i]);
+        if (s == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fractions);
+            return NULL;
+        }
+        double q_meas;
+        if (held) {
+            q_meas = held_measured;
+        } else {
+            double x = q + bias;
+            if (quantum <= 0.0) {
+                q_meas = x;
+            } else {
+                double r = x / quantum;
+                if (!isfinite(r))
+                    goto python;
+                q_meas = py_round(r) * quantum;
+            }
+        }
+        /* the drive's servo (JointDriveNode._servo + servo_torque) */
+        if (kind == SERVO_OFF) {
+            q_ref = q_meas;
+            v_ref = 0.0;
+            tau_m = 0.0;
+        } else {
+            q_ref = q_start + s * (q_end - q_start);
+            v_ref = v_ff;
+            double tau_joint = inertia * (w * w * (q_ref - q_meas) + 2.0 * damping * w * (v_ref - qd));
+            tau_m = tau_joint / gear_ratio + torque_ff;
+        }
+        tau_m = tau_m < limit ? tau_m : limit;
+        tau_m = tau_m > -limit ? tau_m : -limit;
+        if (held) {
+            qd = thetad = 0.0;
+            continue;
+        }
+        double drive = tau_m * gear_ratio * efficiency;
+        if (!constant_load) {
+            if (!isfinite(q + angle))
+                goto python;                     /* math.cos raises on an infinity */
+            load = amplitude * cos(q + angle);
+        }
+        double tau = drive - external - load;
+        double v = thetad;
+        if (fabs(v) > 1e-6 || static_ == 0.0) {
+            tau -= friction_torque(v, coulomb, viscous, stribeck, stribeck_velocity);
+        } else if (fabs(tau) <= static_) {
+            tau = 0.0;
+            thetad = 0.0;
+        } else {
+            tau -= copysign(static_, tau);
+        }
+        thetad += tau / inertia * h;
+        theta += thetad * h;
+        if (te_amplitude > 0.0) {
+            /* transmission_error and its slope (effects/transmission.py); math.sin raises on an infinity */
+            double wt = te_harmonic * gear_ratio;
+            double phase = wt * theta + te_phase;
+            if (!isfinite(phase))
+                goto python;
+            q = theta + te_amplitude * sin(phase);
+            qd = thetad * (1.0 + te_amplitude * wt * cos(phase));
+        } else {
+            q = theta;
+            qd = thetad;
+        }
+    }
+    Py_DECREF(fractions);
+    return Py_BuildValue("(ddddddd)", q, qd, theta, thetad, tau_m, q_ref, v_ref);
+python:
+    Py_DECREF(fractions);
+    Py_RETURN_NONE;
+}
+
+static int to_i32(double x, long long *out) {
+    /* _i32(round(x)): 0 when x is not finite (Python's round() raises: the caller's path) */
+    if (!isfinite(x))
+        return 0;
+    double r = py_round(x);
+    if (r > 2147483647.0)
+        r = 2147483647.0;
+    if (r < -2147483648.0)
+        r = -2147483648.0;
+    *out = (long long)r;
+    return 1;
+}
+
+static int to_i16(double x, long long *out) {
+    /* max(-32768, min(32767, round(x))) */
+    if (!isfinite(x))
+        return 0;
+    double r = py_round(x);
+    if (r > 32767.0)
+        r = 32767.0;
+    if (r < -32768.0)
+        r = -32768.0;
+    *out = (long long)r;
+    return 1;
+}
+
+/* actual_values(k, rated, q_reported, q_ref, qd_reported, torque_reported, q_measured, temperature)
+ * -> (position, demand, velocity, torque, following error, temperature) as the drive's objects
+ * count them (JointDriveNode._update_od), or None when a value is not finite. */
+static PyObject *actual_values(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "actual_values takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    double a[8];
+    for (int i = 0; i < 8; i++)
+        a[i] = PyFloat_AsDouble(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double k = a[0], rated = a[1];
+    long long v[6];
+    if (!to_i32(a[2] * k, &v[0]) || !to_i32(a[3] * k, &v[1]) || !to_i32(a[4] * k, &v[2]) ||
+        !to_i16(a[5] / rated * 1000.0, &v[3]) || !to_i32((a[3] - a[6]) * k, &v[4]) ||
+        !to_i16(a[7] * 10.0, &v[5]))
+        Py_RETURN_NONE;
+    return Py_BuildValue("(LLLLLL)", v[0], v[1], v[2], v[3], v[4], v[5]);
+}
+
+static PyMethodDef methods[] = {
+    {"rigid_period", (PyCFunction)(void (*)(void))rigid_period, METH_FASTCALL,
+     "A rigid-gear joint's SYNC period with its drive's servo law (see the module source)."},
+    {"actual_values", (PyCFunction)(void (*)(void))actual_values, METH_FASTCALL,
+     "A drive's actual values as its objects count them (see the module source)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_simcore", NULL, -1, methods};
+
+PyMODINIT_FUNC PyInit__simcore(void) { return PyModule_Create(&module); }

@@ -1,0 +1,156 @@
+"""The simulator's compiled core (firmware_sim/_simcore.c) computes what the pure-Python path
+computes, bit for bit: a joint's SYNC period on random plants and servo laws, the drive's
+actual values, and whole lockstep runs (recording, plant state after every cycle, every CAN
+frame of the cycle thread). Skipped, with the reason, where the core was not built."""
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from spacearm.firmware_sim import simcore
+from spacearm.firmware_sim.joint_drive import SERVO_CSP, SERVO_OFF
+from spacearm.firmware_sim.plant import JointModel, JointParams
+
+needs_core = pytest.mark.skipif(simcore.core is None, reason="compiled core not built (no C compiler at install "
+                                                              "time) or SPACEARM_PURE_PYTHON=1: nothing to compare")
+
+
+class _Law:
+    """A drive's servo law for a period as joint_drive.JointDriveNode gives it, and its _servo()."""
+
+    def __init__(self, kind, q_start, q_end, v_ff, torque_ff, joint):
+        self.kind, self.q_start, self.q_end, self.v_ff, self.torque_ff = kind, q_start, q_end, v_ff, torque_ff
+        self.joint, self.q_ref, self.v_ref = joint, None, None
+
+    def servo(self, s, q_meas, qd):
+        if self.kind == SERVO_OFF:
+            self.q_ref, self.v_ref = q_meas, 0.0
+            return 0.0
+        from spacearm.firmware_sim.joint_drive import servo_torque
+        self.q_ref = self.q_start + s * (self.q_end - self.q_start)
+        self.v_ref = self.v_ff
+        return servo_torque(self.joint, self.q_ref, self.v_ref, q_meas, qd) + self.torque_ff
+
+    def law(self):
+        p = self.joint.params
+        return (self.kind, self.q_start, self.q_end, self.v_ff, self.torque_ff, p.servo_bandwidth_hz,
+                p.servo_damping, self.finish)
+
+    def finish(self, q_ref, v_ref):
+        self.q_ref, self.v_ref = q_ref, v_ref
+
+
+def _joint(params, q, qd, motor_torque, brake, load_amplitude, max_torque):
+    joint = JointModel(params=params, q=q, load_amplitude=load_amplitude)
+    joint.qd, joint.thetad, joint.motor_torque, joint.brake_engaged = qd, qd, motor_torque, brake
+    joint.max_motor_torque = max_torque
+    return joint
+
+
+def _state(joint, law):
+    return repr((joint.q, joint.qd, joint.theta, joint.thetad, joint.motor_torque, law.q_ref, law.v_ref))
+
+
+finite = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), q=finite, qd=finite, q_end=finite, torque_ff=st.floats(-2.0, 2.0),
+       kind=st.sampled_from([SERVO_OFF, SERVO_CSP]), brake=st.booleans(), friction=st.booleans(),
+       te=st.booleans(), prismatic=st.booleans(), substeps=st.integers(1, 20))
+def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff, kind, brake, friction, te,
+                                                     prismatic, substeps):
+    rng = random.Random(seed)
+    fields = dict(servo_bandwidth_hz=rng.uniform(1.0, 50.0), servo_damping=rng.uniform(0.3, 2.0),
+                  gear_ratio=rng.uniform(1.0, 200.0), gear_efficiency=rng.uniform(0.5, 1.0),
+                  link_inertia=rng.uniform(0.0, 20.0), torque_limit=rng.choice([0.0, rng.uniform(0.01, 5.0)]),
+                  encoder_bias=rng.uniform(-1e-3, 1e-3), gravity_angle=rng.uniform(-3.0, 3.0))
+    if prismatic:
+        fields.update(kind="prismatic", encoder_quantum=rng.choice([0.0, 1e-6]))
+    else:
+        fields.update(resolver_arcsec=rng.choice([0.0, 25.0]))
+    if friction:
+        fields.update(coulomb_friction=rng.uniform(0.0, 5.0), viscous_friction=rng.uniform(0.0, 5.0),
+                      stribeck_friction=rng.uniform(0.0, 3.0), stribeck_velocity=rng.uniform(0.001, 0.1))
+    if te:
+        fields.update(te_amplitude=rng.uniform(1e-5, 1e-3), te_harmonic=rng.uniform(1.0, 3.0),
+                      te_phase=rng.uniform(-3.0, 3.0))
+    params = JointParams(**fields)
+    amplitude = rng.choice([0.0, rng.uniform(-50.0, 50.0)])
+    max_torque = rng.choice([math.inf, rng.uniform(0.1, 10.0)])
+    n = substeps
+    fractions = [(k + 1) / n for k in range(n)]
+    h = 0.02 / n
+    external = rng.uniform(-1.0, 1.0)
+    results = []
+    for _ in range(2):
+        joint = _joint(params, q, qd, 0.3, brake, amplitude, max_torque)
+        joint.external_torque = external
+        law = _Law(kind, q, q_end, (q_end - q) / 0.02, torque_ff, joint)
+        joint.controller = law.servo
+        joint.period_servo = (law.servo, law.law)
+        results.append((joint, law))
+    core_joint, core_law = results[0]
+    assert core_joint._core_period(fractions, h, core_law.law())
+    py_joint, py_law = results[1]
+    py_joint.period_servo = None
+    py_joint.substeps(fractions, h)
+    assert _state(core_joint, core_law) == _state(py_joint, py_law)
+
+
+@needs_core
+def test_a_period_python_raises_on_is_left_to_python():
+    """round() of a NaN position raises in Python: the core changes nothing and says so."""
+    joint = _joint(JointParams(), math.nan, 0.0, 0.0, False, 0.0, math.inf)
+    law = _Law(SERVO_CSP, 0.0, 0.1, 5.0, 0.0, joint)
+    joint.controller, joint.period_servo = law.servo, (law.servo, law.law)
+    assert not joint._core_period([0.5, 1.0], 0.01, law.law())
+    assert math.isnan(joint.q) and joint.motor_torque == 0.0 and law.q_ref is None
+    with pytest.raises(ValueError):
+        joint.substeps([0.5, 1.0], 0.01)
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.floats(allow_nan=True, allow_infinity=True, width=64), min_size=8, max_size=8))
+def test_actual_values_are_the_python_counts(values):
+    k, rated, q_rep, q_ref, qd_rep, torque, q_meas, temperature = values
+
+    def i32(x):
+        return max(-2**31, min(2**31 - 1, round(x)))
+    try:
+        expected = (i32(q_rep * k), i32(q_ref * k), i32(qd_rep * k),
+                    max(-32768, min(32767, round(torque / rated * 1000.0))), i32((q_ref - q_meas) * k),
+                    max(-32768, min(32767, round(temperature * 10.0))))
+    except (ValueError, OverflowError, ZeroDivisionError):
+        expected = None
+    if rated == 0.0:
+        return           # Python divides by zero and raises; the drive's rated torque is never 0 (EDS)
+    assert simcore.core.actual_values(*values) == expected
+
+
+def _run(name, tmp_path, monkeypatch, use_core):
+    from bench.lockstep_fingerprint import run_scenario
+    monkeypatch.setattr(simcore, "core", simcore.core if use_core else None)
+    folder = tmp_path / ("core" if use_core else "pure")
+    folder.mkdir()
+    return run_scenario(name, folder)
+
+
+@needs_core
+@pytest.mark.slow
+@pytest.mark.parametrize("scenario", ["effects", "cell"])
+def test_a_lockstep_run_with_the_core_is_the_pure_run(scenario, tmp_path, monkeypatch):
+    """A scripted lockstep run (bench/lockstep_fingerprint.py: every joint effect on, or the
+    contact cell with a drive fault and its stops): the recording's /cycle records, the plant
+    state after every cycle and every CAN frame of the cycle thread agree bit for bit."""
+    core = _run(scenario, tmp_path, monkeypatch, True)
+    pure = _run(scenario, tmp_path, monkeypatch, False)
+    assert len(core["cycles"]) == len(pure["cycles"]) > 100
+    assert repr(core["cycles"]) == repr(pure["cycles"])
+    assert repr([c[1] for c in core["per_cycle"]]) == repr([c[1] for c in pure["per_cycle"]])
+    assert core["frames"] == pure["frames"]
