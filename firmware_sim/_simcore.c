@@ -1,5 +1,6 @@
-/* Compiled core of the simulator's SYNC hot path (issue 35): a rigid-gear joint's whole SYNC
- * period of sub-steps with its drive's servo law, and the drive's actual values as integers.
+/* Compiled core of the simulator's SYNC hot path (issue 35): a drive's SYNC begin that changes no state
+ * (its RPDO objects read straight from the data store), a rigid-gear joint's whole SYNC period
+ * of sub-steps with its drive's servo law, and the drive's actual values as integers.
  *
  * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
  * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
@@ -221,7 +222,128 @@ static PyObject *actual_values(PyObject *self, PyObject *const *args, Py_ssize_t
     return Py_BuildValue("(LLLLLL)", v[0], v[1], v[2], v[3], v[4], v[5]);
 }
 
+/* One stored object's value: store[index][sub] as the little-endian integer of `size` bytes
+ * (signed or not) the object's type says. 0: not stored, or stored with another length (the
+ * Python path decodes what SimNode.get() would). */
+static int stored_int(PyObject *store, PyObject *spec, long long *out) {
+    if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) != 4)
+        return 0;
+    PyObject *entry = PyDict_GetItemWithError(store, PyTuple_GET_ITEM(spec, 0));
+    if (entry == NULL || !PyDict_Check(entry))
+        return 0;
+    PyObject *data = PyDict_GetItemWithError(entry, PyTuple_GET_ITEM(spec, 1));
+    if (data == NULL || !PyBytes_Check(data))
+        return 0;
+    long size = PyLong_AsLong(PyTuple_GET_ITEM(spec, 2));
+    int is_signed = PyObject_IsTrue(PyTuple_GET_ITEM(spec, 3));
+    if (size < 1 || size > 4 || is_signed < 0 || PyBytes_GET_SIZE(data) != size)
+        return 0;
+    const unsigned char *b = (const unsigned char *)PyBytes_AS_STRING(data);
+    unsigned long long u = 0;
+    for (long i = 0; i < size; i++)          /* exactly `size` bytes: the length was checked */
+        u |= (unsigned long long)b[i] << (8 * i);
+    long long v = (long long)u;
+    if (is_signed && (u >> (8 * size - 1)) & 1)
+        v -= 1LL << (8 * size);
+    *out = v;
+    return 1;
+}
+
+#define CW_FAULT_RESET 0x0080
+#define CW_NEW_SETPOINT 0x0010
+#define CW_HALT 0x0100
+#define MODE_PROFILE_POSITION 1
+#define MODE_CSP 8
+
+/* decode_controlword's command, as the bit of a stay mask: disable voltage, quick stop,
+ * shutdown, switch on, enable operation */
+static int command_of(long long cw) {
+    if (!(cw & 0x02))
+        return 0;
+    if (!(cw & 0x04))
+        return 1;
+    if (!(cw & 0x01))
+        return 2;
+    if (!(cw & 0x08))
+        return 3;
+    return 4;
+}
+
+/* steady_begin(store, objects, q_ref, dt, k, lo, hi, vmax, rated, enabled, fault, mode, stay_mask, halt)
+ * JointDriveNode.on_sync_begin for a SYNC that changes no state: no fault reset bit, a command
+ * that leaves the drive's state where it is (stay_mask: bit c for command c, from next_state;
+ * `fault`: the drive is in FAULT, where only a reset acts), no mode change, no halt starting;
+ * in OPERATION ENABLED only CSP (`mode` is the drive's mode, `enabled` its state).
+ * store: the node's data store ({index: {sub: bytes}}); objects: (index, sub, size, signed) of
+ * the controlword, modes of operation, torque offset, target position and velocity offset;
+ * lo, hi, vmax: the software limits' and the maximum profile velocity's counts (enabled only).
+ * -> (controlword, halt, torque_ff, limit_active, q_end, v_ff) (the last two None unless
+ * enabled), or None for any other SYNC: the Python path runs it. */
+static PyObject *steady_begin(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 14) {
+        PyErr_Format(PyExc_TypeError, "steady_begin takes 14 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *store = args[0], *objects = args[1];
+    if (!PyDict_Check(store) || !PyTuple_Check(objects) || PyTuple_GET_SIZE(objects) != 5) {
+        PyErr_SetString(PyExc_TypeError, "steady_begin: a dict and five object specs");
+        return NULL;
+    }
+    double a[7];
+    for (int i = 0; i < 7; i++)
+        a[i] = PyFloat_AsDouble(args[i + 2]);
+    int enabled = PyObject_IsTrue(args[9]), fault = PyObject_IsTrue(args[10]);
+    long own_mode = PyLong_AsLong(args[11]), stay_mask = PyLong_AsLong(args[12]);
+    int prev_halt = PyObject_IsTrue(args[13]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double q_start = a[0], dt = a[1], k = a[2], lo_count = a[3], hi_count = a[4], vmax_count = a[5],
+                 rated = a[6];
+    long long cw, mode, torque_offset, target_count, velocity_offset;
+    if (!stored_int(store, PyTuple_GET_ITEM(objects, 0), &cw) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 1), &mode) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 2), &torque_offset) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 3), &target_count) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 4), &velocity_offset)) {
+        if (PyErr_Occurred())
+            return NULL;
+        Py_RETURN_NONE;
+    }
+    if (cw & CW_FAULT_RESET)
+        Py_RETURN_NONE;
+    if (!fault && !((stay_mask >> command_of(cw)) & 1))
+        Py_RETURN_NONE;
+    if ((mode == MODE_CSP || mode == MODE_PROFILE_POSITION) && mode != own_mode)
+        Py_RETURN_NONE;
+    if (enabled && own_mode != MODE_CSP)
+        Py_RETURN_NONE;
+    int halt = (cw & CW_HALT) && enabled && own_mode == MODE_CSP;
+    if (halt && !prev_halt)
+        Py_RETURN_NONE;
+    /* on_sync_begin, its operations in its order */
+    double torque_ff = (double)torque_offset / 1000.0 * rated;
+    if (!enabled)
+        return Py_BuildValue("(LOdOOO)", cw, halt ? Py_True : Py_False, torque_ff, Py_False, Py_None, Py_None);
+    if (k == 0.0 || dt == 0.0)
+        Py_RETURN_NONE;           /* Python divides by zero and raises */
+    double lo = lo_count / k, hi = hi_count / k, vmax = vmax_count / k;
+    double target = (double)target_count / k;
+    double m = target > lo ? target : lo;           /* max(lo, target) */
+    double clamped = m < hi ? m : hi;               /* min(hi, .) */
+    double step = clamped - q_start;
+    if (fabs(step) > vmax * dt)
+        step = copysign(vmax * dt, step);
+    int limit_active = clamped != target || q_start + step != clamped;
+    double q_end = q_start + step;
+    double v_ff = step / dt + (double)velocity_offset / k;
+    return Py_BuildValue("(LOdOdd)", cw, halt ? Py_True : Py_False, torque_ff, limit_active ? Py_True : Py_False,
+                         q_end, v_ff);
+}
+
 static PyMethodDef methods[] = {
+    {"steady_begin", (PyCFunction)(void (*)(void))steady_begin, METH_FASTCALL,
+     "A drive's SYNC begin that changes no state (see the module source)."},
     {"rigid_period", (PyCFunction)(void (*)(void))rigid_period, METH_FASTCALL,
      "A rigid-gear joint's SYNC period with its drive's servo law (see the module source)."},
     {"actual_values", (PyCFunction)(void (*)(void))actual_values, METH_FASTCALL,

@@ -35,6 +35,11 @@ from spacearm.firmware_sim.od_cyclic import CyclicObjects
 from spacearm.firmware_sim import simcore
 
 SERVO_OFF, SERVO_CSP = 0, 1    # the servo laws the compiled core runs (_simcore.c)
+# the commands in the order of the core's stay masks (decode_controlword's order), and the masks
+# worked out per (state, quick-stop option): bit i set when command i leaves the state as it is
+_COMMANDS = (Command.DISABLE_VOLTAGE, Command.QUICK_STOP, Command.SHUTDOWN, Command.SWITCH_ON,
+             Command.ENABLE_OPERATION)
+_STAY: dict = {}
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -56,6 +61,7 @@ class JointDriveNode(SimNode):
         servo = self._servo
         self.joint.controller = servo
         self.joint.period_servo = (servo, self._period_law)
+        self._begin_objects = self._core_objects()
         self._actual_values = CyclicObjects(self, [
             (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0), (od.POSITION_ACTUAL, 0), (od.POSITION_DEMAND, 0),
             (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.FOLLOWING_ERROR_ACTUAL, 0), (od.DRIVE_TEMPERATURE, 0),
@@ -138,6 +144,10 @@ class JointDriveNode(SimNode):
         self._h = dt / self.plant.config.substeps
         k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = self._settings()
         self._k = k
+        core = simcore.core
+        if core is not None and self._begin_objects is not None and not self.local._read_callbacks \
+                and self._steady_begin(core, dt, k, rated, max_motor_torque):
+            return
         cw = self.get(od.CONTROLWORD)
         self._apply_controlword(cw)
         mode = self.get(od.MODES_OF_OPERATION)
@@ -186,6 +196,51 @@ class JointDriveNode(SimNode):
             self._start_ramp(quick=option == 2)
         self.halt = halt
         self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
+
+    def _steady_begin(self, core, dt: float, k: float, rated: float, max_motor_torque: float) -> bool:
+        """The rest of on_sync_begin in the compiled core, for a SYNC that changes no state (no
+        transition, mode change or halt starting; CSP when enabled). False: it was not such a
+        SYNC, nothing changed."""
+        state = self.state
+        enabled = state == State.OPERATION_ENABLED
+        if enabled:
+            limits = (self.param(od.SOFTWARE_POSITION_LIMIT, 1), self.param(od.SOFTWARE_POSITION_LIMIT, 2),
+                      self.param(od.MAX_PROFILE_VELOCITY))
+        else:
+            limits = (0, 0, 0)
+        stay = _STAY.get((state, self._qs_option))
+        if stay is None:
+            stay = _STAY[(state, self._qs_option)] = sum(1 << i for i, command in enumerate(_COMMANDS)
+                                                          if next_state(state, command, self._qs_option) == state)
+        steady = core.steady_begin(self.local.data_store, self._begin_objects, self.q_ref, dt, k, *limits, rated,
+                                   enabled, state == State.FAULT, self.mode, stay, self.halt)
+        if steady is None:
+            return False
+        cw, self.halt, self.torque_ff, self.limit_active, q_end, v_ff = steady
+        if enabled:
+            self.q_end, self.v_ff = q_end, v_ff
+        self.prev_cw = cw
+        self.joint.max_motor_torque = max_motor_torque
+        self.q_start = self.q_ref
+        self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
+        self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
+        return True
+
+    def _core_objects(self) -> tuple | None:
+        """(index, sub, bytes, signed) of the objects csp_begin reads from the data store, in
+        its order; None if one is not a plain integer of the EDS (the Python path decodes it)."""
+        objects = []
+        for index in (od.CONTROLWORD, od.MODES_OF_OPERATION, od.TORQUE_OFFSET, od.TARGET_POSITION,
+                      od.VELOCITY_OFFSET):
+            try:
+                _, codec, integer = self._codec(index, 0)
+            except SdoAbortedError:          # not in this EDS
+                return None
+            kind = codec.format[-1:] if codec is not None and integer else ""
+            if kind not in ("b", "B", "h", "H", "l", "L") or codec.size not in (1, 2, 4):
+                return None
+            objects.append((index, 0, codec.size, kind.islower()))
+        return tuple(objects)
 
     def _start_ramp(self, quick: bool) -> None:
         self.ramp_quick = quick

@@ -154,3 +154,86 @@ def test_a_lockstep_run_with_the_core_is_the_pure_run(scenario, tmp_path, monkey
     assert repr(core["cycles"]) == repr(pure["cycles"])
     assert repr([c[1] for c in core["per_cycle"]]) == repr([c[1] for c in pure["per_cycle"]])
     assert core["frames"] == pure["frames"]
+
+
+DRIVE_FIELDS = ("state", "prev_cw", "mode", "q_ref", "q_start", "q_end", "v_ref", "v_ff", "limit_active", "torque_ff",
+                "prev_cw_setpoint", "halt", "ramp_dec", "ramp_quick", "_ramp_from_actual", "pp_target",
+                "target_reached", "fe_time", "error_code")
+
+
+_DRIVES: list = []
+
+
+def _drive():
+    """A joint drive just powered on (one built per test session: loading the EDS is slow)."""
+    if not _DRIVES:
+        from spacearm.base.config.bus import EDS_DIR
+        from spacearm.firmware_sim.joint_drive import JointDriveNode
+        from spacearm.firmware_sim.plant import Plant
+        _DRIVES.append(JointDriveNode(3, EDS_DIR / "joint_drive.eds", "joint_1", Plant.create(1), 0))
+    drive = _DRIVES[0]
+    drive.power_on()
+    return drive
+
+
+@needs_core
+@settings(max_examples=400, deadline=None)
+@given(state=st.sampled_from(["SWITCH_ON_DISABLED", "READY_TO_SWITCH_ON", "SWITCHED_ON", "OPERATION_ENABLED",
+                              "QUICK_STOP_ACTIVE", "FAULT_REACTION_ACTIVE", "FAULT"]),
+       cw=st.sampled_from([0x0, 0x2, 0x6, 0x7, 0xF, 0x8F, 0x10F, 0x1F, 0x80, 0x106]) | st.integers(0, 0xFFFF),
+       mode=st.sampled_from([8, 1, 0, 3]), own_mode=st.sampled_from([8, 1]), halt=st.booleans(),
+       target=st.integers(-2**31, 2**31 - 1), velocity_offset=st.integers(-2**31, 2**31 - 1),
+       torque_offset=st.integers(-2**15, 2**15 - 1), q_ref=st.floats(-4.0, 4.0),
+       qs_option=st.sampled_from([0, 1, 2, 5, 6]), small_target=st.integers(-200000, 200000))
+def test_a_sync_begin_in_the_core_is_the_python_begin(state, cw, mode, own_mode, halt, target, velocity_offset,
+                                                      torque_offset, q_ref, qs_option, small_target):
+    """JointDriveNode.on_sync_begin, with the core (steady SYNCs) and without: the drive's state
+    after it agrees bit for bit, whatever the controlword, mode and targets."""
+    from spacearm.base.canopen import od
+    from spacearm.base.canopen.cia402_defs import State
+    after = []
+    for use_core in (True, False):
+        drive = _drive()
+        drive.state, drive.mode, drive.halt, drive.q_ref = State[state], own_mode, halt, q_ref
+        drive.put(od.QUICK_STOP_OPTION, 0, qs_option)
+        for index, value in ((od.CONTROLWORD, cw), (od.MODES_OF_OPERATION, mode), (od.TORQUE_OFFSET, torque_offset),
+                             (od.TARGET_POSITION, target if target % 2 else small_target),
+                             (od.VELOCITY_OFFSET, velocity_offset)):
+            drive.put(index, 0, value)
+        saved, simcore.core = simcore.core, simcore.core if use_core else None
+        try:
+            drive.on_sync_begin(0.02)
+        finally:
+            simcore.core = saved
+        after.append(repr({name: getattr(drive, name) for name in DRIVE_FIELDS}) + repr(drive.joint.max_motor_torque))
+    assert after[0] == after[1]
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(cw=st.sampled_from([0x0F, 0x1F, 0x3F, 0x10F]), q_ref=st.floats(-3.0, 3.0), delta=st.floats(-0.05, 0.05),
+       velocity_offset=st.integers(-10**6, 10**6), limits=st.booleans(), halt=st.booleans())
+def test_a_csp_sync_begin_in_operation_is_the_python_begin(cw, q_ref, delta, velocity_offset, limits, halt):
+    """In OPERATION ENABLED and CSP, targets near the reference: the interpolation's end point,
+    its speed and the limit flag agree bit for bit (steps beyond the velocity limit and the
+    software position limits included)."""
+    from spacearm.base.canopen import od
+    from spacearm.base.canopen.cia402_defs import State
+    after = []
+    for use_core in (True, False):
+        drive = _drive()
+        k = drive._settings()[0]
+        drive.state, drive.mode, drive.halt, drive.q_ref = State.OPERATION_ENABLED, od.MODE_CSP, halt, q_ref
+        if limits:
+            drive.put(od.SOFTWARE_POSITION_LIMIT, 1, round((q_ref - 0.01) * k))
+            drive.put(od.SOFTWARE_POSITION_LIMIT, 2, round((q_ref + 0.01) * k))
+        for index, value in ((od.CONTROLWORD, cw), (od.MODES_OF_OPERATION, od.MODE_CSP), (od.TORQUE_OFFSET, 100),
+                             (od.TARGET_POSITION, round((q_ref + delta) * k)), (od.VELOCITY_OFFSET, velocity_offset)):
+            drive.put(index, 0, value)
+        saved, simcore.core = simcore.core, simcore.core if use_core else None
+        try:
+            drive.on_sync_begin(0.02)
+        finally:
+            simcore.core = saved
+        after.append(repr({name: getattr(drive, name) for name in DRIVE_FIELDS}))
+    assert after[0] == after[1]
