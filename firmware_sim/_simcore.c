@@ -341,7 +341,100 @@ static PyObject *steady_begin(PyObject *self, PyObject *const *args, Py_ssize_t 
                          q_end, v_ff);
 }
 
+/* cyclic_write(specs, values, entries, last_values, last_stored, params, start) -> stop
+ * CyclicObjects.write's loop from object `start`: per object (specs: (sub, size, signed, key)),
+ * skipped while its value equals the last one written and its stored bytes are still those;
+ * else packed little-endian into entries[i][sub], its param() cache entry dropped (del, so the
+ * cache's epoch moves) and remembered. Stops at the first value that is not an exact int or
+ * does not fit, returning its position for the Python loop (which names the object in its
+ * error); returns len(values) when done. */
+static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 7) {
+        PyErr_Format(PyExc_TypeError, "cyclic_write takes 7 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *specs = args[0], *entries = args[2], *last_values = args[3], *last_stored = args[4],
+             *params = args[5];
+    Py_ssize_t start = PyLong_AsSsize_t(args[6]);
+    if (start == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *values = PySequence_Fast(args[1], "values must be a sequence");
+    if (values == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(values);
+    if (!PyTuple_Check(specs) || !PyList_Check(entries) || !PyList_Check(last_values) || !PyList_Check(last_stored) ||
+        !PyDict_Check(params) || PyTuple_GET_SIZE(specs) < n || PyList_GET_SIZE(entries) < n ||
+        PyList_GET_SIZE(last_values) < n || PyList_GET_SIZE(last_stored) < n || start < 0) {
+        Py_DECREF(values);
+        PyErr_SetString(PyExc_TypeError, "cyclic_write: layout, entries and last values do not match");
+        return NULL;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(values);
+    Py_ssize_t i = start;
+    for (; i < n; i++) {
+        PyObject *value = items[i], *spec = PyTuple_GET_ITEM(specs, i), *entry = PyList_GET_ITEM(entries, i);
+        if (!PyLong_CheckExact(value) || !PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) != 4 || !PyDict_Check(entry))
+            break;
+        PyObject *sub = PyTuple_GET_ITEM(spec, 0), *key = PyTuple_GET_ITEM(spec, 3);
+        int same = PyObject_RichCompareBool(value, PyList_GET_ITEM(last_values, i), Py_EQ);
+        if (same < 0)
+            goto error;
+        if (same) {
+            PyObject *stored = PyDict_GetItemWithError(entry, sub);
+            if (stored == NULL && PyErr_Occurred())
+                goto error;
+            if ((stored == NULL ? Py_None : stored) == PyList_GET_ITEM(last_stored, i))
+                continue;
+        }
+        long size = PyLong_AsLong(PyTuple_GET_ITEM(spec, 1));
+        int is_signed = PyObject_IsTrue(PyTuple_GET_ITEM(spec, 2));
+        if (size < 1 || size > 4 || is_signed < 0) {
+            PyErr_Clear();
+            break;
+        }
+        int overflow = 0;
+        long long v = PyLong_AsLongLongAndOverflow(value, &overflow);
+        if (overflow || (v == -1 && PyErr_Occurred())) {
+            PyErr_Clear();
+            break;                               /* does not fit: the Python loop raises */
+        }
+        long long lo = is_signed ? -(1LL << (8 * size - 1)) : 0;
+        long long hi = is_signed ? (1LL << (8 * size - 1)) - 1 : (1LL << (8 * size)) - 1;
+        if (v < lo || v > hi)
+            break;
+        unsigned char buf[4];
+        unsigned long long u = (unsigned long long)v;
+        for (long b = 0; b < size; b++)
+            buf[b] = (unsigned char)(u >> (8 * b));
+        PyObject *data = PyBytes_FromStringAndSize((const char *)buf, size);
+        if (data == NULL)
+            goto error;
+        if (PyDict_SetItem(entry, sub, data) < 0) {
+            Py_DECREF(data);
+            goto error;
+        }
+        if (PyDict_GET_SIZE(params) > 0) {
+            int cached = PyDict_Contains(params, key);
+            if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0)) {
+                Py_DECREF(data);
+                goto error;
+            }
+        }
+        Py_INCREF(value);
+        PyList_SetItem(last_values, i, value);    /* steals the references */
+        PyList_SetItem(last_stored, i, data);
+    }
+    Py_DECREF(values);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(values);
+    return NULL;
+}
+
 static PyMethodDef methods[] = {
+    {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,
+     "CyclicObjects.write's loop (see the module source)."},
     {"steady_begin", (PyCFunction)(void (*)(void))steady_begin, METH_FASTCALL,
      "A drive's SYNC begin that changes no state (see the module source)."},
     {"rigid_period", (PyCFunction)(void (*)(void))rigid_period, METH_FASTCALL,

@@ -237,3 +237,49 @@ def test_a_csp_sync_begin_in_operation_is_the_python_begin(cw, q_ref, delta, vel
             simcore.core = saved
         after.append(repr({name: getattr(drive, name) for name in DRIVE_FIELDS}))
     assert after[0] == after[1]
+
+
+ops = st.lists(st.one_of(
+    st.tuples(st.just("write"), st.lists(st.one_of(st.integers(-2**33, 2**33), st.integers(-3, 3), st.booleans()),
+                                         min_size=4, max_size=4)),
+    st.tuples(st.just("put"), st.integers(0, 3)), st.tuples(st.just("param"), st.integers(0, 3)),
+    st.tuples(st.just("reset"), st.just(0))), max_size=12)
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(ops)
+def test_cyclic_writes_in_the_core_are_the_python_writes(operations):
+    """od_cyclic.CyclicObjects.write with the core and without, over a sequence of writes (equal
+    values again, bools, values that do not fit), someone else's put(), param() reads and
+    resets: the same stored bytes, the same param() cache and epoch, the same errors."""
+    from spacearm.base.canopen import od
+    from spacearm.firmware_sim.od_cyclic import CyclicObjects
+    objects = [(od.POSITION_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0)]
+    traces = []
+    for use_core in (True, False):
+        drive = _drive()
+        layout = CyclicObjects(drive, objects)
+        epoch = drive._params.epoch       # the drive is reused: its epoch counts on from here
+        trace = []
+        saved, simcore.core = simcore.core, simcore.core if use_core else None
+        try:
+            for op, arg in operations:
+                if op == "write":
+                    try:
+                        layout.write(arg)
+                        trace.append("ok")
+                    except ValueError as exc:
+                        trace.append(str(exc))
+                elif op == "put":
+                    drive.put(*objects[arg], 1)
+                elif op == "param":
+                    trace.append(drive.param(*objects[arg]))
+                else:
+                    drive.power_on()
+                trace.append(([drive.local.data_store.get(i, {}).get(s) for i, s in objects], dict(drive._params),
+                              drive._params.epoch - epoch))
+        finally:
+            simcore.core = saved
+        traces.append(repr(trace))
+    assert traces[0] == traces[1]
