@@ -432,7 +432,107 @@ error:
     return NULL;
 }
 
+/* rpdo_store(codec, data, store, params, on_write, write_rules, aborted, stats) -> None
+ * PdoEngine.on_rpdo's loop over the mapped objects, for a node whose only write callback is its
+ * own write rules: per entry (index, sub, start, end, obj, size_ok, key) the slice data[start:end]
+ * (Python's slicing: a short frame gives a short slice, never a read past its end), counted as
+ * malformed if its size is not the object's; write_rules(index, sub, obj, chunk) for the
+ * communication area, on_write(index, sub, chunk) for application objects; an `aborted`
+ * exception (SdoAbortedError) counts as malformed and the object is not stored; else stored
+ * in store[index][sub] and its param() cache entry dropped. */
+static int count_malformed(PyObject *stats) {
+    PyObject *n = PyObject_GetAttrString(stats, "malformed");
+    if (n == NULL)
+        return -1;
+    PyObject *one = PyLong_FromLong(1);
+    PyObject *m = one ? PyNumber_Add(n, one) : NULL;
+    Py_DECREF(n);
+    Py_XDECREF(one);
+    if (m == NULL)
+        return -1;
+    int rc = PyObject_SetAttrString(stats, "malformed", m);
+    Py_DECREF(m);
+    return rc;
+}
+
+static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *codec = args[0], *data = args[1], *store = args[2], *params = args[3], *on_write = args[4],
+             *write_rules = args[5], *aborted = args[6], *stats = args[7];
+    if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
+        PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(codec); i++) {
+        PyObject *e = PyTuple_GET_ITEM(codec, i);
+        if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 7) {
+            PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 7-tuples");
+            return NULL;
+        }
+        PyObject *index = PyTuple_GET_ITEM(e, 0), *sub = PyTuple_GET_ITEM(e, 1), *obj = PyTuple_GET_ITEM(e, 4),
+                 *key = PyTuple_GET_ITEM(e, 6);
+        Py_ssize_t start = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 2)), end = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 3));
+        long index_value = PyLong_AsLong(index);
+        if (PyErr_Occurred())
+            return NULL;
+        PyObject *chunk = PySequence_GetSlice(data, start, end);
+        if (chunk == NULL)
+            return NULL;
+        int size_ok = PyObject_IsTrue(PyTuple_GET_ITEM(e, 5));
+        if (size_ok <= 0) {
+            Py_DECREF(chunk);
+            if (size_ok < 0 || count_malformed(stats) < 0)
+                return NULL;
+            continue;
+        }
+        PyObject *result = index_value < 0x2000
+            ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
+            : PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL);
+        if (result == NULL) {
+            if (!PyErr_ExceptionMatches(aborted)) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+            PyErr_Clear();
+            Py_DECREF(chunk);
+            if (count_malformed(stats) < 0)
+                return NULL;
+            continue;
+        }
+        Py_DECREF(result);
+        PyObject *entry = PyDict_GetItemWithError(store, index);
+        if (entry == NULL) {
+            if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+            int rc = PyDict_SetItem(store, index, entry);
+            Py_DECREF(entry);                      /* the store holds it */
+            if (rc < 0) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+        }
+        int rc = PyObject_SetItem(entry, sub, chunk);
+        Py_DECREF(chunk);
+        if (rc < 0)
+            return NULL;
+        if (PyDict_GET_SIZE(params) > 0) {
+            int cached = PyDict_Contains(params, key);
+            if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0))
+                return NULL;
+        }
+    }
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
+    {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,
+     "PdoEngine.on_rpdo's loop over the mapped objects (see the module source)."},
     {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,
      "CyclicObjects.write's loop (see the module source)."},
     {"steady_begin", (PyCFunction)(void (*)(void))steady_begin, METH_FASTCALL,

@@ -18,6 +18,7 @@ from canopen.sdo import SdoAbortedError
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen.codes import ABORT_DEVICE_STATE, ABORT_NOT_MAPPABLE, ABORT_PDO_LENGTH
+from spacearm.firmware_sim import simcore
 
 
 @dataclass
@@ -82,9 +83,13 @@ class PdoEngine:
         generic = len(callbacks) != 1 or callbacks[0] != write_rules
         on_write = node.on_write
         params = node._params
+        core = simcore.core
         with node._lock:
             node.in_rpdo = True
             try:
+                if core is not None and not generic:
+                    core.rpdo_store(codec, data, store, params, on_write, write_rules, SdoAbortedError, node.stats)
+                    return
                 for index, sub, start, end, obj, size_ok, key in codec:
                     chunk = data[start:end]
                     if not size_ok:          # mapped size differs from the object's type

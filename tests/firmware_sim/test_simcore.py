@@ -283,3 +283,46 @@ def test_cyclic_writes_in_the_core_are_the_python_writes(operations):
             simcore.core = saved
         traces.append(repr(trace))
     assert traces[0] == traces[1]
+
+
+def _offset_of(drive, cob: int, index: int) -> int | None:
+    offset = 0
+    for mapped, _, size in drive.pdo_engine.rpdos[cob].entries:
+        if mapped == index:
+            return offset
+        offset += size
+    return None
+
+
+@needs_core
+@settings(max_examples=200, deadline=None)
+@given(frames=st.lists(st.tuples(st.integers(0, 7), st.binary(min_size=0, max_size=8)), max_size=10),
+       modes=st.lists(st.sampled_from([8, 1, 3, 0, -1]), min_size=10, max_size=10))
+def test_rpdos_in_the_core_are_stored_as_python_stores_them(frames, modes):
+    """PdoEngine.on_rpdo with the core and without: frames of any length to each RPDO (modes of
+    operation the drive refuses among them): the same stored bytes, param() cache, malformed
+    count and EMCY count."""
+    from spacearm.base.canopen import od
+    traces = []
+    for use_core in (True, False):
+        drive = _drive()
+        drive.nmt_state = od.NMT_STATE_OPERATIONAL
+        cobs = sorted(drive.rpdo_cob_ids())
+        drive.param(od.TARGET_POSITION)
+        counts = drive.stats.malformed, drive.stats.emcy_sent    # the drive is reused: counted from here
+        trace = []
+        saved, simcore.core = simcore.core, simcore.core if use_core else None
+        try:
+            for n, (which, data) in enumerate(frames):
+                cob = cobs[which % len(cobs)]
+                at = _offset_of(drive, cob, od.MODES_OF_OPERATION)
+                if at is not None and len(data) > at and which % 2:     # a mode the drive may refuse
+                    data = data[:at] + modes[n].to_bytes(1, "little", signed=True) + data[at + 1:]
+                drive.on_rpdo(cob, data)
+                trace.append((repr(sorted((i, sorted(v.items())) for i, v in drive.local.data_store.items())),
+                              dict(drive._params), drive.stats.malformed - counts[0],
+                              drive.stats.emcy_sent - counts[1]))
+        finally:
+            simcore.core = saved
+        traces.append(repr(trace))
+    assert traces[0] == traces[1]
