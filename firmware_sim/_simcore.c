@@ -12,6 +12,7 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 #include <math.h>
+#include <string.h>
 
 /* servo kinds the Python side selects (joint_drive.JointDriveNode.period_servo) */
 enum { SERVO_OFF = 0, SERVO_CSP = 1 };
@@ -38,46 +39,58 @@ static double friction_torque(double v, double coulomb, double viscous, double s
     return f;
 }
 
-#define N_ARGS 30
+#define N_DYNAMIC 13
+#define N_CONSTANTS 19
 
-/* rigid_period(fractions, kind, h, bias, quantum, limit, held, gear_ratio, efficiency, external,
- *              amplitude, angle, constant_load, load, coulomb, viscous, stribeck, stribeck_velocity,
- *              inertia, te_amplitude, te_harmonic, te_phase, q, qd, theta, thetad, tau_m,
- *              q_start, q_end, v_ff, torque_ff, w, damping)
- * -> (q, qd, theta, thetad, tau_m, q_ref, v_ref), or None when a measured position is not
- * finite (Python's round() raises there: the caller reruns the period in Python).
+/* rigid_period(fractions, kind, h, held, external, q, qd, theta, thetad, tau_m, q_start, q_end, v_ff,
+ *              torque_ff, constants)
+ * constants (plant.JointModel._core_constants, fixed while the joint's parameters, torque limit
+ * and load stand): (bias, quantum, limit, gear_ratio, efficiency, amplitude, angle,
+ * constant_load, load, coulomb, viscous, stribeck, stribeck_velocity, inertia, te_amplitude,
+ * te_harmonic, te_phase, servo bandwidth Hz, servo damping)
+ * -> (q, qd, theta, thetad, tau_m, q_ref, v_ref), or None when Python's round() or cos() would
+ * raise on a value (a non-finite position): the caller reruns the period in Python.
  * fractions: a list or tuple of floats (the servo's interpolation points). */
 static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     (void)self;
-    if (nargs != N_ARGS + 3) {
-        PyErr_Format(PyExc_TypeError, "rigid_period takes %d arguments (%zd given)", N_ARGS + 3, nargs);
+    if (nargs != N_DYNAMIC + 2) {
+        PyErr_Format(PyExc_TypeError, "rigid_period takes %d arguments (%zd given)", N_DYNAMIC + 2, nargs);
+        return NULL;
+    }
+    PyObject *constants = args[nargs - 1];
+    if (!PyTuple_Check(constants) || PyTuple_GET_SIZE(constants) != N_CONSTANTS) {
+        PyErr_Format(PyExc_TypeError, "rigid_period: %d constants", N_CONSTANTS);
+        return NULL;
+    }
+    long kind = PyLong_AsLong(args[1]);
+    double a[N_DYNAMIC - 1], c[N_CONSTANTS];
+    for (int i = 0; i < N_DYNAMIC - 1; i++)
+        a[i] = PyFloat_AsDouble(args[i + 2]);
+    for (int i = 0; i < N_CONSTANTS; i++)
+        c[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(constants, i));
+    if (PyErr_Occurred())
+        return NULL;
+    if (kind != SERVO_OFF && kind != SERVO_CSP) {
+        PyErr_SetString(PyExc_ValueError, "unknown servo kind");
         return NULL;
     }
     PyObject *fractions = PySequence_Fast(args[0], "fractions must be a sequence");
     if (fractions == NULL)
         return NULL;
-    long kind = PyLong_AsLong(args[1]);
-    double a[N_ARGS + 1];
-    for (int i = 2; i < nargs; i++) {
-        a[i - 2] = PyFloat_AsDouble(args[i]);
-    }
-    if (PyErr_Occurred() || (kind != SERVO_OFF && kind != SERVO_CSP)) {
-        Py_DECREF(fractions);
-        if (!PyErr_Occurred())
-            PyErr_SetString(PyExc_ValueError, "unknown servo kind");
-        return NULL;
-    }
-    const double h = a[0], bias = a[1], quantum = a[2], limit = a[3];
-    const int held = a[4] != 0.0;
-    const double gear_ratio = a[5], efficiency = a[6];
-    const double external = a[7], amplitude = a[8], angle = a[9];
-    const int constant_load = a[10] != 0.0;
-    double load = a[11];
-    const double coulomb = a[12], viscous = a[13], stribeck = a[14], stribeck_velocity = a[15];
-    const double inertia = a[16], te_amplitude = a[17], te_harmonic = a[18], te_phase = a[19];
-    double q = a[20], qd = a[21], theta = a[22], thetad = a[23], tau_m = a[24];
-    const double q_start = a[25], q_end = a[26], v_ff = a[27], torque_ff = a[28], bandwidth_hz = a[29],
-                 damping = a[30];
+    const double h = a[0];
+    const int held = a[1] != 0.0;
+    const double external = a[2];
+    double q = a[3], qd = a[4], theta = a[5], thetad = a[6], tau_m = a[7];
+    const double q_start = a[8], q_end = a[9], v_ff = a[10], torque_ff = a[11];
+    const double bias = c[0], quantum = c[1], limit = c[2], gear_ratio = c[3], efficiency = c[4];
+    const double amplitude = c[5], angle = c[6];
+    const int constant_load = c[7] != 0.0;
+    double load = c[8];
+    const double coulomb = c[9], viscous = c[10], stribeck = c[11], stribeck_velocity = c[12];
+    const double inertia = c[13], te_amplitude = c[14], te_harmonic = c[15], te_phase = c[16];
+    const double bandwidth_hz = c[17], damping = c[18];
+    if (!constant_load && isinf(q + angle))
+        goto python;                /* stepper()'s first load, math.cos(q + angle), raises */
     const double static_ = coulomb + stribeck;       /* effects.static_friction */
     const double w = 2.0 * M_PI * bandwidth_hz;      /* servo_torque's, in its order */
     double q_ref = NAN, v_ref = NAN;
@@ -530,7 +543,87 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
     Py_RETURN_NONE;
 }
 
+/* tpdo_frames(table, counter) -> [(cob_id, bytes), ...] or None
+ * PdoEngine.send_tpdos's due TPDOs sampled: table = ((cob_id, transmission type, dicts, subs),
+ * ...) with each mapped object's data-store dict and subindex (PdoEngine._slots); a TPDO is due
+ * at this SYNC counter when synchronous (0..240) and, beyond type 1, every type-th SYNC. Its
+ * bytes are the mapped objects' stored bytes joined. None when an object is not stored as
+ * bytes (the Python path samples it through SimNode.raw). */
+static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 2 || !PyTuple_Check(args[0])) {
+        PyErr_SetString(PyExc_TypeError, "tpdo_frames(table, counter)");
+        return NULL;
+    }
+    PyObject *table = args[0];
+    long long counter = PyLong_AsLongLong(args[1]);
+    if (counter == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *frames = PyList_New(0);
+    if (frames == NULL)
+        return NULL;
+    for (Py_ssize_t t = 0; t < PyTuple_GET_SIZE(table); t++) {
+        PyObject *row = PyTuple_GET_ITEM(table, t);
+        if (!PyTuple_Check(row) || PyTuple_GET_SIZE(row) != 4 || !PyTuple_Check(PyTuple_GET_ITEM(row, 2)) ||
+            !PyTuple_Check(PyTuple_GET_ITEM(row, 3)) ||
+            PyTuple_GET_SIZE(PyTuple_GET_ITEM(row, 2)) != PyTuple_GET_SIZE(PyTuple_GET_ITEM(row, 3))) {
+            Py_DECREF(frames);
+            PyErr_SetString(PyExc_TypeError, "tpdo_frames: rows are (cob_id, type, dicts, subs)");
+            return NULL;
+        }
+        long long type = PyLong_AsLongLong(PyTuple_GET_ITEM(row, 1));
+        if (type == -1 && PyErr_Occurred()) {
+            Py_DECREF(frames);
+            return NULL;
+        }
+        if (type < 0 || type > 240 || (type > 1 && counter % type))
+            continue;
+        PyObject *dicts = PyTuple_GET_ITEM(row, 2), *subs = PyTuple_GET_ITEM(row, 3);
+        Py_ssize_t n = PyTuple_GET_SIZE(dicts), total = 0;
+        PyObject *parts[64];
+        if (n > 64)
+            goto python;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            PyObject *d = PyTuple_GET_ITEM(dicts, i);
+            PyObject *part = PyDict_Check(d) ? PyDict_GetItemWithError(d, PyTuple_GET_ITEM(subs, i)) : NULL;
+            if (part == NULL || !PyBytes_Check(part)) {
+                if (PyErr_Occurred()) {
+                    Py_DECREF(frames);
+                    return NULL;
+                }
+                goto python;
+            }
+            parts[i] = part;
+            total += PyBytes_GET_SIZE(part);
+        }
+        PyObject *data = PyBytes_FromStringAndSize(NULL, total);
+        if (data == NULL) {
+            Py_DECREF(frames);
+            return NULL;
+        }
+        char *out = PyBytes_AS_STRING(data);
+        for (Py_ssize_t i = 0; i < n; i++) {       /* total is the sum of these sizes */
+            memcpy(out, PyBytes_AS_STRING(parts[i]), PyBytes_GET_SIZE(parts[i]));
+            out += PyBytes_GET_SIZE(parts[i]);
+        }
+        PyObject *frame = PyTuple_Pack(2, PyTuple_GET_ITEM(row, 0), data);
+        Py_DECREF(data);
+        if (frame == NULL || PyList_Append(frames, frame) < 0) {
+            Py_XDECREF(frame);
+            Py_DECREF(frames);
+            return NULL;
+        }
+        Py_DECREF(frame);
+    }
+    return frames;
+python:
+    Py_DECREF(frames);
+    Py_RETURN_NONE;
+}
+
 static PyMethodDef methods[] = {
+    {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
+     "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
     {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,
      "PdoEngine.on_rpdo's loop over the mapped objects (see the module source)."},
     {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,

@@ -289,9 +289,7 @@ class JointDriveNode(SimNode):
             kind = SERVO_CSP
         else:
             return None
-        p = self.joint.params
-        return (kind, self.q_start, self.q_end, self.v_ff, self.torque_ff, p.servo_bandwidth_hz, p.servo_damping,
-                self._end_period)
+        return kind, self.q_start, self.q_end, self.v_ff, self.torque_ff, self._end_period
 
     def _end_period(self, q_ref: float, v_ref: float) -> None:
         self.q_ref, self.v_ref = q_ref, v_ref

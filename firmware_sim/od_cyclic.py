@@ -51,9 +51,8 @@ class CyclicObjects:
             start = core.cyclic_write(self._specs, values, entries, last_values, last_stored, params, 0)
             if start == len(values):
                 return
-        for i, value in enumerate(values):
-            if i < start:
-                continue
+        for i in range(start, len(values)):      # where the core stopped, or all of them
+            value = values[i]
             index, sub, pack = self._layout[i]
             entry = entries[i]
             if value == last_values[i] and entry.get(sub) is last_stored[i]:

@@ -317,25 +317,40 @@ class JointModel:
 
     def _core_period(self, fractions, h: float, law: tuple) -> bool:
         """stepper()'s rigid-gear period in the compiled core, with the servo law `law` =
-        (kind, q_start, q_end, v_ff, torque_ff, bandwidth Hz, damping, finish): finish(q_ref,
-        v_ref) hands the drive its reference at the period's end. False: the core left this
-        period to Python (a value Python's round() or cos() raises on), nothing changed."""
-        p = self.params
-        limit = self.max_motor_torque
-        if p.torque_limit > 0.0:
-            limit = min(limit, p.torque_limit)
-        amplitude = self.load_amplitude
-        out = simcore.core.rigid_period(
-            fractions, law[0], h, p.encoder_bias, p.position_quantum, limit, self.brake_engaged or self.stalled,
-            p.gear_ratio, p.gear_efficiency, self.external_torque, amplitude, p.gravity_angle,
-            p.prismatic or amplitude == 0.0, self._load(), p.coulomb_friction, p.viscous_friction,
-            p.stribeck_friction, p.stribeck_velocity, self.effective_inertia, p.te_amplitude, p.te_harmonic,
-            p.te_phase, self.q, self.qd, self.theta, self.thetad, self.motor_torque, *law[1:7])
+        (kind, q_start, q_end, v_ff, torque_ff, finish): finish(q_ref, v_ref) hands the drive
+        its reference at the period's end. False: the core left this period to Python (a value
+        Python's round() or cos() raises on), nothing changed."""
+        out = simcore.core.rigid_period(fractions, law[0], h, self.brake_engaged or self.stalled, self.external_torque,
+                                        self.q, self.qd, self.theta, self.thetad, self.motor_torque, law[1], law[2],
+                                        law[3], law[4], self._core_constants())
         if out is None:
             return False
         self.q, self.qd, self.theta, self.thetad, self.motor_torque, q_ref, v_ref = out
-        law[7](q_ref, v_ref)
+        law[5](q_ref, v_ref)
         return True
+
+    _core_key: tuple | None = None
+    _core_values: tuple = ()
+
+    def _core_constants(self) -> tuple:
+        """What stepper() reads once a period and the servo law's gains, as the core takes them:
+        worked out again only when the parameters, the drive's torque limit or the load
+        amplitude changed (the same expressions as stepper(), so the same floats)."""
+        key = (self.params, self.max_motor_torque, self.load_amplitude)
+        if self._core_key != key:
+            p = self.params
+            limit = self.max_motor_torque
+            if p.torque_limit > 0.0:
+                limit = min(limit, p.torque_limit)
+            amplitude = self.load_amplitude
+            constant_load = p.prismatic or amplitude == 0.0
+            load = self._load() if constant_load else 0.0    # else the first sub-step works it out
+            self._core_values = (p.encoder_bias, p.position_quantum, limit, p.gear_ratio, p.gear_efficiency, amplitude,
+                                 p.gravity_angle, constant_load, load, p.coulomb_friction, p.viscous_friction,
+                                 p.stribeck_friction, p.stribeck_velocity, self.effective_inertia, p.te_amplitude,
+                                 p.te_harmonic, p.te_phase, p.servo_bandwidth_hz, p.servo_damping)
+            self._core_key = key
+        return self._core_values
 
     def stepper(self, fractions, h: float, coupled: bool = True):
         """substeps() as a generator. `coupled` (a contact world acts between sub-steps): the
