@@ -227,7 +227,7 @@ class JointDriveNode(SimNode):
         return True
 
     def _core_objects(self) -> tuple | None:
-        """(index, sub, bytes, signed) of the objects csp_begin reads from the data store, in
+        """(index, sub, bytes, signed) of the objects steady_begin reads from the data store, in
         its order; None if one is not a plain integer of the EDS (the Python path decodes it)."""
         objects = []
         for index in (od.CONTROLWORD, od.MODES_OF_OPERATION, od.TORQUE_OFFSET, od.TARGET_POSITION,

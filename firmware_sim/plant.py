@@ -329,8 +329,8 @@ class JointModel:
         law[5](q_ref, v_ref)
         return True
 
-    _core_key: tuple | None = None
-    _core_values: tuple = ()
+    _core_key = None      # _core_constants' cache (no annotation: class attributes, not dataclass fields)
+    _core_values = ()
 
     def _core_constants(self) -> tuple:
         """What stepper() reads once a period and the servo law's gains, as the core takes them:
