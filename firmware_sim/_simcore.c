@@ -621,7 +621,96 @@ python:
     Py_RETURN_NONE;
 }
 
+/* statusword bits (base/canopen/cia402_defs.py) */
+#define SW_WARNING (1 << 7)
+#define SW_REMOTE (1 << 9)
+#define SW_TARGET_REACHED (1 << 10)
+#define SW_INTERNAL_LIMIT (1 << 11)
+#define SW_OP_MODE_12 (1 << 12)
+#define SW_FOLLOWING_ERROR (1 << 13)
+/* drive_end's flags */
+#define END_ENERGISED 1
+#define END_ENABLED 2
+#define END_FAULT_REACTION 4
+#define END_QUICK_STOP 8
+#define END_RAMP_FROM_ACTUAL 16
+#define END_LIMIT_ACTIVE 32
+
+/* drive_end(dt, flags, quick_stop_option, v_ref, brake_closing, brake_engage, q_ref, q_measured,
+ *           fe_window, fe_time, fe_timeout_ms, temperature, over_temperature, warn_temperature,
+ *           state_bits, k, rated, q_reported, qd_reported, torque_reported)
+ * JointDriveNode.on_sync_end in CSP for a SYNC that changes no state: the brake's timing
+ * (_stop_and_brake), the following error, the statusword and the actual values (_update_od).
+ * -> (brake_closing, brake engaged, fe_time, following_error, statusword, position, demand,
+ * velocity, torque, following error count, temperature count), or None when the drive leaves
+ * its state (a stop ends, a following-error timeout, over temperature) or a value is not finite:
+ * the Python path runs the SYNC end. */
+static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 20) {
+        PyErr_Format(PyExc_TypeError, "drive_end takes 20 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    long flags = PyLong_AsLong(args[1]), option = PyLong_AsLong(args[2]), state_bits = PyLong_AsLong(args[14]);
+    double a[20];
+    for (int i = 0; i < 20; i++)
+        a[i] = (i == 1 || i == 2 || i == 14) ? 0.0 : PyFloat_AsDouble(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double dt = a[0], v_ref = a[3], brake_engage = a[5], q_ref = a[6], q_measured = a[7], fe_window = a[8];
+    const double fe_timeout_ms = a[10], temperature = a[11], over_temperature = a[12], warn_temperature = a[13];
+    const double k = a[15], rated = a[16];
+    double brake_closing = a[4], fe_time = a[9];
+    const int enabled = (flags & END_ENABLED) != 0;
+    /* _stop_and_brake */
+    int at_rest = v_ref == 0.0 && !(flags & END_RAMP_FROM_ACTUAL);
+    int letting_go = ((flags & END_FAULT_REACTION) && at_rest) ||
+                     ((flags & END_QUICK_STOP) && at_rest && option >= 1 && option <= 4);
+    if (!(flags & END_ENERGISED) || letting_go)
+        brake_closing += dt;
+    else
+        brake_closing = 0.0;
+    int engaged = brake_closing >= brake_engage;
+    if (letting_go && engaged)
+        Py_RETURN_NONE;                     /* the stop ends: the drive leaves operation */
+    /* following error */
+    double err = q_ref - q_measured;
+    int following_error;
+    if (enabled && fabs(err) > fe_window) {
+        fe_time += dt;
+        following_error = 1;
+        if (fe_time * 1000.0 > fe_timeout_ms)
+            Py_RETURN_NONE;                 /* the drive faults */
+    } else {
+        fe_time = 0.0;
+        following_error = 0;
+    }
+    if (temperature > over_temperature)
+        Py_RETURN_NONE;
+    /* _update_od's statusword (CSP) */
+    long sw = state_bits | SW_REMOTE;
+    if (flags & END_LIMIT_ACTIVE)
+        sw |= SW_INTERNAL_LIMIT;
+    if (following_error)
+        sw |= SW_FOLLOWING_ERROR;
+    if (temperature > warn_temperature)
+        sw |= SW_WARNING;
+    if (enabled)
+        sw |= SW_OP_MODE_12;
+    if (!following_error && !enabled)
+        sw |= SW_TARGET_REACHED;
+    long long v[6];
+    if (!to_i32(a[17] * k, &v[0]) || !to_i32(q_ref * k, &v[1]) || !to_i32(a[18] * k, &v[2]) ||
+        !to_i16(a[19] / rated * 1000.0, &v[3]) || !to_i32((q_ref - q_measured) * k, &v[4]) ||
+        !to_i16(temperature * 10.0, &v[5]))
+        Py_RETURN_NONE;
+    return Py_BuildValue("(dOdOlLLLLLL)", brake_closing, engaged ? Py_True : Py_False, fe_time,
+                         following_error ? Py_True : Py_False, sw, v[0], v[1], v[2], v[3], v[4], v[5]);
+}
+
 static PyMethodDef methods[] = {
+    {"drive_end", (PyCFunction)(void (*)(void))drive_end, METH_FASTCALL,
+     "A CSP drive's SYNC end that changes no state (see the module source)."},
     {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
      "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
     {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,

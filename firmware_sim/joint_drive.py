@@ -295,6 +295,9 @@ class JointDriveNode(SimNode):
         self.q_ref, self.v_ref = q_ref, v_ref
 
     def on_sync_end(self, dt: float) -> None:
+        core = simcore.core
+        if core is not None and self.mode == od.MODE_CSP and self._steady_end(core, dt):
+            return
         j = self.joint
         self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
@@ -315,6 +318,26 @@ class JointDriveNode(SimNode):
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
         self._update_od(self._k, self._settings_values[1], q_measured)
+
+    def _steady_end(self, core, dt: float) -> bool:
+        """on_sync_end in the compiled core (CSP), for a SYNC that changes no state: no stop
+        ends, no following-error timeout, no over temperature. False: nothing changed."""
+        j = self.joint
+        state = self.state
+        flags = ((state in ENERGISED) | (state == State.OPERATION_ENABLED) << 1
+                 | (state == State.FAULT_REACTION_ACTIVE) << 2 | (state == State.QUICK_STOP_ACTIVE) << 3
+                 | bool(self._ramp_from_actual) << 4 | bool(self.limit_active) << 5)
+        out = core.drive_end(dt, flags, self._qs_option, self.v_ref, self.brake_closing, BRAKE_ENGAGE_TIME - 1e-9,
+                             self.q_ref, j.q_measured, self._fe_window, self.fe_time,
+                             self.param(od.FOLLOWING_ERROR_TIMEOUT), j.temperature, OVER_TEMPERATURE, WARN_TEMPERATURE,
+                             STATE_BITS[state], self._k, self._settings_values[1], j.q_reported, j.qd_reported,
+                             j.torque_reported)
+        if out is None:
+            return False
+        self.brake_closing, engaged, self.fe_time, self.following_error, sw = out[:5]
+        j.brake_engaged = engaged
+        self._actual_values.write((sw, self.mode, *out[5:], 1 if engaged else 0, self.error_code))
+        return True
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint

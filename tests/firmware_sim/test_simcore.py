@@ -170,6 +170,9 @@ def _drive():
         from spacearm.firmware_sim.plant import Plant
         _DRIVES.append(JointDriveNode(3, EDS_DIR / "joint_drive.eds", "joint_1", Plant.create(1), 0))
     drive = _DRIVES[0]
+    joint = drive.joint           # the plant's joint outlives the example that moved it: at rest at 0
+    joint.q = joint.theta = joint.qd = joint.thetad = joint.motor_torque = joint.torque_reported = 0.0
+    joint.temperature = 25.0
     drive.power_on()
     return drive
 
@@ -360,3 +363,40 @@ def test_tpdos_from_the_core_are_the_python_tpdos(types, syncs, drop, corrupt, f
         drive.stats.dropped_tx = drive.stats.corrupted_tx = 0
         drive._send = drive._send_many = None
     assert traces[0] == traces[1]
+
+
+@needs_core
+@settings(max_examples=400, deadline=None)
+@given(state=st.sampled_from(["SWITCH_ON_DISABLED", "READY_TO_SWITCH_ON", "SWITCHED_ON", "OPERATION_ENABLED",
+                              "QUICK_STOP_ACTIVE", "FAULT_REACTION_ACTIVE", "FAULT"]),
+       v_ref=st.sampled_from([0.0, 0.1, -0.2]), ramp=st.booleans(), brake_closing=st.sampled_from([0.0, 0.01, 0.029999999, 0.05]),
+       error=st.sampled_from([0.0, 1e-4, 0.02, -0.5]), fe_time=st.sampled_from([0.0, 0.02, 0.5, 10.0]),
+       temperature=st.sampled_from([25.0, 76.0, 90.0]), limit=st.booleans(), qs_option=st.sampled_from([0, 1, 2, 5]),
+       q=st.floats(-3.0, 3.0), torque=st.floats(-100.0, 100.0))
+def test_a_sync_end_in_the_core_is_the_python_end(state, v_ref, ramp, brake_closing, error, fe_time, temperature,
+                                                  limit, qs_option, q, torque):
+    """JointDriveNode.on_sync_end in CSP, with the core (a SYNC that changes no state) and
+    without: the drive's state, the brake, the following error and the stored actual values
+    agree bit for bit, and so do the SYNCs the core leaves to Python (a stop ending, a
+    following-error timeout, over temperature: faults, EMCYs)."""
+    from spacearm.base.canopen import od
+    from spacearm.base.canopen.cia402_defs import State
+    after = []
+    for use_core in (True, False):
+        drive = _drive()
+        drive.on_sync_begin(0.02)
+        j = drive.joint
+        j.q, j.temperature, j.torque_reported = q, temperature, torque
+        drive.state, drive.v_ref, drive._ramp_from_actual = State[state], v_ref, ramp
+        drive.brake_closing, drive.q_ref, drive.fe_time, drive.limit_active = brake_closing, q + error, fe_time, limit
+        drive._qs_option = qs_option
+        emcy = drive.stats.emcy_sent
+        saved, simcore.core = simcore.core, simcore.core if use_core else None
+        try:
+            drive.on_sync_end(0.02)
+        finally:
+            simcore.core = saved
+        after.append(repr(({name: getattr(drive, name) for name in DRIVE_FIELDS + ("brake_closing", "following_error")},
+                           j.brake_engaged, sorted((i, sorted(v.items())) for i, v in drive.local.data_store.items()),
+                           drive.stats.emcy_sent - emcy)))
+    assert after[0] == after[1]
