@@ -23,23 +23,54 @@ run): process CPU per cycle as a share of a pure-Python loop's CPU, and as a mul
 PDO floor (the cycle's own frames packed and unpacked with precompiled struct).
 
 Where one lockstep cycle's thread CPU goes (8 nodes, virtual bus, recording on; cProfile own
-time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-28, load
-3.7, profiled 2.49 ms per cycle and 1982 Python calls per cycle, against 14.8 ms and 4085 calls
-at load 11.7 on 2026-11-27 before both halves were made cheaper):
+time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-29, load
+9.0, with the compiled simulator core: profiled 3.39 ms per cycle and 1516 Python calls per
+cycle, against 1982 calls for the tree before it (4.13 ms profiled at load 3.7); cProfile
+inflates every Python call, so the shares overstate per-call parts):
 
 | part of the cycle | ms/cycle | share |
 | --- | --- | --- |
-| Python built-ins and libraries called from all parts (dict.get, min/max/round, struct) | 0.60 | 24 % |
-| simulator: object dictionary, PDO/SDO engine | 0.41 | 17 % |
-| master: PDO decode/encode, device drivers (drivers/cyclic_io, devices) | 0.40 | 16 % |
-| simulator: drives (CiA 402 state machine, servo) | 0.27 | 11 % |
-| bus: transport and frame delivery | 0.21 | 9 % |
-| simulator: plant physics (10 substeps x 6 joints) | 0.18 | 7 % |
-| controller: daemon cycle, modes, planning | 0.16 | 6 % |
-| simulator: SYNC routing | 0.14 | 6 % |
-| controller: recording hand-off (serialisation is in helper processes) | 0.05 | 2 % |
-| controller: supervision | 0.04 | 1.5 % |
-| other spacearm code | 0.03 | 1 % |
+| Python built-ins and libraries called from all parts (dict.get, min/max/round, struct) | 0.84 | 25 % |
+| master: PDO decode/encode, device drivers (drivers/cyclic_io, devices) | 0.67 | 20 % |
+| bus: transport and frame delivery | 0.33 | 10 % |
+| simulator: object dictionary, PDO/SDO engine | 0.30 | 9 % |
+| simulator: drives (CiA 402, servo; what the core leaves and its calls) | 0.27 | 8 % |
+| controller: daemon cycle, modes, planning | 0.26 | 8 % |
+| simulator: plant physics (end effector, F/T, what the core leaves) | 0.21 | 6 % |
+| simulator: SYNC routing | 0.19 | 5.5 % |
+| simulator: compiled core (firmware_sim/_simcore.c) | 0.12 | 3.6 % |
+| controller: recording hand-off (serialisation is in helper processes) | 0.09 | 2.5 % |
+| controller: supervision | 0.06 | 1.9 % |
+| other spacearm code | 0.04 | 1 % |
+
+The compiled core (issue 35; firmware_sim/_simcore.c, a plain C extension built by setup.py,
+optional: firmware_sim/simcore.py, SPACEARM_PURE_PYTHON=1 switches it off) runs the
+simulator's steady SYNC path per node: a drive's SYNC begin that changes no state (its RPDO
+objects read straight from the data store, the CSP interpolation), a rigid joint's whole
+period of sub-steps under its drive's servo law (powered off or CSP), a CSP drive's SYNC end
+that changes no state (brake timing, following error, statusword, actual values),
+CyclicObjects' writes into the store, the RPDO store and the TPDO sampling. Transitions,
+ramps, halt, profile position, faults, elastic gears, coupled plants (the contact cell, the
+Panda's rigid body), fault switches and anything Python would raise on stay on the Python
+path. Both compute the same bits: -ffp-contract=off and Python's order of operations;
+bench/lockstep_fingerprint.py (5 scenarios) identical to the tree before, with the core and
+without; tests/firmware_sim/test_simcore.py compares each function with its Python path on
+random inputs, and two lockstep runs whole.
+Measured 2026-11-29 (this bench, `--lockstep-only --lockstep-cycles 4000`, the tree before and
+this one alternating, 3 rounds, load 6.3-7.9, steal <= 0.2 %), medians of the judged CPU
+shares: 8 nodes virtual recording on 0.739 -> 0.567 % (runs 0.586, 0.739, 0.802 / 0.608,
+0.567, 0.535), recording off 0.609 -> 0.519 %, Panda 0.946 -> 0.864 %, loopback 0.511 ->
+0.509 % (that row is the daemon's process alone, which the core does not touch; the
+simulator's process there 0.423 -> 0.300 ms per cycle); the simulator's part of the
+in-process cycle (medians per run) 0.21-0.25 -> 0.15-0.17 ms. An earlier round (load 2.9-4.6,
+before the SYNC end was compiled): 0.559 -> 0.487 %, 0.557 -> 0.458 %, 0.897 -> 0.747 %. In one
+run with the core switched on and off every 25 cycles (`bench/profile_lockstep.py
+--compare-core`, 4000 cycles, load 9.5) the cycle thread costs 0.368 against 0.454 ms, 0.81x.
+The targets (0.23 / 0.34 / 0.33 %) are still 2-2.6x away: what is left is the master's half
+(drivers' per-joint state machines and dataclasses, the daemon's cycle: now the larger half of
+the in-process cycle), one Python call per frame and receiver in the bus, and the simulator's
+remaining per-node Python (SYNC routing, the F/T sensor and end effector, the calls into the
+core).
 
 Recording (issue 35): the cycle packs one fixed-size record (one precompiled struct) straight
 into a shared-memory ring (controller/recording/record_ring.py) and publishes it with one
@@ -78,7 +109,8 @@ identical off runs differ by up to 50 % in CPU per cycle there (2026-11-27, load
 1.25-1.87 ms); their share is printed for information.
 
 Both halves are per-frame and per-object Python: no single part is the floor, which is why the
-cycle costs ~160x its PDO floor.
+cycle costs ~160x its PDO floor (the compiled core takes the simulator's steady per-node work,
+above; the frames and the master's objects remain).
 
 The master's half (drivers/, base/transport, controller/daemon; 2026-11-28, cProfile own time
 of the master's functions and of the built-ins they call, recording off, load 3.6-4.0):

@@ -3,6 +3,11 @@
     .venv/bin/python bench/profile_lockstep.py [--cycles 1000] [--record] [--top 25]
     .venv/bin/python bench/profile_lockstep.py --transport loopback [--cycles 3000] [--top 15]
 
+    .venv/bin/python bench/profile_lockstep.py --compare-core [--cycles 4000]
+
+--compare-core: the compiled core's saving (firmware_sim/_simcore.c) in one run, the core
+switched on and off every 25 cycles (compare_core).
+
 In-process bus (default): cProfile of N cycles (8 nodes), CPU and Python calls per cycle,
 then the functions by own time (thread CPU clock, so waiting on a loaded machine does not
 show up as cost).
@@ -83,7 +88,9 @@ PARTS = (
 )
 
 
-def part_of(filename: str) -> str:
+def part_of(filename: str, name: str = "") -> str:
+    if "_simcore." in name:        # the compiled core's functions are built-ins to cProfile
+        return "simulator: compiled core (_simcore.c)"
     for part, places in PARTS:
         if any(place in filename for place in places):
             return part
@@ -93,8 +100,8 @@ def part_of(filename: str) -> str:
 def print_parts(stats: pstats.Stats, cycles: int) -> None:
     """Own (exclusive) CPU per cycle grouped by part of the cycle: the bench's docstring table."""
     own: Counter = Counter()
-    for (filename, _line, _name), (_cc, _nc, tottime, _ct, _callers) in stats.stats.items():
-        own[part_of(filename)] += tottime
+    for (filename, _line, name), (_cc, _nc, tottime, _ct, _callers) in stats.stats.items():
+        own[part_of(filename, name)] += tottime
     total = sum(own.values())
     print(f"\n{'part of the cycle (own CPU, profiled)':<48} {'ms/cycle':>9} {'share':>7}")
     for part, seconds in own.most_common():
@@ -171,6 +178,46 @@ def profile_loopback(args) -> None:
     shutil.rmtree(out, ignore_errors=True)
 
 
+def compare_core(args) -> None:
+    """The compiled core's saving inside one lockstep run (8 nodes, virtual bus, recording off,
+    not profiled): the core on and off every 25 cycles in blocks (on, off, off, on), so both
+    see the same machine; the cycle thread's CPU per cycle, medians over the blocks. Both
+    states compute the same bits (tests/firmware_sim/test_simcore.py), so switching mid-run
+    changes nothing else."""
+    import statistics
+    from spacearm.firmware_sim import simcore
+    core = simcore.core
+    if core is None:
+        sys.exit("profile_lockstep: the compiled core is not built (or SPACEARM_PURE_PYTHON=1): nothing to compare")
+    bus = f"virtual:profile-{time.monotonic_ns()}"
+    sim = start_simulator(bus)
+    daemon = Daemon(DaemonOptions(bus=bus, clock="lockstep", period=0.02, api=None, record_dir=None))
+    on, off, segment = [], [], 25
+    try:
+        daemon.start()
+        daemon.run(max_cycles=50)
+        load = os.getloadavg()[0]
+        for _ in range(max(1, args.cycles // (4 * segment))):
+            cpu = {}
+            for state in ("on", "off", "off again", "on again"):
+                simcore.core = core if state.startswith("on") else None
+                started = time.thread_time()
+                daemon.run(max_cycles=segment)
+                cpu[state] = (time.thread_time() - started) / segment
+            on.append((cpu["on"] + cpu["on again"]) / 2)
+            off.append((cpu["off"] + cpu["off again"]) / 2)
+    finally:
+        simcore.core = core
+        daemon.shutdown()
+        sim.stop()
+    ratios = sorted(a / b for a, b in zip(on, off))
+    print(f"{4 * segment * len(on)} lockstep cycles (8 nodes, virtual, recording off), load {load:.1f}-"
+          f"{os.getloadavg()[0]:.1f}: cycle thread CPU per cycle, medians of {len(on)} blocks: compiled core "
+          f"{1e3 * statistics.median(on):.3f} ms, pure Python {1e3 * statistics.median(off):.3f} ms; core / pure "
+          f"{statistics.median(ratios):.3f} (blocks' quartiles {ratios[len(ratios) // 4]:.3f}-"
+          f"{ratios[3 * len(ratios) // 4]:.3f})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cycles", type=int, default=1000)
@@ -178,7 +225,12 @@ def main() -> None:
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--transport", default="virtual", choices=["virtual", "loopback"],
                     help="virtual: in-process bus, cProfile; loopback: simulator in its own process, py-spy")
+    ap.add_argument("--compare-core", action="store_true",
+                    help="no profile: the compiled core on/off every 25 cycles in one run, cycle thread CPU")
     args = ap.parse_args()
+    if args.compare_core:
+        compare_core(args)
+        return
     (profile_loopback if args.transport == "loopback" else profile_in_process)(args)
 
 

@@ -32,6 +32,14 @@ from spacearm.base.canopen.codes import ABORT_VALUE_INVALID
 from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
 from spacearm.firmware_sim.od_cyclic import CyclicObjects
+from spacearm.firmware_sim import simcore
+
+SERVO_OFF, SERVO_CSP = 0, 1    # the servo laws the compiled core runs (_simcore.c)
+# the commands in the order of the core's stay masks (decode_controlword's order), and the masks
+# worked out per (state, quick-stop option): bit i set when command i leaves the state as it is
+_COMMANDS = (Command.DISABLE_VOLTAGE, Command.QUICK_STOP, Command.SHUTDOWN, Command.SWITCH_ON,
+             Command.ENABLE_OPERATION)
+_STAY: dict = {}
 
 OVER_TEMPERATURE = 85.0   # degC: drive faults above this
 WARN_TEMPERATURE = 75.0
@@ -50,7 +58,10 @@ class JointDriveNode(SimNode):
     def __init__(self, node_id, eds_path, name, plant, joint_index: int):
         self.joint = plant.joints[joint_index]
         super().__init__(node_id, eds_path, name, plant)
-        self.joint.controller = self._servo
+        servo = self._servo
+        self.joint.controller = servo
+        self.joint.period_servo = (servo, self._period_law)
+        self._begin_objects = self._core_objects()
         self._actual_values = CyclicObjects(self, [
             (od.STATUSWORD, 0), (od.MODES_OF_OPERATION_DISPLAY, 0), (od.POSITION_ACTUAL, 0), (od.POSITION_DEMAND, 0),
             (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0), (od.FOLLOWING_ERROR_ACTUAL, 0), (od.DRIVE_TEMPERATURE, 0),
@@ -133,6 +144,10 @@ class JointDriveNode(SimNode):
         self._h = dt / self.plant.config.substeps
         k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = self._settings()
         self._k = k
+        core = simcore.core
+        if core is not None and self._begin_objects is not None and not self.local._read_callbacks \
+                and self._steady_begin(core, dt, k, rated, max_motor_torque):
+            return
         cw = self.get(od.CONTROLWORD)
         self._apply_controlword(cw)
         mode = self.get(od.MODES_OF_OPERATION)
@@ -182,6 +197,51 @@ class JointDriveNode(SimNode):
         self.halt = halt
         self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
 
+    def _steady_begin(self, core, dt: float, k: float, rated: float, max_motor_torque: float) -> bool:
+        """The rest of on_sync_begin in the compiled core, for a SYNC that changes no state (no
+        transition, mode change or halt starting; CSP when enabled). False: it was not such a
+        SYNC, nothing changed."""
+        state = self.state
+        enabled = state == State.OPERATION_ENABLED
+        if enabled:
+            limits = (self.param(od.SOFTWARE_POSITION_LIMIT, 1), self.param(od.SOFTWARE_POSITION_LIMIT, 2),
+                      self.param(od.MAX_PROFILE_VELOCITY))
+        else:
+            limits = (0, 0, 0)
+        stay = _STAY.get((state, self._qs_option))
+        if stay is None:
+            stay = _STAY[(state, self._qs_option)] = sum(1 << i for i, command in enumerate(_COMMANDS)
+                                                          if next_state(state, command, self._qs_option) == state)
+        steady = core.steady_begin(self.local.data_store, self._begin_objects, self.q_ref, dt, k, *limits, rated,
+                                   enabled, state == State.FAULT, self.mode, stay, self.halt)
+        if steady is None:
+            return False
+        cw, self.halt, self.torque_ff, self.limit_active, q_end, v_ff = steady
+        if enabled:
+            self.q_end, self.v_ff = q_end, v_ff
+        self.prev_cw = cw
+        self.joint.max_motor_torque = max_motor_torque
+        self.q_start = self.q_ref
+        self.prev_cw_setpoint = bool(cw & CW_NEW_SETPOINT)
+        self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
+        return True
+
+    def _core_objects(self) -> tuple | None:
+        """(index, sub, bytes, signed) of the objects steady_begin reads from the data store, in
+        its order; None if one is not a plain integer of the EDS (the Python path decodes it)."""
+        objects = []
+        for index in (od.CONTROLWORD, od.MODES_OF_OPERATION, od.TORQUE_OFFSET, od.TARGET_POSITION,
+                      od.VELOCITY_OFFSET):
+            try:
+                _, codec, integer = self._codec(index, 0)
+            except SdoAbortedError:          # not in this EDS
+                return None
+            kind = codec.format[-1:] if codec is not None and integer else ""
+            if kind not in ("b", "B", "h", "H", "l", "L") or codec.size not in (1, 2, 4):
+                return None
+            objects.append((index, 0, codec.size, kind.islower()))
+        return tuple(objects)
+
     def _start_ramp(self, quick: bool) -> None:
         self.ramp_quick = quick
         self._ramp_from_actual = True
@@ -217,7 +277,27 @@ class JointDriveNode(SimNode):
                     self.q_ref += self.v_ref * h
         return servo_torque(self.joint, self.q_ref, self.v_ref, q_meas, qd) + self.torque_ff
 
+    def _period_law(self) -> tuple | None:
+        """_servo() for the whole period as the compiled core runs it (plant.JointModel.
+        _core_period): powered off, or CSP in operation without halt; None for the states the
+        core does not model (ramps, halt, profile position), which _servo() runs sub-step by
+        sub-step."""
+        state = self.state
+        if state not in ENERGISED:
+            kind = SERVO_OFF
+        elif state == State.OPERATION_ENABLED and not self.halt and self.mode == od.MODE_CSP:
+            kind = SERVO_CSP
+        else:
+            return None
+        return kind, self.q_start, self.q_end, self.v_ff, self.torque_ff, self._end_period
+
+    def _end_period(self, q_ref: float, v_ref: float) -> None:
+        self.q_ref, self.v_ref = q_ref, v_ref
+
     def on_sync_end(self, dt: float) -> None:
+        core = simcore.core
+        if core is not None and self.mode == od.MODE_CSP and self._steady_end(core, dt):
+            return
         j = self.joint
         self._stop_and_brake(dt)
         # following error (CSP and PP while enabled)
@@ -238,6 +318,26 @@ class JointDriveNode(SimNode):
             self.target_reached = (self.q_ref == self.pp_target and
                                    abs(self.pp_target - j.q_measured) * self._k <= self.param(od.POSITION_WINDOW))
         self._update_od(self._k, self._settings_values[1], q_measured)
+
+    def _steady_end(self, core, dt: float) -> bool:
+        """on_sync_end in the compiled core (CSP), for a SYNC that changes no state: no stop
+        ends, no following-error timeout, no over temperature. False: nothing changed."""
+        j = self.joint
+        state = self.state
+        flags = ((state in ENERGISED) | (state == State.OPERATION_ENABLED) << 1
+                 | (state == State.FAULT_REACTION_ACTIVE) << 2 | (state == State.QUICK_STOP_ACTIVE) << 3
+                 | bool(self._ramp_from_actual) << 4 | bool(self.limit_active) << 5)
+        out = core.drive_end(dt, flags, self._qs_option, self.v_ref, self.brake_closing, BRAKE_ENGAGE_TIME - 1e-9,
+                             self.q_ref, j.q_measured, self._fe_window, self.fe_time,
+                             self.param(od.FOLLOWING_ERROR_TIMEOUT), j.temperature, OVER_TEMPERATURE, WARN_TEMPERATURE,
+                             STATE_BITS[state], self._k, self._settings_values[1], j.q_reported, j.qd_reported,
+                             j.torque_reported)
+        if out is None:
+            return False
+        self.brake_closing, engaged, self.fe_time, self.following_error, sw = out[:5]
+        j.brake_engaged = engaged
+        self._actual_values.write((sw, self.mode, *out[5:], 1 if engaged else 0, self.error_code))
+        return True
 
     def _stop_and_brake(self, dt: float) -> None:
         """End a finished ramp and time the brake: a controlled stop at rest holds the joint
@@ -280,6 +380,13 @@ class JointDriveNode(SimNode):
                 sw |= SW_OP_MODE_12
             if self.target_reached:
                 sw |= SW_TARGET_REACHED
+        core = simcore.core
+        if core is not None:
+            counts = core.actual_values(k, rated, j.q_reported, self.q_ref, j.qd_reported, j.torque_reported,
+                                        q_measured, j.temperature)
+            if counts is not None:      # None: a value round() raises on, below
+                self._actual_values.write((sw, self.mode, *counts, 1 if j.brake_engaged else 0, self.error_code))
+                return
         self._actual_values.write((
             sw, self.mode,
             _i32(round(j.q_reported * k)),     # late by any feedback latency

@@ -12,6 +12,10 @@ from __future__ import annotations
 
 import struct
 
+from spacearm.firmware_sim import simcore
+
+_UNSET = object()      # the last value of an object not written since the store was emptied
+
 
 class CyclicObjects:
     def __init__(self, node, objects: list[tuple[int, int]]):
@@ -23,25 +27,35 @@ class CyclicObjects:
                 raise ValueError(f"0x{index:04X}:{sub:02X}: not an integer object, written with put()")
             layout.append((index, sub, codec.pack))
         self._layout = tuple(layout)
-        self._values: list = [None] * len(layout)
+        self._values: list = [_UNSET] * len(layout)
         self._stored: list = [None] * len(layout)
         self._generation = -1
         self._entries: list = []      # the store's dict of each object's index, while the store lasts
+        # the compiled core's layout (_simcore.c cyclic_write): (sub, bytes, signed, cache key)
+        self._specs = tuple((sub, pack.__self__.size, pack.__self__.format[-1].islower(), (index, sub))
+                            for index, sub, pack in layout)
 
     def write(self, values) -> None:
         """The objects' new values, in the order given at construction."""
         node = self._node
-        store = node.local.data_store
         params = node._params
-        if self._generation != node.store_generation:    # a reset emptied the store
-            self._generation, self._entries = node.store_generation, [None] * len(self._layout)
+        if self._generation != node.store_generation:    # a reset emptied the store: write every object
+            store = node.local.data_store
+            self._generation = node.store_generation
+            self._entries = [store.setdefault(index, {}) for index, _, _ in self._layout]
+            self._values[:] = [_UNSET] * len(self._layout)
         entries, last_values, last_stored = self._entries, self._values, self._stored
-        for i, value in enumerate(values):
+        start = 0
+        core = simcore.core
+        if core is not None:
+            start = core.cyclic_write(self._specs, values, entries, last_values, last_stored, params, 0)
+            if start == len(values):
+                return
+        for i in range(start, len(values)):      # where the core stopped, or all of them
+            value = values[i]
             index, sub, pack = self._layout[i]
             entry = entries[i]
-            if entry is None:
-                entry = entries[i] = store.setdefault(index, {})
-            elif value == last_values[i] and entry.get(sub) is last_stored[i]:
+            if value == last_values[i] and entry.get(sub) is last_stored[i]:
                 continue
             try:
                 data = pack(int(value))

@@ -18,6 +18,7 @@ from canopen.sdo import SdoAbortedError
 
 from spacearm.base.canopen import od
 from spacearm.base.canopen.codes import ABORT_DEVICE_STATE, ABORT_NOT_MAPPABLE, ABORT_PDO_LENGTH
+from spacearm.firmware_sim import simcore
 
 
 @dataclass
@@ -82,9 +83,13 @@ class PdoEngine:
         generic = len(callbacks) != 1 or callbacks[0] != write_rules
         on_write = node.on_write
         params = node._params
+        core = simcore.core
         with node._lock:
             node.in_rpdo = True
             try:
+                if core is not None and not generic:
+                    core.rpdo_store(codec, data, store, params, on_write, write_rules, SdoAbortedError, node.stats)
+                    return
                 for index, sub, start, end, obj, size_ok, key in codec:
                     chunk = data[start:end]
                     if not size_ok:          # mapped size differs from the object's type
@@ -139,6 +144,17 @@ class PdoEngine:
             return
         tpdos = self._tpdo_table()
         counter = self.sync_counter
+        core, faults = simcore.core, node.faults
+        if core is not None and self._plain_cobs and not faults.drop_tx and not faults.corrupt_tx \
+                and not node.local._read_callbacks:
+            table = self._core_table(tpdos)
+            if table is not None:
+                with node._lock:
+                    frames = core.tpdo_frames(table, counter)
+                if frames is not None:
+                    if frames:
+                        node.send_frames(frames)
+                    return
         due = [pdo for pdo in tpdos
                if 0 <= pdo.transmission_type <= 240 and not (pdo.transmission_type > 1 and counter % pdo.transmission_type)]
         if due:
@@ -149,6 +165,21 @@ class PdoEngine:
             else:                        # a TPDO on the SDO answer's COB-ID: send() counts its aborts
                 for frame in frames:
                     node.send(*frame)
+
+    _core_key: tuple | None = None
+    _core_rows: tuple | None = None
+
+    def _core_table(self, tpdos: list[Pdo]) -> tuple | None:
+        """The compiled core's view of the TPDOs (cob_id, transmission type, _slots()), kept while
+        the table and the data store last; None while a mapped object is not stored yet."""
+        key = (tpdos, self.node.store_generation)
+        if self._core_key is None or self._core_key[0] is not tpdos or self._core_key[1] != key[1]:
+            try:
+                self._core_rows = tuple((pdo.cob_id, pdo.transmission_type, *self._slots(pdo)) for pdo in tpdos)
+            except KeyError:
+                return None
+            self._core_key = key
+        return self._core_rows
 
     def _tpdo_table(self) -> list[Pdo]:
         if self.tpdos is None:

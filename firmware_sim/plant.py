@@ -35,6 +35,7 @@ from spacearm.firmware_sim.geometry import GeometryErrors
 from spacearm.firmware_sim.laser_ranger import LaserTarget
 from spacearm.firmware_sim.contact.config import ContactConfig
 from spacearm.firmware_sim.rigid_body_config import RigidBodyParams
+from spacearm.firmware_sim import simcore
 
 ARCSEC = math.pi / (180.0 * 3600.0)
 
@@ -203,6 +204,9 @@ class JointModel:
     temperature: float = 25.0
     external_torque: float = 0.0       # N m at the joint from the environment (contact, later)
     controller: Controller | None = None
+    # (the controller, a function giving its servo law for the whole period as the compiled
+    # core takes it, or None when the core does not model its state): set by a drive
+    period_servo: tuple | None = None
     max_motor_torque: float = math.inf  # drive torque limit, N m motor side
     load_amplitude: float = 0.0        # N m (N) gravity/payload load amplitude (set by Plant.create)
     theta: float = math.nan            # motor angle in joint units (gear output before play/error)
@@ -301,9 +305,52 @@ class JointModel:
         interpolation point), in order. Plant.step hands a joint the whole period at once: a
         rigid gear is integrated on local variables with the constants read once, the same
         arithmetic in the same order as one substep() at a time (issue 35: 60 method calls
-        and 80 property reads a cycle were a tenth of the simulator's CPU)."""
+        and 80 property reads a cycle were a tenth of the simulator's CPU). With the compiled
+        core (simcore.py) a rigid gear's period under a servo law the core models is one call."""
+        servo = self.period_servo
+        if simcore.core is not None and servo is not None and servo[0] is self.controller and not self.two_mass:
+            law = servo[1]()
+            if law is not None and self._core_period(fractions, h, law):
+                return
         for _ in self.stepper(fractions, h, coupled=False):
             pass
+
+    def _core_period(self, fractions, h: float, law: tuple) -> bool:
+        """stepper()'s rigid-gear period in the compiled core, with the servo law `law` =
+        (kind, q_start, q_end, v_ff, torque_ff, finish): finish(q_ref, v_ref) hands the drive
+        its reference at the period's end. False: the core left this period to Python (a value
+        Python's round() or cos() raises on), nothing changed."""
+        out = simcore.core.rigid_period(fractions, law[0], h, self.brake_engaged or self.stalled, self.external_torque,
+                                        self.q, self.qd, self.theta, self.thetad, self.motor_torque, law[1], law[2],
+                                        law[3], law[4], self._core_constants())
+        if out is None:
+            return False
+        self.q, self.qd, self.theta, self.thetad, self.motor_torque, q_ref, v_ref = out
+        law[5](q_ref, v_ref)
+        return True
+
+    _core_key = None      # _core_constants' cache (no annotation: class attributes, not dataclass fields)
+    _core_values = ()
+
+    def _core_constants(self) -> tuple:
+        """What stepper() reads once a period and the servo law's gains, as the core takes them:
+        worked out again only when the parameters, the drive's torque limit or the load
+        amplitude changed (the same expressions as stepper(), so the same floats)."""
+        key = (self.params, self.max_motor_torque, self.load_amplitude)
+        if self._core_key != key:
+            p = self.params
+            limit = self.max_motor_torque
+            if p.torque_limit > 0.0:
+                limit = min(limit, p.torque_limit)
+            amplitude = self.load_amplitude
+            constant_load = p.prismatic or amplitude == 0.0
+            load = self._load() if constant_load else 0.0    # else the first sub-step works it out
+            self._core_values = (p.encoder_bias, p.position_quantum, limit, p.gear_ratio, p.gear_efficiency, amplitude,
+                                 p.gravity_angle, constant_load, load, p.coulomb_friction, p.viscous_friction,
+                                 p.stribeck_friction, p.stribeck_velocity, self.effective_inertia, p.te_amplitude,
+                                 p.te_harmonic, p.te_phase, p.servo_bandwidth_hz, p.servo_damping)
+            self._core_key = key
+        return self._core_values
 
     def stepper(self, fractions, h: float, coupled: bool = True):
         """substeps() as a generator. `coupled` (a contact world acts between sub-steps): the

@@ -27,6 +27,14 @@ if [ "$(uname -s)" = Linux ] && [ "$(uname -m)" = x86_64 ] && [ "${SPACEARM_NO_V
     command -v make >/dev/null 2>&1 || need_apt+=(make)
     dpkg -s libc6-dev >/dev/null 2>&1 || need_apt+=(libc6-dev)
 fi
+# The simulator's compiled core (setup.py builds firmware_sim/_simcore.c) needs a C compiler and
+# Python's headers; where it cannot be built the install still succeeds and runs pure Python.
+command -v cc >/dev/null 2>&1 || need_apt+=(gcc libc6-dev)
+if ! command -v python3 >/dev/null 2>&1; then
+    need_apt+=(python3-dev)
+elif [ ! -f "$(python3 -c 'import sysconfig; print(sysconfig.get_paths()["include"])')/Python.h" ]; then
+    need_apt+=(python3-dev)
+fi
 # The browser console (console/web): three.js from Debian (served from /usr/share/javascript,
 # never fetched at run time) and Chromium for its end-to-end test (Playwright drives it).
 dpkg -s libjs-three >/dev/null 2>&1 || need_apt+=(libjs-three)
@@ -43,10 +51,21 @@ if [ ! -x "$VENV/bin/python" ]; then
     echo "[bootstrap] creating virtual environment in $VENV"
     python3 -m venv "$VENV"
 fi
-# Reinstall only when the dependency list changed.
+# Reinstall only when the dependency list changed; build the compiled core again (the editable
+# install builds it into firmware_sim/) when its source changed.
+core_status() {
+    (cd "$ROOT" && "$VENV/bin/python" -c "from spacearm.firmware_sim.simcore import core
+print('[bootstrap] compiled core:', 'built' if core is not None else 'not built, the pure-Python path runs')") || true
+}
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
     echo "[bootstrap] installing spacearm and its dependencies"
     "$VENV/bin/python" -m pip install -q --upgrade pip
     "$VENV/bin/python" -m pip install -q -e "$ROOT[dev]"
     touch "$STAMP"
+    core_status
+elif [ "$ROOT/setup.py" -nt "$STAMP" ] || [ "$ROOT/firmware_sim/_simcore.c" -nt "$STAMP" ]; then
+    echo "[bootstrap] building the compiled core"
+    "$VENV/bin/python" -m pip install -q --no-deps -e "$ROOT"
+    touch "$STAMP"
+    core_status
 fi

@@ -1,0 +1,731 @@
+/* Compiled core of the simulator's SYNC hot path (issue 35): a drive's SYNC begin that changes no state
+ * (its RPDO objects read straight from the data store), a rigid-gear joint's whole SYNC period
+ * of sub-steps with its drive's servo law, and the drive's actual values as integers.
+ *
+ * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
+ * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
+ * operations in the same order, built with -ffp-contract=off (no fused multiply-add), the
+ * same libm calls Python's math module makes (cos, sin, exp, pow), and Python's round()
+ * (half to even, nearbyint in the default rounding mode). Anything the Python path would
+ * raise on (round() of NaN or infinity) is handed back to Python, which raises it.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <math.h>
+#include <string.h>
+
+/* servo kinds the Python side selects (joint_drive.JointDriveNode.period_servo) */
+enum { SERVO_OFF = 0, SERVO_CSP = 1 };
+
+static double py_round(double x) {
+    /* round() of a float in CPython: half away from zero, then back to even on a tie */
+    double r = round(x);
+    if (fabs(x - r) == 0.5)
+        r = 2.0 * round(x / 2.0);
+    return r;
+}
+
+static double friction_torque(double v, double coulomb, double viscous, double stribeck, double stribeck_velocity) {
+    double f = viscous * v;
+    if (v != 0.0 && (coulomb > 0.0 || stribeck > 0.0)) {
+        double level = coulomb;
+        if (stribeck > 0.0) {
+            /* Python's x ** 2 on a float is pow(|x|, 2) (float_pow negates odd powers only) */
+            double r = v / stribeck_velocity;
+            level += stribeck * exp(-pow(fabs(r), 2.0));
+        }
+        f += copysign(level, v);
+    }
+    return f;
+}
+
+#define N_DYNAMIC 13
+#define N_CONSTANTS 19
+
+/* rigid_period(fractions, kind, h, held, external, q, qd, theta, thetad, tau_m, q_start, q_end, v_ff,
+ *              torque_ff, constants)
+ * constants (plant.JointModel._core_constants, fixed while the joint's parameters, torque limit
+ * and load stand): (bias, quantum, limit, gear_ratio, efficiency, amplitude, angle,
+ * constant_load, load, coulomb, viscous, stribeck, stribeck_velocity, inertia, te_amplitude,
+ * te_harmonic, te_phase, servo bandwidth Hz, servo damping)
+ * -> (q, qd, theta, thetad, tau_m, q_ref, v_ref), or None when Python's round() or cos() would
+ * raise on a value (a non-finite position): the caller reruns the period in Python.
+ * fractions: a list or tuple of floats (the servo's interpolation points). */
+static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != N_DYNAMIC + 2) {
+        PyErr_Format(PyExc_TypeError, "rigid_period takes %d arguments (%zd given)", N_DYNAMIC + 2, nargs);
+        return NULL;
+    }
+    PyObject *constants = args[nargs - 1];
+    if (!PyTuple_Check(constants) || PyTuple_GET_SIZE(constants) != N_CONSTANTS) {
+        PyErr_Format(PyExc_TypeError, "rigid_period: %d constants", N_CONSTANTS);
+        return NULL;
+    }
+    long kind = PyLong_AsLong(args[1]);
+    double a[N_DYNAMIC - 1], c[N_CONSTANTS];
+    for (int i = 0; i < N_DYNAMIC - 1; i++)
+        a[i] = PyFloat_AsDouble(args[i + 2]);
+    for (int i = 0; i < N_CONSTANTS; i++)
+        c[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(constants, i));
+    if (PyErr_Occurred())
+        return NULL;
+    if (kind != SERVO_OFF && kind != SERVO_CSP) {
+        PyErr_SetString(PyExc_ValueError, "unknown servo kind");
+        return NULL;
+    }
+    PyObject *fractions = PySequence_Fast(args[0], "fractions must be a sequence");
+    if (fractions == NULL)
+        return NULL;
+    const double h = a[0];
+    const int held = a[1] != 0.0;
+    const double external = a[2];
+    double q = a[3], qd = a[4], theta = a[5], thetad = a[6], tau_m = a[7];
+    const double q_start = a[8], q_end = a[9], v_ff = a[10], torque_ff = a[11];
+    const double bias = c[0], quantum = c[1], limit = c[2], gear_ratio = c[3], efficiency = c[4];
+    const double amplitude = c[5], angle = c[6];
+    const int constant_load = c[7] != 0.0;
+    double load = c[8];
+    const double coulomb = c[9], viscous = c[10], stribeck = c[11], stribeck_velocity = c[12];
+    const double inertia = c[13], te_amplitude = c[14], te_harmonic = c[15], te_phase = c[16];
+    const double bandwidth_hz = c[17], damping = c[18];
+    if (!constant_load && isinf(q + angle))
+        goto python;                /* stepper()'s first load, math.cos(q + angle), raises */
+    const double static_ = coulomb + stribeck;       /* effects.static_friction */
+    const double w = 2.0 * M_PI * bandwidth_hz;      /* servo_torque's, in its order */
+    double q_ref = NAN, v_ref = NAN;
+
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fractions);
+    PyObject **items = PySequence_Fast_ITEMS(fractions);
+    if (n == 0)
+        goto python;
+    double held_measured = 0.0;
+    if (held) {
+        double x = q + bias;
+        if (quantum <= 0.0) {
+            held_measured = x;
+        } else {
+            double r = x / quantum;
+            if (!isfinite(r))
+                goto python;
+            held_measured = py_round(r) * quantum;
+        }
+    }
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double s = PyFloat_AsDouble(items[i]);
+        if (s == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fractions);
+            return NULL;
+        }
+        double q_meas;
+        if (held) {
+            q_meas = held_measured;
+        } else {
+            double x = q + bias;
+            if (quantum <= 0.0) {
+                q_meas = x;
+            } else {
+                double r = x / quantum;
+                if (!isfinite(r))
+                    goto python;
+                q_meas = py_round(r) * quantum;
+            }
+        }
+        /* the drive's servo (JointDriveNode._servo + servo_torque) */
+        if (kind == SERVO_OFF) {
+            q_ref = q_meas;
+            v_ref = 0.0;
+            tau_m = 0.0;
+        } else {
+            q_ref = q_start + s * (q_end - q_start);
+            v_ref = v_ff;
+            double tau_joint = inertia * (w * w * (q_ref - q_meas) + 2.0 * damping * w * (v_ref - qd));
+            tau_m = tau_joint / gear_ratio + torque_ff;
+        }
+        tau_m = tau_m < limit ? tau_m : limit;
+        tau_m = tau_m > -limit ? tau_m : -limit;
+        if (held) {
+            qd = thetad = 0.0;
+            continue;
+        }
+        double drive = tau_m * gear_ratio * efficiency;
+        if (!constant_load) {
+            if (!isfinite(q + angle))
+                goto python;                     /* math.cos raises on an infinity */
+            load = amplitude * cos(q + angle);
+        }
+        double tau = drive - external - load;
+        double v = thetad;
+        if (fabs(v) > 1e-6 || static_ == 0.0) {
+            tau -= friction_torque(v, coulomb, viscous, stribeck, stribeck_velocity);
+        } else if (fabs(tau) <= static_) {
+            tau = 0.0;
+            thetad = 0.0;
+        } else {
+            tau -= copysign(static_, tau);
+        }
+        thetad += tau / inertia * h;
+        theta += thetad * h;
+        if (te_amplitude > 0.0) {
+            /* transmission_error and its slope (effects/transmission.py); math.sin raises on an infinity */
+            double wt = te_harmonic * gear_ratio;
+            double phase = wt * theta + te_phase;
+            if (!isfinite(phase))
+                goto python;
+            q = theta + te_amplitude * sin(phase);
+            qd = thetad * (1.0 + te_amplitude * wt * cos(phase));
+        } else {
+            q = theta;
+            qd = thetad;
+        }
+    }
+    Py_DECREF(fractions);
+    return Py_BuildValue("(ddddddd)", q, qd, theta, thetad, tau_m, q_ref, v_ref);
+python:
+    Py_DECREF(fractions);
+    Py_RETURN_NONE;
+}
+
+static int to_i32(double x, long long *out) {
+    /* _i32(round(x)): 0 when x is not finite (Python's round() raises: the caller's path) */
+    if (!isfinite(x))
+        return 0;
+    double r = py_round(x);
+    if (r > 2147483647.0)
+        r = 2147483647.0;
+    if (r < -2147483648.0)
+        r = -2147483648.0;
+    *out = (long long)r;
+    return 1;
+}
+
+static int to_i16(double x, long long *out) {
+    /* max(-32768, min(32767, round(x))) */
+    if (!isfinite(x))
+        return 0;
+    double r = py_round(x);
+    if (r > 32767.0)
+        r = 32767.0;
+    if (r < -32768.0)
+        r = -32768.0;
+    *out = (long long)r;
+    return 1;
+}
+
+/* actual_values(k, rated, q_reported, q_ref, qd_reported, torque_reported, q_measured, temperature)
+ * -> (position, demand, velocity, torque, following error, temperature) as the drive's objects
+ * count them (JointDriveNode._update_od), or None when a value is not finite. */
+static PyObject *actual_values(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "actual_values takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    double a[8];
+    for (int i = 0; i < 8; i++)
+        a[i] = PyFloat_AsDouble(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double k = a[0], rated = a[1];
+    long long v[6];
+    if (!to_i32(a[2] * k, &v[0]) || !to_i32(a[3] * k, &v[1]) || !to_i32(a[4] * k, &v[2]) ||
+        !to_i16(a[5] / rated * 1000.0, &v[3]) || !to_i32((a[3] - a[6]) * k, &v[4]) ||
+        !to_i16(a[7] * 10.0, &v[5]))
+        Py_RETURN_NONE;
+    return Py_BuildValue("(LLLLLL)", v[0], v[1], v[2], v[3], v[4], v[5]);
+}
+
+/* One stored object's value: store[index][sub] as the little-endian integer of `size` bytes
+ * (signed or not) the object's type says. 0: not stored, or stored with another length (the
+ * Python path decodes what SimNode.get() would). */
+static int stored_int(PyObject *store, PyObject *spec, long long *out) {
+    if (!PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) != 4)
+        return 0;
+    PyObject *entry = PyDict_GetItemWithError(store, PyTuple_GET_ITEM(spec, 0));
+    if (entry == NULL || !PyDict_Check(entry))
+        return 0;
+    PyObject *data = PyDict_GetItemWithError(entry, PyTuple_GET_ITEM(spec, 1));
+    if (data == NULL || !PyBytes_Check(data))
+        return 0;
+    long size = PyLong_AsLong(PyTuple_GET_ITEM(spec, 2));
+    int is_signed = PyObject_IsTrue(PyTuple_GET_ITEM(spec, 3));
+    if (size < 1 || size > 4 || is_signed < 0 || PyBytes_GET_SIZE(data) != size)
+        return 0;
+    const unsigned char *b = (const unsigned char *)PyBytes_AS_STRING(data);
+    unsigned long long u = 0;
+    for (long i = 0; i < size; i++)          /* exactly `size` bytes: the length was checked */
+        u |= (unsigned long long)b[i] << (8 * i);
+    long long v = (long long)u;
+    if (is_signed && (u >> (8 * size - 1)) & 1)
+        v -= 1LL << (8 * size);
+    *out = v;
+    return 1;
+}
+
+#define CW_FAULT_RESET 0x0080
+#define CW_NEW_SETPOINT 0x0010
+#define CW_HALT 0x0100
+#define MODE_PROFILE_POSITION 1
+#define MODE_CSP 8
+
+/* decode_controlword's command, as the bit of a stay mask: disable voltage, quick stop,
+ * shutdown, switch on, enable operation */
+static int command_of(long long cw) {
+    if (!(cw & 0x02))
+        return 0;
+    if (!(cw & 0x04))
+        return 1;
+    if (!(cw & 0x01))
+        return 2;
+    if (!(cw & 0x08))
+        return 3;
+    return 4;
+}
+
+/* steady_begin(store, objects, q_ref, dt, k, lo, hi, vmax, rated, enabled, fault, mode, stay_mask, halt)
+ * JointDriveNode.on_sync_begin for a SYNC that changes no state: no fault reset bit, a command
+ * that leaves the drive's state where it is (stay_mask: bit c for command c, from next_state;
+ * `fault`: the drive is in FAULT, where only a reset acts), no mode change, no halt starting;
+ * in OPERATION ENABLED only CSP (`mode` is the drive's mode, `enabled` its state).
+ * store: the node's data store ({index: {sub: bytes}}); objects: (index, sub, size, signed) of
+ * the controlword, modes of operation, torque offset, target position and velocity offset;
+ * lo, hi, vmax: the software limits' and the maximum profile velocity's counts (enabled only).
+ * -> (controlword, halt, torque_ff, limit_active, q_end, v_ff) (the last two None unless
+ * enabled), or None for any other SYNC: the Python path runs it. */
+static PyObject *steady_begin(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 14) {
+        PyErr_Format(PyExc_TypeError, "steady_begin takes 14 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *store = args[0], *objects = args[1];
+    if (!PyDict_Check(store) || !PyTuple_Check(objects) || PyTuple_GET_SIZE(objects) != 5) {
+        PyErr_SetString(PyExc_TypeError, "steady_begin: a dict and five object specs");
+        return NULL;
+    }
+    double a[7];
+    for (int i = 0; i < 7; i++)
+        a[i] = PyFloat_AsDouble(args[i + 2]);
+    int enabled = PyObject_IsTrue(args[9]), fault = PyObject_IsTrue(args[10]);
+    long own_mode = PyLong_AsLong(args[11]), stay_mask = PyLong_AsLong(args[12]);
+    int prev_halt = PyObject_IsTrue(args[13]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double q_start = a[0], dt = a[1], k = a[2], lo_count = a[3], hi_count = a[4], vmax_count = a[5],
+                 rated = a[6];
+    long long cw, mode, torque_offset, target_count, velocity_offset;
+    if (!stored_int(store, PyTuple_GET_ITEM(objects, 0), &cw) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 1), &mode) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 2), &torque_offset) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 3), &target_count) ||
+        !stored_int(store, PyTuple_GET_ITEM(objects, 4), &velocity_offset)) {
+        if (PyErr_Occurred())
+            return NULL;
+        Py_RETURN_NONE;
+    }
+    if (cw & CW_FAULT_RESET)
+        Py_RETURN_NONE;
+    if (!fault && !((stay_mask >> command_of(cw)) & 1))
+        Py_RETURN_NONE;
+    if ((mode == MODE_CSP || mode == MODE_PROFILE_POSITION) && mode != own_mode)
+        Py_RETURN_NONE;
+    if (enabled && own_mode != MODE_CSP)
+        Py_RETURN_NONE;
+    int halt = (cw & CW_HALT) && enabled && own_mode == MODE_CSP;
+    if (halt && !prev_halt)
+        Py_RETURN_NONE;
+    /* on_sync_begin, its operations in its order */
+    double torque_ff = (double)torque_offset / 1000.0 * rated;
+    if (!enabled)
+        return Py_BuildValue("(LOdOOO)", cw, halt ? Py_True : Py_False, torque_ff, Py_False, Py_None, Py_None);
+    if (k == 0.0 || dt == 0.0)
+        Py_RETURN_NONE;           /* Python divides by zero and raises */
+    double lo = lo_count / k, hi = hi_count / k, vmax = vmax_count / k;
+    double target = (double)target_count / k;
+    double m = target > lo ? target : lo;           /* max(lo, target) */
+    double clamped = m < hi ? m : hi;               /* min(hi, .) */
+    double step = clamped - q_start;
+    if (fabs(step) > vmax * dt)
+        step = copysign(vmax * dt, step);
+    int limit_active = clamped != target || q_start + step != clamped;
+    double q_end = q_start + step;
+    double v_ff = step / dt + (double)velocity_offset / k;
+    return Py_BuildValue("(LOdOdd)", cw, halt ? Py_True : Py_False, torque_ff, limit_active ? Py_True : Py_False,
+                         q_end, v_ff);
+}
+
+/* cyclic_write(specs, values, entries, last_values, last_stored, params, start) -> stop
+ * CyclicObjects.write's loop from object `start`: per object (specs: (sub, size, signed, key)),
+ * skipped while its value equals the last one written and its stored bytes are still those;
+ * else packed little-endian into entries[i][sub], its param() cache entry dropped (del, so the
+ * cache's epoch moves) and remembered. Stops at the first value that is not an exact int or
+ * does not fit, returning its position for the Python loop (which names the object in its
+ * error); returns len(values) when done. */
+static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 7) {
+        PyErr_Format(PyExc_TypeError, "cyclic_write takes 7 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *specs = args[0], *entries = args[2], *last_values = args[3], *last_stored = args[4],
+             *params = args[5];
+    Py_ssize_t start = PyLong_AsSsize_t(args[6]);
+    if (start == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *values = PySequence_Fast(args[1], "values must be a sequence");
+    if (values == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(values);
+    if (!PyTuple_Check(specs) || !PyList_Check(entries) || !PyList_Check(last_values) || !PyList_Check(last_stored) ||
+        !PyDict_Check(params) || PyTuple_GET_SIZE(specs) < n || PyList_GET_SIZE(entries) < n ||
+        PyList_GET_SIZE(last_values) < n || PyList_GET_SIZE(last_stored) < n || start < 0) {
+        Py_DECREF(values);
+        PyErr_SetString(PyExc_TypeError, "cyclic_write: layout, entries and last values do not match");
+        return NULL;
+    }
+    PyObject **items = PySequence_Fast_ITEMS(values);
+    Py_ssize_t i = start;
+    for (; i < n; i++) {
+        PyObject *value = items[i], *spec = PyTuple_GET_ITEM(specs, i), *entry = PyList_GET_ITEM(entries, i);
+        if (!PyLong_CheckExact(value) || !PyTuple_Check(spec) || PyTuple_GET_SIZE(spec) != 4 || !PyDict_Check(entry))
+            break;
+        PyObject *sub = PyTuple_GET_ITEM(spec, 0), *key = PyTuple_GET_ITEM(spec, 3);
+        int same = PyObject_RichCompareBool(value, PyList_GET_ITEM(last_values, i), Py_EQ);
+        if (same < 0)
+            goto error;
+        if (same) {
+            PyObject *stored = PyDict_GetItemWithError(entry, sub);
+            if (stored == NULL && PyErr_Occurred())
+                goto error;
+            if ((stored == NULL ? Py_None : stored) == PyList_GET_ITEM(last_stored, i))
+                continue;
+        }
+        long size = PyLong_AsLong(PyTuple_GET_ITEM(spec, 1));
+        int is_signed = PyObject_IsTrue(PyTuple_GET_ITEM(spec, 2));
+        if (size < 1 || size > 4 || is_signed < 0) {
+            PyErr_Clear();
+            break;
+        }
+        int overflow = 0;
+        long long v = PyLong_AsLongLongAndOverflow(value, &overflow);
+        if (overflow || (v == -1 && PyErr_Occurred())) {
+            PyErr_Clear();
+            break;                               /* does not fit: the Python loop raises */
+        }
+        long long lo = is_signed ? -(1LL << (8 * size - 1)) : 0;
+        long long hi = is_signed ? (1LL << (8 * size - 1)) - 1 : (1LL << (8 * size)) - 1;
+        if (v < lo || v > hi)
+            break;
+        unsigned char buf[4];
+        unsigned long long u = (unsigned long long)v;
+        for (long b = 0; b < size; b++)
+            buf[b] = (unsigned char)(u >> (8 * b));
+        PyObject *data = PyBytes_FromStringAndSize((const char *)buf, size);
+        if (data == NULL)
+            goto error;
+        if (PyDict_SetItem(entry, sub, data) < 0) {
+            Py_DECREF(data);
+            goto error;
+        }
+        if (PyDict_GET_SIZE(params) > 0) {
+            int cached = PyDict_Contains(params, key);
+            if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0)) {
+                Py_DECREF(data);
+                goto error;
+            }
+        }
+        Py_INCREF(value);
+        PyList_SetItem(last_values, i, value);    /* steals the references */
+        PyList_SetItem(last_stored, i, data);
+    }
+    Py_DECREF(values);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(values);
+    return NULL;
+}
+
+/* rpdo_store(codec, data, store, params, on_write, write_rules, aborted, stats) -> None
+ * PdoEngine.on_rpdo's loop over the mapped objects, for a node whose only write callback is its
+ * own write rules: per entry (index, sub, start, end, obj, size_ok, key) the slice data[start:end]
+ * (Python's slicing: a short frame gives a short slice, never a read past its end), counted as
+ * malformed if its size is not the object's; write_rules(index, sub, obj, chunk) for the
+ * communication area, on_write(index, sub, chunk) for application objects; an `aborted`
+ * exception (SdoAbortedError) counts as malformed and the object is not stored; else stored
+ * in store[index][sub] and its param() cache entry dropped. */
+static int count_malformed(PyObject *stats) {
+    PyObject *n = PyObject_GetAttrString(stats, "malformed");
+    if (n == NULL)
+        return -1;
+    PyObject *one = PyLong_FromLong(1);
+    PyObject *m = one ? PyNumber_Add(n, one) : NULL;
+    Py_DECREF(n);
+    Py_XDECREF(one);
+    if (m == NULL)
+        return -1;
+    int rc = PyObject_SetAttrString(stats, "malformed", m);
+    Py_DECREF(m);
+    return rc;
+}
+
+static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *codec = args[0], *data = args[1], *store = args[2], *params = args[3], *on_write = args[4],
+             *write_rules = args[5], *aborted = args[6], *stats = args[7];
+    if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
+        PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
+        return NULL;
+    }
+    for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(codec); i++) {
+        PyObject *e = PyTuple_GET_ITEM(codec, i);
+        if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 7) {
+            PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 7-tuples");
+            return NULL;
+        }
+        PyObject *index = PyTuple_GET_ITEM(e, 0), *sub = PyTuple_GET_ITEM(e, 1), *obj = PyTuple_GET_ITEM(e, 4),
+                 *key = PyTuple_GET_ITEM(e, 6);
+        Py_ssize_t start = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 2)), end = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 3));
+        long index_value = PyLong_AsLong(index);
+        if (PyErr_Occurred())
+            return NULL;
+        PyObject *chunk = PySequence_GetSlice(data, start, end);
+        if (chunk == NULL)
+            return NULL;
+        int size_ok = PyObject_IsTrue(PyTuple_GET_ITEM(e, 5));
+        if (size_ok <= 0) {
+            Py_DECREF(chunk);
+            if (size_ok < 0 || count_malformed(stats) < 0)
+                return NULL;
+            continue;
+        }
+        PyObject *result = index_value < 0x2000
+            ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
+            : PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL);
+        if (result == NULL) {
+            if (!PyErr_ExceptionMatches(aborted)) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+            PyErr_Clear();
+            Py_DECREF(chunk);
+            if (count_malformed(stats) < 0)
+                return NULL;
+            continue;
+        }
+        Py_DECREF(result);
+        PyObject *entry = PyDict_GetItemWithError(store, index);
+        if (entry == NULL) {
+            if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+            int rc = PyDict_SetItem(store, index, entry);
+            Py_DECREF(entry);                      /* the store holds it */
+            if (rc < 0) {
+                Py_DECREF(chunk);
+                return NULL;
+            }
+        }
+        int rc = PyObject_SetItem(entry, sub, chunk);
+        Py_DECREF(chunk);
+        if (rc < 0)
+            return NULL;
+        if (PyDict_GET_SIZE(params) > 0) {
+            int cached = PyDict_Contains(params, key);
+            if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0))
+                return NULL;
+        }
+    }
+    Py_RETURN_NONE;
+}
+
+/* tpdo_frames(table, counter) -> [(cob_id, bytes), ...] or None
+ * PdoEngine.send_tpdos's due TPDOs sampled: table = ((cob_id, transmission type, dicts, subs),
+ * ...) with each mapped object's data-store dict and subindex (PdoEngine._slots); a TPDO is due
+ * at this SYNC counter when synchronous (0..240) and, beyond type 1, every type-th SYNC. Its
+ * bytes are the mapped objects' stored bytes joined. None when an object is not stored as
+ * bytes (the Python path samples it through SimNode.raw). */
+static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 2 || !PyTuple_Check(args[0])) {
+        PyErr_SetString(PyExc_TypeError, "tpdo_frames(table, counter)");
+        return NULL;
+    }
+    PyObject *table = args[0];
+    long long counter = PyLong_AsLongLong(args[1]);
+    if (counter == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *frames = PyList_New(0);
+    if (frames == NULL)
+        return NULL;
+    for (Py_ssize_t t = 0; t < PyTuple_GET_SIZE(table); t++) {
+        PyObject *row = PyTuple_GET_ITEM(table, t);
+        if (!PyTuple_Check(row) || PyTuple_GET_SIZE(row) != 4 || !PyTuple_Check(PyTuple_GET_ITEM(row, 2)) ||
+            !PyTuple_Check(PyTuple_GET_ITEM(row, 3)) ||
+            PyTuple_GET_SIZE(PyTuple_GET_ITEM(row, 2)) != PyTuple_GET_SIZE(PyTuple_GET_ITEM(row, 3))) {
+            Py_DECREF(frames);
+            PyErr_SetString(PyExc_TypeError, "tpdo_frames: rows are (cob_id, type, dicts, subs)");
+            return NULL;
+        }
+        long long type = PyLong_AsLongLong(PyTuple_GET_ITEM(row, 1));
+        if (type == -1 && PyErr_Occurred()) {
+            Py_DECREF(frames);
+            return NULL;
+        }
+        if (type < 0 || type > 240 || (type > 1 && counter % type))
+            continue;
+        PyObject *dicts = PyTuple_GET_ITEM(row, 2), *subs = PyTuple_GET_ITEM(row, 3);
+        Py_ssize_t n = PyTuple_GET_SIZE(dicts), total = 0;
+        PyObject *parts[64];
+        if (n > 64)
+            goto python;
+        for (Py_ssize_t i = 0; i < n; i++) {
+            PyObject *d = PyTuple_GET_ITEM(dicts, i);
+            PyObject *part = PyDict_Check(d) ? PyDict_GetItemWithError(d, PyTuple_GET_ITEM(subs, i)) : NULL;
+            if (part == NULL || !PyBytes_Check(part)) {
+                if (PyErr_Occurred()) {
+                    Py_DECREF(frames);
+                    return NULL;
+                }
+                goto python;
+            }
+            parts[i] = part;
+            total += PyBytes_GET_SIZE(part);
+        }
+        PyObject *data = PyBytes_FromStringAndSize(NULL, total);
+        if (data == NULL) {
+            Py_DECREF(frames);
+            return NULL;
+        }
+        char *out = PyBytes_AS_STRING(data);
+        for (Py_ssize_t i = 0; i < n; i++) {       /* total is the sum of these sizes */
+            memcpy(out, PyBytes_AS_STRING(parts[i]), PyBytes_GET_SIZE(parts[i]));
+            out += PyBytes_GET_SIZE(parts[i]);
+        }
+        PyObject *frame = PyTuple_Pack(2, PyTuple_GET_ITEM(row, 0), data);
+        Py_DECREF(data);
+        if (frame == NULL || PyList_Append(frames, frame) < 0) {
+            Py_XDECREF(frame);
+            Py_DECREF(frames);
+            return NULL;
+        }
+        Py_DECREF(frame);
+    }
+    return frames;
+python:
+    Py_DECREF(frames);
+    Py_RETURN_NONE;
+}
+
+/* statusword bits (base/canopen/cia402_defs.py) */
+#define SW_WARNING (1 << 7)
+#define SW_REMOTE (1 << 9)
+#define SW_TARGET_REACHED (1 << 10)
+#define SW_INTERNAL_LIMIT (1 << 11)
+#define SW_OP_MODE_12 (1 << 12)
+#define SW_FOLLOWING_ERROR (1 << 13)
+/* drive_end's flags */
+#define END_ENERGISED 1
+#define END_ENABLED 2
+#define END_FAULT_REACTION 4
+#define END_QUICK_STOP 8
+#define END_RAMP_FROM_ACTUAL 16
+#define END_LIMIT_ACTIVE 32
+
+/* drive_end(dt, flags, quick_stop_option, v_ref, brake_closing, brake_engage, q_ref, q_measured,
+ *           fe_window, fe_time, fe_timeout_ms, temperature, over_temperature, warn_temperature,
+ *           state_bits, k, rated, q_reported, qd_reported, torque_reported)
+ * JointDriveNode.on_sync_end in CSP for a SYNC that changes no state: the brake's timing
+ * (_stop_and_brake), the following error, the statusword and the actual values (_update_od).
+ * -> (brake_closing, brake engaged, fe_time, following_error, statusword, position, demand,
+ * velocity, torque, following error count, temperature count), or None when the drive leaves
+ * its state (a stop ends, a following-error timeout, over temperature) or a value is not finite:
+ * the Python path runs the SYNC end. */
+static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 20) {
+        PyErr_Format(PyExc_TypeError, "drive_end takes 20 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    long flags = PyLong_AsLong(args[1]), option = PyLong_AsLong(args[2]), state_bits = PyLong_AsLong(args[14]);
+    double a[20];
+    for (int i = 0; i < 20; i++)
+        a[i] = (i == 1 || i == 2 || i == 14) ? 0.0 : PyFloat_AsDouble(args[i]);
+    if (PyErr_Occurred())
+        return NULL;
+    const double dt = a[0], v_ref = a[3], brake_engage = a[5], q_ref = a[6], q_measured = a[7], fe_window = a[8];
+    const double fe_timeout_ms = a[10], temperature = a[11], over_temperature = a[12], warn_temperature = a[13];
+    const double k = a[15], rated = a[16];
+    double brake_closing = a[4], fe_time = a[9];
+    const int enabled = (flags & END_ENABLED) != 0;
+    /* _stop_and_brake */
+    int at_rest = v_ref == 0.0 && !(flags & END_RAMP_FROM_ACTUAL);
+    int letting_go = ((flags & END_FAULT_REACTION) && at_rest) ||
+                     ((flags & END_QUICK_STOP) && at_rest && option >= 1 && option <= 4);
+    if (!(flags & END_ENERGISED) || letting_go)
+        brake_closing += dt;
+    else
+        brake_closing = 0.0;
+    int engaged = brake_closing >= brake_engage;
+    if (letting_go && engaged)
+        Py_RETURN_NONE;                     /* the stop ends: the drive leaves operation */
+    /* following error */
+    double err = q_ref - q_measured;
+    int following_error;
+    if (enabled && fabs(err) > fe_window) {
+        fe_time += dt;
+        following_error = 1;
+        if (fe_time * 1000.0 > fe_timeout_ms)
+            Py_RETURN_NONE;                 /* the drive faults */
+    } else {
+        fe_time = 0.0;
+        following_error = 0;
+    }
+    if (temperature > over_temperature)
+        Py_RETURN_NONE;
+    /* _update_od's statusword (CSP) */
+    long sw = state_bits | SW_REMOTE;
+    if (flags & END_LIMIT_ACTIVE)
+        sw |= SW_INTERNAL_LIMIT;
+    if (following_error)
+        sw |= SW_FOLLOWING_ERROR;
+    if (temperature > warn_temperature)
+        sw |= SW_WARNING;
+    if (enabled)
+        sw |= SW_OP_MODE_12;
+    if (!following_error && !enabled)
+        sw |= SW_TARGET_REACHED;
+    long long v[6];
+    if (!to_i32(a[17] * k, &v[0]) || !to_i32(q_ref * k, &v[1]) || !to_i32(a[18] * k, &v[2]) ||
+        !to_i16(a[19] / rated * 1000.0, &v[3]) || !to_i32((q_ref - q_measured) * k, &v[4]) ||
+        !to_i16(temperature * 10.0, &v[5]))
+        Py_RETURN_NONE;
+    return Py_BuildValue("(dOdOlLLLLLL)", brake_closing, engaged ? Py_True : Py_False, fe_time,
+                         following_error ? Py_True : Py_False, sw, v[0], v[1], v[2], v[3], v[4], v[5]);
+}
+
+static PyMethodDef methods[] = {
+    {"drive_end", (PyCFunction)(void (*)(void))drive_end, METH_FASTCALL,
+     "A CSP drive's SYNC end that changes no state (see the module source)."},
+    {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
+     "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
+    {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,
+     "PdoEngine.on_rpdo's loop over the mapped objects (see the module source)."},
+    {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,
+     "CyclicObjects.write's loop (see the module source)."},
+    {"steady_begin", (PyCFunction)(void (*)(void))steady_begin, METH_FASTCALL,
+     "A drive's SYNC begin that changes no state (see the module source)."},
+    {"rigid_period", (PyCFunction)(void (*)(void))rigid_period, METH_FASTCALL,
+     "A rigid-gear joint's SYNC period with its drive's servo law (see the module source)."},
+    {"actual_values", (PyCFunction)(void (*)(void))actual_values, METH_FASTCALL,
+     "A drive's actual values as its objects count them (see the module source)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_simcore", NULL, -1, methods};
+
+PyMODINIT_FUNC PyInit__simcore(void) { return PyModule_Create(&module); }
