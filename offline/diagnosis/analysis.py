@@ -43,6 +43,7 @@ from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.breakaway import at_breakaway
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.offline.diagnosis.stick_slip import stiction_by_breakaway
+from spacearm.offline.diagnosis.stribeck_replay import stribeck_by_replay
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import PlantConfig
 
@@ -361,6 +362,14 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                                                    if set(a.effects) <= {"coulomb", "viscous"}))
             if sticking is not None:
                 fit, alternatives[j] = sticking, []
+            elif fit is not None and fit.judged_by == "samples":
+                # on slow motion that reverses, stiction shows in how each reversal swings, which a
+                # running law, or a Stribeck law sized row by row, misses (stribeck_replay.py)
+                swing = stribeck_by_replay(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
+                                           table.dq_cmd, table.tau[:, j], quiet.dq[:, j],
+                                           np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train)
+                if swing is not None:
+                    fit, alternatives[j] = swing, []
         residual = table.tau[:, j] - sim.tau[:, j]
         left = residual if fit is None else residual - fit.prediction
         own_noise = max(tau_noise, chatter[j])
