@@ -37,24 +37,15 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
         f"load {_started['load']:.1f} at the start, {os.getloadavg()[0]:.1f} at the end")
 
 
-VM_SUITE = "hil_tests/test_vcan_suite.py"
-
-
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """With pytest-xdist (the README's test command runs two workers): every HIL test on one
     worker, one after another in file order, while the unit tests share out over both. HIL
-    stacks time real motion on 2 cores and must not pile up on each other. The vcan suite's
-    QEMU VM is a scope of its own, so the other worker runs it beside the HIL tests (from the
-    start: scopes with most tests go first, then the one-test scopes in file order): it was
-    a quarter of the HIL worker's serial time (5-10 min of 19-30), the suite's critical path,
-    and it loads the cores as a unit test on the other worker does."""
+    stacks time real motion on 2 cores and must not pile up on each other."""
     from xdist.scheduler import LoadScopeScheduling
 
     class HilInOrder(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            if nodeid.startswith(VM_SUITE):
-                return VM_SUITE
             return "hil_tests" if nodeid.startswith("hil_tests/") else nodeid
 
     return HilInOrder(config, log)
