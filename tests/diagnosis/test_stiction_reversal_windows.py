@@ -34,10 +34,11 @@ def ramps(seconds: float = 40.0) -> Trajectory:
     return Trajectory(t, q)
 
 
-def recorded(seed: int, **effect):
-    """Joint 3 with the effect; every joint's torque with 0.5 N m of sensor noise."""
+def recorded(seed: int, joint: int = 2, **effect):
+    """The joint (index, default joint 3) with the effect; every joint's torque with 0.5 N m of
+    sensor noise."""
     joints = [j.model_copy(update={"torque_noise": 0.5}) for j in BED.joints]
-    joints[2] = joints[2].model_copy(update=effect)
+    joints[joint] = joints[joint].model_copy(update=effect)
     return record_direct(BED.model_copy(update={"joints": joints, "seed": seed}), ramps(), None, hold_cycles=0)
 
 

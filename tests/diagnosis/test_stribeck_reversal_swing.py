@@ -10,36 +10,15 @@ friction on the same joint and motion must stay what they are.
 """
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
 from spacearm.offline.diagnosis.analysis import diagnose
-from spacearm.offline.diagnosis.record import record_direct
-from spacearm.offline.diagnosis.trajectory import Trajectory
-from spacearm.firmware_sim.plant import load_plant_config
+# the slow ramps of the reversal-window tests (each joint its own speed and period), on joint 2
+from tests.diagnosis.test_stiction_reversal_windows import BED, recorded as recorded_on
 
-BED = load_plant_config("configs/plant/oru_testbed_nominal.toml")
-DT = 0.02
-# the slow-ramp speeds and periods of tests/diagnosis/test_stiction_reversal_windows.py
-SPEEDS = (0.0085, 0.0108, 0.0085, 0.0043, 0.0108, 0.0073)      # rad/s
-PERIODS = (8.6, 8.8, 15.4, 11.0, 10.3, 8.8)                    # s
 JOINT = 1
 
 
-def ramps(seconds: float = 40.0) -> Trajectory:
-    t = np.arange(0.0, seconds, DT)
-    home = np.array([j.initial_position for j in BED.joints])
-    q = home + np.column_stack([s * p / 4 * (2 / math.pi) * np.arcsin(np.sin(2 * math.pi * t / p))
-                                for s, p in zip(SPEEDS, PERIODS)])
-    return Trajectory(t, q)
-
-
 def recorded(seed: int, **effect):
-    """Joint 2 with the effect; every joint's torque with 0.5 N m of sensor noise."""
-    joints = [j.model_copy(update={"torque_noise": 0.5}) for j in BED.joints]
-    joints[JOINT] = joints[JOINT].model_copy(update=effect)
-    return record_direct(BED.model_copy(update={"joints": joints, "seed": seed}), ramps(), None, hold_cycles=0)
+    return recorded_on(seed, JOINT, **effect)
 
 
 def first_on_joint(result):
