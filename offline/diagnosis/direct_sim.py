@@ -253,3 +253,15 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         if isinstance(config, ArmPlant) else math.inf
     keep = [index.index(i) for i in wanted]
     return SimTraces(t, cols[:, keep].copy(), q[:, keep], dq[:, keep], tau[:, keep], ft, fe, window)
+
+
+def replayed_torque(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray, j: int,
+                    dq_cmd: np.ndarray | None = None) -> np.ndarray | None:
+    """Joint j's torque replayed alone on `config`; None where the explicit step diverges (a
+    fitted law can make a light joint's step unstable) or gives non-finite values."""
+    try:
+        with np.errstate(all="raise"):
+            sim = simulate(config, q_cmd, dt, q0=q0, joints=[j], dq_cmd=dq_cmd, wrench=False)
+    except (OverflowError, FloatingPointError, ValueError):
+        return None
+    return sim.tau[:, 0] if np.all(np.isfinite(sim.tau)) else None

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from spacearm.offline.diagnosis.breakaway import MOVING, start_events
-from spacearm.offline.diagnosis.direct_sim import simulate
+from spacearm.offline.diagnosis.direct_sim import replayed_torque
 from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.offline.diagnosis.running_mean import running_mean
 
@@ -129,13 +129,8 @@ def stiction_by_breakaway(chosen: ChannelFit | None, j: int, nominal, apply_fits
     def replay(fit: ChannelFit | None, rows: int) -> np.ndarray | None:
         if fit is None:
             return tau_nominal[:rows]
-        try:
-            with np.errstate(all="raise"):
-                sim = simulate(apply_fits(nominal, [fit]), q_cmd[:rows], dt, q0=q0, joints=[j],
-                               dq_cmd=None if dq_cmd is None else dq_cmd[:rows], wrench=False)
-        except (OverflowError, FloatingPointError, ValueError):
-            return None
-        return sim.tau[:, 0] if np.all(np.isfinite(sim.tau)) else None
+        return replayed_torque(apply_fits(nominal, [fit]), q_cmd[:rows], dt, q0, j,
+                               None if dq_cmd is None else dq_cmd[:rows])
 
     tau_chosen = replay(chosen, len(tau_real))
     if tau_chosen is None:

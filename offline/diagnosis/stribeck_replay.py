@@ -31,9 +31,10 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from spacearm.offline.diagnosis.breakaway import start_events
-from spacearm.offline.diagnosis.direct_sim import simulate
+from spacearm.offline.diagnosis.direct_sim import replayed_torque
 from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.offline.diagnosis.honesty import MIN_CONFIRMED_REDUCTION
+from spacearm.offline.diagnosis.running_mean import running_mean
 
 MIN_EVENTS = 4              # reversals and starts, training and held-out rows together
 MIN_HELD_EVENTS = 2
@@ -51,7 +52,7 @@ SLOW = 0.05                 # rad/s (m/s): only joints whose typical speed is be
 
 
 def _smoothed(x: np.ndarray) -> np.ndarray:
-    return np.convolve(x, np.ones(SMOOTH_ROWS) / SMOOTH_ROWS, mode="same")
+    return running_mean(x, SMOOTH_ROWS)
 
 
 def stribeck_by_replay(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: np.ndarray, dt: float,
@@ -74,13 +75,8 @@ def stribeck_by_replay(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: n
     def replay(fit: ChannelFit, upto: int = rows, offset: float = 0.5) -> np.ndarray | None:
         start = q0.copy()
         start[j] += offset * quantum
-        try:
-            with np.errstate(all="raise"):
-                sim = simulate(apply_fits(nominal, [fit]), q_cmd[:upto], dt, q0=start, joints=[j],
-                               dq_cmd=None if dq_cmd is None else dq_cmd[:upto], wrench=False)
-        except (OverflowError, FloatingPointError, ValueError):
-            return None
-        return sim.tau[:, 0] if np.all(np.isfinite(sim.tau)) else None
+        return replayed_torque(apply_fits(nominal, [fit]), q_cmd[:upto], dt, start, j,
+                               None if dq_cmd is None else dq_cmd[:upto])
 
     running = float(np.median(np.sign(velocity[moving & train]) * chosen.prediction[moving & train]))
     if running <= 0.0:
