@@ -186,30 +186,33 @@ python:
     Py_RETURN_NONE;
 }
 
-static int to_i32(double x, long long *out) {
-    /* _i32(round(x)): 0 when x is not finite (Python's round() raises: the caller's path) */
+static int clamp_round(double x, double lo, double hi, long long *out) {
+    /* max(lo, min(hi, round(x))): 0 when x is not finite (Python's round() raises: the caller's
+     * path); _i32's bounds for the 32-bit objects, the 16-bit ones' for torque and temperature */
     if (!isfinite(x))
         return 0;
     double r = py_round(x);
-    if (r > 2147483647.0)
-        r = 2147483647.0;
-    if (r < -2147483648.0)
-        r = -2147483648.0;
+    if (r > hi)
+        r = hi;
+    if (r < lo)
+        r = lo;
     *out = (long long)r;
     return 1;
 }
 
-static int to_i16(double x, long long *out) {
-    /* max(-32768, min(32767, round(x))) */
-    if (!isfinite(x))
-        return 0;
-    double r = py_round(x);
-    if (r > 32767.0)
-        r = 32767.0;
-    if (r < -32768.0)
-        r = -32768.0;
-    *out = (long long)r;
-    return 1;
+#define I32_MIN -2147483648.0
+#define I32_MAX 2147483647.0
+
+/* The drive's actual values as its objects count them (JointDriveNode._update_od): position,
+ * demand, velocity, torque (per mille of rated), following error, temperature (0.1 degC);
+ * 0 when one is not finite. */
+static int actual_counts(double k, double rated, double q_reported, double q_ref, double qd_reported,
+                         double torque_reported, double q_measured, double temperature, long long v[6]) {
+    return clamp_round(q_reported * k, I32_MIN, I32_MAX, &v[0]) && clamp_round(q_ref * k, I32_MIN, I32_MAX, &v[1]) &&
+           clamp_round(qd_reported * k, I32_MIN, I32_MAX, &v[2]) &&
+           clamp_round(torque_reported / rated * 1000.0, -32768.0, 32767.0, &v[3]) &&
+           clamp_round((q_ref - q_measured) * k, I32_MIN, I32_MAX, &v[4]) &&
+           clamp_round(temperature * 10.0, -32768.0, 32767.0, &v[5]);
 }
 
 /* actual_values(k, rated, q_reported, q_ref, qd_reported, torque_reported, q_measured, temperature)
@@ -228,9 +231,7 @@ static PyObject *actual_values(PyObject *self, PyObject *const *args, Py_ssize_t
         return NULL;
     const double k = a[0], rated = a[1];
     long long v[6];
-    if (!to_i32(a[2] * k, &v[0]) || !to_i32(a[3] * k, &v[1]) || !to_i32(a[4] * k, &v[2]) ||
-        !to_i16(a[5] / rated * 1000.0, &v[3]) || !to_i32((a[3] - a[6]) * k, &v[4]) ||
-        !to_i16(a[7] * 10.0, &v[5]))
+    if (!actual_counts(k, rated, a[2], a[3], a[4], a[5], a[6], a[7], v))
         Py_RETURN_NONE;
     return Py_BuildValue("(LLLLLL)", v[0], v[1], v[2], v[3], v[4], v[5]);
 }
@@ -700,9 +701,7 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
     if (!following_error && !enabled)
         sw |= SW_TARGET_REACHED;
     long long v[6];
-    if (!to_i32(a[17] * k, &v[0]) || !to_i32(q_ref * k, &v[1]) || !to_i32(a[18] * k, &v[2]) ||
-        !to_i16(a[19] / rated * 1000.0, &v[3]) || !to_i32((q_ref - q_measured) * k, &v[4]) ||
-        !to_i16(temperature * 10.0, &v[5]))
+    if (!actual_counts(k, rated, a[17], q_ref, a[18], a[19], q_measured, temperature, v))
         Py_RETURN_NONE;
     return Py_BuildValue("(dOdOlLLLLLL)", brake_closing, engaged ? Py_True : Py_False, fe_time,
                          following_error ? Py_True : Py_False, sw, v[0], v[1], v[2], v[3], v[4], v[5]);
