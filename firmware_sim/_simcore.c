@@ -18,11 +18,12 @@
 enum { SERVO_OFF = 0, SERVO_CSP = 1 };
 
 static double py_round(double x) {
-    /* round() of a float in CPython: half away from zero, then back to even on a tie */
+    /* round() of a float in CPython: half away from zero, then back to even on a tie; an int,
+     * so a zero has no sign (round(-0.3) * quantum is +0.0 in Python, -0.0 from C's round) */
     double r = round(x);
     if (fabs(x - r) == 0.5)
         r = 2.0 * round(x / 2.0);
-    return r;
+    return r == 0.0 ? 0.0 : r;
 }
 
 static double friction_torque(double v, double coulomb, double viscous, double stribeck, double stribeck_velocity) {
