@@ -52,6 +52,20 @@ static double friction_torque(double v, double coulomb, double viscous, double s
  * -> (q, qd, theta, thetad, tau_m, q_ref, v_ref), or None when Python's round() or cos() would
  * raise on a value (a non-finite position): the caller reruns the period in Python.
  * fractions: a list or tuple of floats (the servo's interpolation points). */
+/* The encoder's reading of x: round(x / quantum) * quantum, x itself without a quantum; 0 where
+ * x / quantum is not finite (Python's round() raises: the caller's path). */
+static int measured(double x, double quantum, double *out) {
+    if (quantum <= 0.0) {
+        *out = x;
+        return 1;
+    }
+    double r = x / quantum;
+    if (!isfinite(r))
+        return 0;
+    *out = py_round(r) * quantum;
+    return 1;
+}
+
 static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     (void)self;
     if (nargs != N_DYNAMIC + 2) {
@@ -101,37 +115,17 @@ static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t 
     if (n == 0)
         goto python;
     double held_measured = 0.0;
-    if (held) {
-        double x = q + bias;
-        if (quantum <= 0.0) {
-            held_measured = x;
-        } else {
-            double r = x / quantum;
-            if (!isfinite(r))
-                goto python;
-            held_measured = py_round(r) * quantum;
-        }
-    }
+    if (held && !measured(q + bias, quantum, &held_measured))
+        goto python;
     for (Py_ssize_t i = 0; i < n; i++) {
         double s = PyFloat_AsDouble(items[i]);
         if (s == -1.0 && PyErr_Occurred()) {
             Py_DECREF(fractions);
             return NULL;
         }
-        double q_meas;
-        if (held) {
-            q_meas = held_measured;
-        } else {
-            double x = q + bias;
-            if (quantum <= 0.0) {
-                q_meas = x;
-            } else {
-                double r = x / quantum;
-                if (!isfinite(r))
-                    goto python;
-                q_meas = py_round(r) * quantum;
-            }
-        }
+        double q_meas = held_measured;
+        if (!held && !measured(q + bias, quantum, &q_meas))
+            goto python;
         /* the drive's servo (JointDriveNode._servo + servo_torque) */
         if (kind == SERVO_OFF) {
             q_ref = q_meas;
