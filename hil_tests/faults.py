@@ -1,8 +1,8 @@
 """Fault-injection helpers for the reliability suite (hil_tests/test_faults_*.py, bench/bench_reliability.py).
 
 The daemon (real-time clock, 20 ms) and the simulator run as separate processes on a loopback
-hub that lives in the test process, so the test can also lose, reorder or cut frames on the
-"bus" itself. Faults inside devices go through the simulator's fault-injection node 126
+hub in a third one that the test steers (hil_tests/faulty_hub.py), so the test can also lose,
+reorder or cut frames on the "bus" itself. Faults inside devices go through the simulator's fault-injection node 126
 (drivers/sim_control.py). Time to safe state is measured from just before the injecting
 call to the first status poll (every ~5 ms on a held API connection) that shows the
 protective stop, and to the first that shows every drive out of "operation enabled" and
@@ -41,10 +41,8 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,8 +51,6 @@ import numpy as np
 
 from spacearm.console.client import ApiClient
 from spacearm.base.runtime.child_process import module_env
-from spacearm.base.runtime.priority import GIL_SWITCH_INTERVAL, use_fifo, use_normal
-from spacearm.base.transport.hub import LoopbackHub
 from spacearm.controller.daemon.supervision import HOST_CYCLES_EXCUSED
 from hil_tests.harness import StealTimeline, free_port
 
@@ -72,82 +68,6 @@ RESULTS_ENV = "SPACEARM_FAULT_RESULTS"   # JSON-lines file the tests append meas
 
 def child_env() -> dict:
     return {**module_env(), "PYTHONUNBUFFERED": "1"}
-
-
-# ------------------------------------------------------------------------ the bus itself
-HUB_PRIORITY = 50           # as the daemon and the simulator (spacearm daemon/sim --rt-priority 50)
-TEST_THREAD_PRIORITY = 10   # the test's own thread: above CPU-bound neighbours, below the stack
-class FaultyHub:
-    """A loopback hub in this process whose frames can be lost, reordered or cut off."""
-
-    def __init__(self, seed: int = 1):
-        # The hub thread shares this process's GIL with the test: a status poll here must not
-        # hold frames back for a whole cycle.
-        sys.setswitchinterval(GIL_SWITCH_INTERVAL)
-        # Every frame of the stack passes through this hub: at normal priority, CPU-bound
-        # neighbours (hil_tests/cpu_load.py) starve it and the daemon sees a bus that stalls
-        # (false "no process data"). Its threads run SCHED_FIFO like the daemon and the
-        # simulator (they inherit the policy of the thread that starts them); this test
-        # thread stays real-time too, below them, because it shares the hub's GIL: at normal
-        # priority a neighbour could preempt it while it holds the GIL and stall the hub.
-        self._rt = use_fifo(HUB_PRIORITY) is None
-        self.hub = LoopbackHub("127.0.0.1", 0).start()
-        if self._rt:
-            use_fifo(TEST_THREAD_PRIORITY)
-        self.rng = random.Random(seed)
-        self.drop_prob = 0.0
-        self.reorder_prob = 0.0
-        self.blackout_until = 0.0
-        self.dropped = 0
-        self.dropped_heartbeats: set[int] = set()   # node IDs whose heartbeat a random loss took
-        self.reordered = 0
-        self._held: dict[str, bytes] = {}
-        self._lock = threading.Lock()
-        self.hub.fault_filter = self._filter
-
-    def spec(self, name: str) -> str:
-        return f"loopback:{name}@127.0.0.1:{self.hub.port}"
-
-    def _filter(self, channel: str, records: list[bytes]) -> list[bytes]:
-        if not (self.drop_prob or self.reorder_prob or self.blackout_until or self._held):
-            return records
-        out: list[bytes] = []
-        with self._lock:
-            if time.monotonic() < self.blackout_until:
-                self.dropped += len(records)
-                return []
-            for rec in records:
-                if self.drop_prob and self.rng.random() < self.drop_prob:
-                    self.dropped += 1
-                    can_id = int.from_bytes(rec[3:7], "big")     # record: length, type, flags, ID
-                    if can_id & 0x780 == 0x700:
-                        self.dropped_heartbeats.add(can_id & 0x7F)
-                    continue
-                held = self._held.pop(channel, None)
-                if held is None and self.reorder_prob and self.rng.random() < self.reorder_prob:
-                    self._held[channel] = rec       # goes out after the next frame
-                    self.reordered += 1
-                    continue
-                out.append(rec)
-                if held is not None:
-                    out.append(held)
-        return out
-
-    def blackout(self, seconds: float) -> None:
-        self.blackout_until = time.monotonic() + seconds
-
-    def clear(self) -> None:
-        with self._lock:
-            self.drop_prob = self.reorder_prob = 0.0
-            self.blackout_until = 0.0
-
-    def disconnect(self, channel: str) -> None:
-        self.hub.disconnect(channel)
-
-    def stop(self) -> None:
-        self.hub.stop()
-        if self._rt:
-            use_normal()
 
 
 # ------------------------------------------------------------------------ the stack
@@ -315,7 +235,7 @@ def start_stack(hub, workdir: Path, plant: Path = NOMINAL_PLANT, name: str | Non
     try:
         stack.start_sim()
         # Connect the rig before the daemon runs: loading its object dictionaries holds this
-        # process's GIL, and the hub lives here too (the daemon would miss PDOs meanwhile).
+        # process's GIL, and an in-process hub (any hub with .spec) would stall meanwhile.
         if rig:
             stack.rig
         stack.start_daemon()

@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from hil_tests.faults import (PERIOD, READY, FaultyHub, assert_motion_refused, assert_stays_still,
+from hil_tests.faulty_hub import FaultyHub
+from hil_tests.faults import (PERIOD, READY, assert_motion_refused, assert_stays_still,
                               recorded_stop_events, start_stack, wait_for, wait_safe)
 from hil_tests.harness import xfail_if_the_host_stalled_a_vcpu
 
@@ -148,16 +149,50 @@ def test_waiting_console_keeps_its_jog_alive(enabled):
     _jog_with_keepalive(enabled)
 
 
-def _jog_with_keepalive(stack):
+def _gil_holder(seconds: float):
+    """A call that keeps this process's GIL for about `seconds` (one C call: no other thread
+    here runs meanwhile), as a full garbage collection late in the suite does (0.1-0.19 s
+    measured); sized here and now, before the jog, so it keeps its length on a slower machine."""
+    n = 100_000
+    while True:
+        t0 = time.perf_counter()
+        sum(range(n))
+        took = time.perf_counter() - t0
+        if took >= 0.05:
+            break
+        n *= 4
+    n = int(n * seconds / took)
+
+    def hold() -> float:
+        t0 = time.perf_counter()
+        sum(range(n))
+        return time.perf_counter() - t0
+    return hold
+
+
+def test_a_stalled_test_process_does_not_stall_the_bus(enabled):
+    """Three ~0.25 s stalls of the test process (over 5 cycles each: the daemon's limit for
+    missing process data) mid-jog: the stack goes on and the jog ends enabled (the hub that
+    carries every frame is a process of its own, not a thread of this one)."""
+    held = _jog_with_keepalive(enabled, delta=-0.3, stall=_gil_holder(0.25), stalls=3)
+    assert len(held) == 3 and min(held) > 5 * PERIOD, held
+
+
+def _jog_with_keepalive(stack, delta: float = 0.3, stall=None, stalls: int = 0) -> list[float]:
+    """Jog joint 6 by `delta` as `console jog --wait` does (status at 10 Hz, the keep-alive),
+    calling `stall` before each of the first `stalls` polls; returns how long each stall took."""
     from spacearm.console.client import ApiClient
+    held: list[float] = []
     if stack.status()["state"] != "enabled":
         stack.enable()
     jogger = ApiClient(stack.api)
     try:
-        start = jogger.call("jog", lease=stack.lease, joint=6, delta=0.3, speed=0.3)
+        start = jogger.call("jog", lease=stack.lease, joint=6, delta=delta, speed=0.3)
         assert start["duration"] > 1.5 * 1.0          # longer than the keep-alive
         deadline = time.monotonic() + start["duration"] + 5
         while time.monotonic() < deadline:              # the console's --wait loop: status at 10 Hz
+            if len(held) < stalls:
+                held.append(stall())
             s = jogger.call("status")
             assert s["state"] == "enabled", s["stop_reason"]
             if s["motions_finished"] >= start["motion"]:
@@ -167,6 +202,7 @@ def _jog_with_keepalive(stack):
             raise AssertionError("jog did not finish")
     finally:
         jogger.close()
+    return held
 
 
 def test_planned_move_runs_to_its_end_without_its_console(enabled):

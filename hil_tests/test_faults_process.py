@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from spacearm.controller.recording.mcap_reader import read_recording
-from hil_tests.faults import (FaultyHub, assert_motion_refused, assert_stays_still,
+from hil_tests.faulty_hub import FaultyHub
+from hil_tests.faults import (assert_motion_refused, assert_stays_still,
                               recorded_stop_events, start_stack, wait_for, wait_safe)
 from hil_tests.harness import xfail_if_the_host_stalled_a_vcpu
 
@@ -72,7 +73,7 @@ def test_frame_loss_and_reordering_end_at_the_target_or_in_a_stop(hub, stack):
     node's heartbeats lost back to back as a lost heartbeat (only of a node whose heartbeat the
     hub did drop). It never ends enabled somewhere else, and the losses are counted."""
     stack.enable_and_hold(0.2)
-    hub.drop_prob, hub.reorder_prob = 0.01, 0.01
+    hub.set_loss(drop=0.01, reorder=0.01)
     target = stack.far_target()
     motion = stack.move(target)["motion"]
     deadline = time.monotonic() + 40
