@@ -248,12 +248,16 @@ class CyclicIO:
         burst, not per frame); anything else goes to _other_frame, outside the lock."""
         stats, routes, lock = self.stats, self._tpdo_in, self._lock
         held = False
+        decoded = 0      # counted once a hold ends: per frame it is two attribute writes more
         try:
             for can_id, data in frames:
                 route = routes.get(can_id)
                 if route is None or route.unpack is None or len(data) < route.length:
                     if held:
                         held = False
+                        stats.rx_frames += decoded
+                        stats.tpdos += decoded
+                        decoded = 0
                         self._wake_if_complete()
                         lock.release()
                     self._other_frame(can_id, data, timestamp)
@@ -261,17 +265,20 @@ class CyclicIO:
                 if not held:
                     lock.acquire()
                     held = True
-                stats.rx_frames += 1
+                    sync, arrived = self._sync, self._received.add   # fixed while the lock is held
                 try:   # the common case: one unpack per frame
                     route.driver.values.update(zip(route.keys, route.unpack(data)))
-                    route.health.life_sync = self._sync
-                    self._received.add(can_id)
-                    stats.tpdos += 1
+                    route.health.life_sync = sync
+                    arrived(can_id)
+                    decoded += 1
                 except Exception:
+                    stats.rx_frames += 1
                     stats.callback_errors += 1
                     logger.exception("error handling frame 0x%03X", can_id)
         finally:
             if held:
+                stats.rx_frames += decoded
+                stats.tpdos += decoded
                 self._wake_if_complete()
                 lock.release()
 
