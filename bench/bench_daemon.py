@@ -52,11 +52,15 @@ burst's TPDOs under one hold of its lock, the trace tap takes a burst in one cal
 calls a device's on_write only for the objects it reacts to (SimNode.WRITE_REACTIONS, in the
 core and in Python); a CiA 402 axis outside a fault reset takes state and controlword from a
 (statusword, goal) table. Bus part 0.34 -> 0.07 ms profiled; lockstep_fingerprint identical
-to the tree before, with the core and without. This bench, 3 rounds alternating with the tree
-before (07a73bd; load 4.9-10.5, steal <= 0.2 %), medians: 8 nodes virtual recording on 0.545
--> 0.434 % (runs 0.545, 0.533, 0.554 / 0.434, 0.409, 0.481), recording off 0.503 -> 0.384 %,
-loopback 0.492 -> 0.441 %, Panda 0.797 -> 0.708 %; the cycle thread's two halves (medians of
-runs) simulator 0.157 -> 0.130 ms, daemon 0.216 -> 0.197 ms. Still 1.3-2.1x from the targets:
+to the tree before, with the core and without. The rigid-body sub-step reads each joint's
+gear kind, static friction and rotor inertia from a tuple kept per parameter set (Panda:
+2137 -> 1977 Python calls per cycle). This bench, 5 rounds alternating with the tree before
+(07a73bd; load 3.5-10.5, steal <= 0.2 %), medians: 8 nodes virtual recording on 0.596 ->
+0.509 % (runs 0.636, 0.710, 0.596, 0.520, 0.527 / 0.493, 0.613, 0.630, 0.509, 0.499),
+recording off 0.537 -> 0.451 %, loopback 0.519 -> 0.465 %, Panda 0.907 -> 0.758 %; the cycle
+thread's halves (medians of runs) simulator 0.152 -> 0.141 ms, daemon 0.217 -> 0.206 ms. An
+earlier 3 rounds without the rigid-body change (load 4.9-10.5): 0.545 -> 0.434 %, 0.503 ->
+0.384 %, 0.492 -> 0.441 %, 0.797 -> 0.708 %. Still 1.4-2.3x from the targets:
 the master's per-joint drivers and dataclasses (JointState, health snapshots, Measurement's
 arrays), the controller's small-array numpy, and per node the simulator's PDO engine calls;
 the Panda's coupled plant runs its drives' servo in Python every sub-step (a compiled servo
