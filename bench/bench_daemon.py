@@ -24,24 +24,48 @@ PDO floor (the cycle's own frames packed and unpacked with precompiled struct).
 
 Where one lockstep cycle's thread CPU goes (8 nodes, virtual bus, recording on; cProfile own
 time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-29, load
-9.0, with the compiled simulator core: profiled 3.39 ms per cycle and 1516 Python calls per
-cycle, against 1982 calls for the tree before it (4.13 ms profiled at load 3.7); cProfile
+6.4, with bursts on the bus (below): profiled 2.85 ms per cycle and 1218 Python calls per
+cycle, against 1513 calls for the tree before them (3.39 ms profiled at load 6.5); cProfile
 inflates every Python call, so the shares overstate per-call parts):
 
 | part of the cycle | ms/cycle | share |
 | --- | --- | --- |
-| Python built-ins and libraries called from all parts (dict.get, min/max/round, struct) | 0.84 | 25 % |
-| master: PDO decode/encode, device drivers (drivers/cyclic_io, devices) | 0.67 | 20 % |
-| bus: transport and frame delivery | 0.33 | 10 % |
-| simulator: object dictionary, PDO/SDO engine | 0.30 | 9 % |
-| simulator: drives (CiA 402, servo; what the core leaves and its calls) | 0.27 | 8 % |
-| controller: daemon cycle, modes, planning | 0.26 | 8 % |
-| simulator: plant physics (end effector, F/T, what the core leaves) | 0.21 | 6 % |
-| simulator: SYNC routing | 0.19 | 5.5 % |
-| simulator: compiled core (firmware_sim/_simcore.c) | 0.12 | 3.6 % |
-| controller: recording hand-off (serialisation is in helper processes) | 0.09 | 2.5 % |
-| controller: supervision | 0.06 | 1.9 % |
-| other spacearm code | 0.04 | 1 % |
+| Python built-ins and libraries called from all parts (dict.get, min/max/round, struct) | 0.73 | 26 % |
+| master: PDO decode/encode, device drivers (drivers/cyclic_io, devices) | 0.61 | 22 % |
+| simulator: object dictionary, PDO/SDO engine | 0.30 | 11 % |
+| simulator: drives (CiA 402, servo; what the core leaves and its calls) | 0.25 | 9 % |
+| controller: daemon cycle, modes, planning | 0.25 | 9 % |
+| simulator: plant physics (end effector, F/T, what the core leaves) | 0.21 | 7 % |
+| simulator: SYNC routing | 0.16 | 5.6 % |
+| simulator: compiled core (firmware_sim/_simcore.c) | 0.09 | 3.3 % |
+| bus: transport and frame delivery | 0.07 | 2.6 % |
+| controller: recording hand-off (serialisation is in helper processes) | 0.06 | 2.3 % |
+| controller: supervision | 0.06 | 2.2 % |
+| other spacearm code | 0.03 | 1 % |
+
+Bursts (issue 35): a cycle's frames go over the bus as two bursts and a SYNC, not as ~38
+frames one by one. The in-process bus's send_frames hands a burst (the master's RPDOs, a
+SYNC's TPDOs) to each receiver whole, taps first, as the loopback hub forwards one, in one
+call where its listener has on_frames; the loopback bus hands a read's frames over the same
+way. The simulator routes a burst's RPDOs without a call per frame, the master decodes a
+burst's TPDOs under one hold of its lock, the trace tap takes a burst in one call. An RPDO
+calls a device's on_write only for the objects it reacts to (SimNode.WRITE_REACTIONS, in the
+core and in Python); a CiA 402 axis outside a fault reset takes state and controlword from a
+(statusword, goal) table. Bus part 0.34 -> 0.07 ms profiled; lockstep_fingerprint identical
+to the tree before, with the core and without. The rigid-body sub-step reads each joint's
+gear kind, static friction and rotor inertia from a tuple kept per parameter set (Panda:
+2137 -> 1977 Python calls per cycle). This bench, 5 rounds alternating with the tree before
+(07a73bd; load 3.5-10.5, steal <= 0.2 %), medians: 8 nodes virtual recording on 0.596 ->
+0.509 % (runs 0.636, 0.710, 0.596, 0.520, 0.527 / 0.493, 0.613, 0.630, 0.509, 0.499),
+recording off 0.537 -> 0.451 %, loopback 0.519 -> 0.465 %, Panda 0.907 -> 0.758 %; the cycle
+thread's halves (medians of runs) simulator 0.152 -> 0.141 ms, daemon 0.217 -> 0.206 ms. An
+earlier 3 rounds without the rigid-body change (load 4.9-10.5): 0.545 -> 0.434 %, 0.503 ->
+0.384 %, 0.492 -> 0.441 %, 0.797 -> 0.708 %. Still 1.4-2.3x from the targets:
+the master's per-joint drivers and dataclasses (JointState, health snapshots, Measurement's
+arrays), the controller's small-array numpy, and per node the simulator's PDO engine calls;
+the Panda's coupled plant runs its drives' servo in Python every sub-step (a compiled servo
+step computes the same bits, but as Python floats where the Python path has numpy scalars:
+the recorded motor torques' repr changes, so it was left out).
 
 The compiled core (issue 35; firmware_sim/_simcore.c, a plain C extension built by setup.py,
 optional: firmware_sim/simcore.py, SPACEARM_PURE_PYTHON=1 switches it off) runs the

@@ -68,8 +68,18 @@ class Cia402Axis:
     # one cycle --------------------------------------------------------------------
     def step(self, statusword: int) -> int:
         self.statusword = statusword
-        self.state = s = decode_statusword(statusword)
         self.fault_cleared = False
+        if not self._reset_phase:
+            # no fault reset running: state and controlword follow from the statusword and the
+            # goal alone, worked out once per pair (a handful ever seen; issue 35)
+            key = (statusword, self.goal)
+            steady = _STEADY.get(key)
+            if steady is None:
+                state = decode_statusword(statusword)
+                steady = _STEADY[key] = (state, self._next(state))
+            self.state, self.controlword = steady
+            return self.controlword
+        self.state = s = decode_statusword(statusword)
         self.controlword = self._next(s)
         return self.controlword
 
@@ -112,3 +122,7 @@ class Cia402Axis:
         if s == State.QUICK_STOP_ACTIVE:
             return CW_DISABLE_VOLTAGE                 # leave quick stop via switch on disabled
         return CW_ENABLE_OPERATION                    # stay enabled
+
+
+# (statusword, goal) -> (state, controlword) outside a fault reset, where _next changes nothing
+_STEADY: dict[tuple[int, Goal], tuple[State, int]] = {}

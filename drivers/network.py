@@ -83,6 +83,7 @@ class _Listener(can.Listener):
         # In-process bus hot path: a standard data frame as plain values, TPDOs decoded in
         # the same call (cyclic_io.py), everything else through the library's subscribers.
         self.on_frame = arm._receive_frame
+        self.on_frames = arm._receive_frames     # a burst (a SYNC's TPDOs) in one call
 
     def on_message_received(self, msg: can.Message) -> None:
         if msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id or getattr(msg, "is_fd", False):

@@ -443,10 +443,11 @@ error:
 
 /* rpdo_store(codec, data, store, params, on_write, write_rules, aborted, stats) -> None
  * PdoEngine.on_rpdo's loop over the mapped objects, for a node whose only write callback is its
- * own write rules: per entry (index, sub, start, end, obj, size_ok, key) the slice data[start:end]
- * (Python's slicing: a short frame gives a short slice, never a read past its end), counted as
- * malformed if its size is not the object's; write_rules(index, sub, obj, chunk) for the
- * communication area, on_write(index, sub, chunk) for application objects; an `aborted`
+ * own write rules: per entry (index, sub, start, end, obj, size_ok, key, reacts) the slice
+ * data[start:end] (Python's slicing: a short frame gives a short slice, never a read past its
+ * end), counted as malformed if its size is not the object's; write_rules(index, sub, obj, chunk)
+ * for the communication area, on_write(index, sub, chunk) for application objects the device
+ * reacts to (`reacts`: SimNode.WRITE_REACTIONS; the others have no reaction to call); an `aborted`
  * exception (SdoAbortedError) counts as malformed and the object is not stored; else stored
  * in store[index][sub] and its param() cache entry dropped. */
 static int count_malformed(PyObject *stats) {
@@ -478,8 +479,8 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
     }
     for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(codec); i++) {
         PyObject *e = PyTuple_GET_ITEM(codec, i);
-        if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 7) {
-            PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 7-tuples");
+        if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 8) {
+            PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 8-tuples");
             return NULL;
         }
         PyObject *index = PyTuple_GET_ITEM(e, 0), *sub = PyTuple_GET_ITEM(e, 1), *obj = PyTuple_GET_ITEM(e, 4),
@@ -498,9 +499,14 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
                 return NULL;
             continue;
         }
+        int reacts = index_value < 0x2000 ? 1 : PyObject_IsTrue(PyTuple_GET_ITEM(e, 7));
+        if (reacts < 0) {
+            Py_DECREF(chunk);
+            return NULL;
+        }
         PyObject *result = index_value < 0x2000
             ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
-            : PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL);
+            : reacts ? PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL) : Py_NewRef(Py_None);
         if (result == NULL) {
             if (!PyErr_ExceptionMatches(aborted)) {
                 Py_DECREF(chunk);

@@ -43,6 +43,8 @@ class EndEffectorNode(SimNode):
         self._progress = (ee.grip, ee.turns)
         self._update_od()
 
+    WRITE_REACTIONS = frozenset({od.EE_COMMAND})     # the only object on_write looks at
+
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.EE_COMMAND:
             value = data[0] if data else 0

@@ -27,6 +27,8 @@ class FtSensorNode(SimNode):
         self.last_rpdo_tare = 0
         self._sample()
 
+    WRITE_REACTIONS = frozenset({od.FT_TARE})     # the only object on_write looks at
+
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.FT_TARE:
             value = data[0] if data else 0

@@ -96,6 +96,8 @@ class JointDriveNode(SimNode):
         self.joint.brake_engaged = True
         self._update_od()
 
+    WRITE_REACTIONS = frozenset({od.MODES_OF_OPERATION})     # the only object on_write looks at
+
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.MODES_OF_OPERATION and int.from_bytes(data, "little", signed=True) not in (
                 od.MODE_CSP, od.MODE_PROFILE_POSITION):

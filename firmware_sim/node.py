@@ -424,5 +424,17 @@ class SimNode:
     _routing_dirty = False
     in_rpdo = False   # True while an RPDO (not an SDO) is writing the OD
 
+    # The application objects (2000h and up) this class's on_write reacts to; an RPDO skips
+    # the call for the others (issue 35: most mapped objects are plain set-points). None: any.
+    WRITE_REACTIONS: frozenset[int] | None = frozenset()
+
+    def write_reactions(self) -> frozenset[int] | None:
+        """WRITE_REACTIONS as declared beside the on_write in use: a subclass that overrides
+        on_write without declaring its own reacts to every object."""
+        for cls in type(self).__mro__:
+            if "on_write" in cls.__dict__:
+                return cls.__dict__.get("WRITE_REACTIONS")
+        return None
+
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         """Device specific reaction to an SDO/RPDO write (called before the value is stored)."""

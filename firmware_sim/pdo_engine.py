@@ -90,7 +90,7 @@ class PdoEngine:
                 if core is not None and not generic:
                     core.rpdo_store(codec, data, store, params, on_write, write_rules, SdoAbortedError, node.stats)
                     return
-                for index, sub, start, end, obj, size_ok, key in codec:
+                for index, sub, start, end, obj, size_ok, key, reacts in codec:
                     chunk = data[start:end]
                     if not size_ok:          # mapped size differs from the object's type
                         node.stats.malformed += 1
@@ -101,7 +101,7 @@ class PdoEngine:
                                 callback(index=index, subindex=sub, od=obj, data=chunk)
                         elif index < 0x2000:   # communication area: the full write rules
                             write_rules(index, sub, obj, chunk)
-                        else:                  # application objects: only the device's reaction
+                        elif reacts:           # application objects: only the device's reaction
                             on_write(index, sub, chunk)
                     except SdoAbortedError:
                         node.stats.malformed += 1
@@ -118,19 +118,22 @@ class PdoEngine:
     def _compile_rpdo(self, pdo: Pdo) -> tuple:
         """The RPDO's decoder, built once per mapping: per entry its byte slice, the object and
         whether the mapped length fits the object's type (what LocalNode.set_data checks per
-        frame), and its param() cache key. Unknown objects are left out (set_data would abort:
-        counted as malformed)."""
+        frame), its param() cache key, and whether the device reacts to a write of it (its
+        on_write is called only then: SimNode.write_reactions). Unknown objects are left out
+        (set_data would abort: counted as malformed)."""
         out, offset = [], 0
+        reactions = self.node.write_reactions()
         for index, sub, size in pdo.entries:
             try:
                 obj = self.node.local._find_object(index, sub)
             except SdoAbortedError:
                 obj = None
+            reacts = reactions is None or index in reactions
             if obj is not None:
                 size_ok = obj.data_type not in odlib.NUMBER_TYPES or 8 * size == len(obj)
-                out.append((index, sub, offset, offset + size, obj, size_ok, (index, sub)))
+                out.append((index, sub, offset, offset + size, obj, size_ok, (index, sub), reacts))
             else:
-                out.append((index, sub, offset, offset + size, None, False, (index, sub)))
+                out.append((index, sub, offset, offset + size, None, False, (index, sub), reacts))
             offset += size
         return tuple(out)
 

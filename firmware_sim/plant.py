@@ -289,7 +289,9 @@ class JointModel:
         p = self.params
         tau_m = 0.0
         if self.controller is not None:
-            tau_m = self.controller(s, self.q_measured, self.thetad if self.two_mass else self.qd)
+            # two_mass inlined: a coupled plant calls this for every joint every sub-step
+            elastic = p.joint_stiffness > 0.0 or p.backlash > 0.0
+            tau_m = self.controller(s, self.q_measured, self.thetad if elastic else self.qd)
         limit = self.max_motor_torque
         if p.torque_limit > 0.0:
             limit = min(limit, p.torque_limit)

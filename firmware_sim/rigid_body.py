@@ -18,6 +18,7 @@ used here: gravity is the plant file's vector, and `link_inertia` is replaced by
 from __future__ import annotations
 
 import math
+import operator
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -77,6 +78,19 @@ class ArmDynamics:
         self._zero = np.zeros(self.nq)
         self._gear_omega: float | None = None   # set on the first step (needs the plant's joints)
         self.link_inertia = np.ones(self.nq)     # kg m^2, smallest M_ii seen (gear damping)
+        self._params: tuple = ()                 # the joints' parameters joint_constants() was worked out for
+        self._constants: tuple = ()
+
+    def joint_constants(self, joints: list) -> tuple:
+        """Per joint what a sub-step reads of its parameters: (elastic or loose gear, static
+        friction, rotor inertia at the joint), worked out again only when a joint's parameters
+        change (a sub-step read them 4 times per joint through calls: issue 35)."""
+        params = tuple(joint.params for joint in joints)
+        if len(params) != len(self._params) or not all(map(operator.is_, params, self._params)):
+            self._constants = tuple((joint.two_mass, static_friction(p.coulomb_friction, p.stribeck_friction),
+                                     p.motor_inertia * p.gear_ratio ** 2) for joint, p in zip(joints, params))
+            self._params = params
+        return self._constants
 
     def step_joints(self, plant: "Plant", s: float, h: float) -> None:
         """One physics sub-step of the plant's joints (see `substep`), split further when an
@@ -154,30 +168,32 @@ def substep(plant: "Plant", dynamics: ArmDynamics, s: float, h: float) -> None:
     """One physics sub-step of every joint with the coupled arm dynamics."""
     joints = plant.joints
     n = len(joints)
-    q = np.fromiter((j.q for j in joints), float, n)
-    qd = np.fromiter((j.qd for j in joints), float, n)
+    # lists, not generators: a generator's resume per joint was a Python call each (issue 35)
+    q = np.array([j.q for j in joints], dtype=float)
+    qd = np.array([j.qd for j in joints], dtype=float)
     tau = np.empty(n)
     locked = np.zeros(n, dtype=bool)
     armature = np.empty(n)
     bias = None
+    constants = dynamics.joint_constants(joints)
     for i, joint in enumerate(joints):
         drive = joint.drive_torque(s)
         p = joint.params
+        two_mass, static, rotor = constants[i]
         if joint.brake_engaged or joint.stalled:
             locked[i] = True
             tau[i] = armature[i] = 0.0
             continue
-        if joint.two_mass:
+        if two_mass:
             # the link inertia the gear sees is the arm's M_ii: the smallest over postures
             tau[i] = joint.advance_motor(drive, h, dynamics.link_inertia[i])
             armature[i] = 0.0
             friction_speed = joint.qd
         else:
             tau[i] = drive
-            armature[i] = p.motor_inertia * p.gear_ratio ** 2
+            armature[i] = rotor
             friction_speed = joint.thetad
         tau[i] -= joint.external_torque
-        static = static_friction(p.coulomb_friction, p.stribeck_friction)
         if abs(friction_speed) > STICTION_SPEED or static == 0.0:
             tau[i] -= friction_torque(friction_speed, p.coulomb_friction, p.viscous_friction,
                                       p.stribeck_friction, p.stribeck_velocity)
@@ -190,20 +206,21 @@ def substep(plant: "Plant", dynamics: ArmDynamics, s: float, h: float) -> None:
             else:
                 tau[i] -= math.copysign(static, net)
     if locked.all():
-        for joint in joints:
+        for joint, (two_mass, _, _) in zip(joints, constants):
             joint.qd = 0.0
-            if not joint.two_mass:
+            if not two_mass:
                 joint.thetad = 0.0
         return
     dynamics.set_armature(armature)
     qdd = dynamics.acceleration(q, qd, tau, locked)
     for i, joint in enumerate(joints):
+        two_mass = constants[i][0]
         if locked[i]:
             joint.qd = 0.0
-            if not joint.two_mass:
+            if not two_mass:
                 joint.thetad = 0.0
             continue
-        if joint.two_mass:
+        if two_mass:
             joint.qd += qdd[i] * h
             joint.q += joint.qd * h
             continue

@@ -98,6 +98,12 @@ class _FastVirtual:
       `on_frame(can_id, data, timestamp)` gets the frame as plain values, so a cycle's ~40
       frames create no Message objects at all. A Message is built only for a queued receiver.
 
+    * `send_frames([(can_id, data), ...])` sends a burst (a cycle's RPDOs, a SYNC's TPDOs) as
+      the loopback hub forwards one: the taps see the whole burst first, then each receiver
+      takes it whole, in one call where its one inline listener has `on_frames(frames,
+      timestamp)` (issue 35: one call a burst instead of one per frame and receiver). A frame
+      a receiver sends in answer follows the burst, as on the loopback bus.
+
     * A passive observer (a trace) registers as a *tap* (`add_tap`): it sees every frame on the
       channel, first, in the sender's thread, and its bus receives nothing else. No queue and
       no re-entrancy guard: ~0.5 us less per frame than an inline listener (issue 35).
@@ -140,21 +146,31 @@ class _FastVirtual:
         # for send_frame: each listener's plain-value handler, looked up once here
         self.queue.inline_handlers = getattr(self.queue, "inline_handlers", []) + [
             (getattr(listener, "on_frame", None), listener)]
+        # for send_frames: a burst in one call, where this queue's only listener takes bursts
+        listeners = self.queue.inline_listeners
+        self.queue.inline_burst = getattr(listener, "on_frames", None) if len(listeners) == 1 else None
 
     def send_frame(self, can_id: int, data: bytes) -> None:
         """Send a standard-ID data frame given as plain values (the same frame send() would put
         on the bus for can.Message(arbitration_id=can_id, data=data, is_extended_id=False))."""
+        self.send_frames(((can_id, data),))
+
+    def send_frames(self, frames) -> None:
+        """Send standard-ID data frames [(can_id, data), ...] as one burst (class docstring):
+        one timestamp, the taps first, then each receiver the whole burst in order."""
         if not self._open:
             raise can.CanOperationError("Cannot operate on a closed bus")
-        if not 0 <= can_id <= 0x7FF or len(data) > 8:
-            raise can.CanOperationError(f"cannot send frame 0x{can_id:X} with {len(data)} bytes: "
-                                        "not a standard CAN data frame")
+        for can_id, data in frames:
+            if not 0 <= can_id <= 0x7FF or len(data) > 8:
+                raise can.CanOperationError(f"cannot send frame 0x{can_id:X} with {len(data)} bytes: "
+                                            "not a standard CAN data frame")
         timestamp = time.time()
-        for on_frame in self._taps.on_frame:
+        taps = self._taps
+        for on_frames in taps.on_frames:
             try:
-                on_frame(can_id, data, timestamp)
+                on_frames(frames, timestamp)
             except Exception as exc:   # a tap's bug must not fail the sender
-                self._taps.failed(on_frame, exc)
+                taps.failed(on_frames, exc)
         own = None if self.receive_own_messages else self.queue
         try:
             active = _inline.active       # this thread's receivers in delivery (_enter_inline)
@@ -167,18 +183,30 @@ class _FastVirtual:
             if handlers and not bus_queue.queue and bus_queue not in active:   # deque length: no lock
                 active.add(bus_queue)
                 try:
-                    for on_frame, listener in handlers:
+                    burst = getattr(bus_queue, "inline_burst", None)
+                    if burst is not None:
                         try:
-                            if on_frame is not None:
-                                on_frame(can_id, data, timestamp)
-                            else:
-                                listener.on_message_received(self._copy(can_id, data, timestamp, bus_queue))
+                            burst(frames, timestamp)
                         except Exception as exc:   # a receiver's bug must not fail the sender
-                            listener.on_error(exc)
+                            handlers[0][1].on_error(exc)
+                        continue
+                    for can_id, data in frames:
+                        self._deliver(handlers, can_id, data, timestamp, bus_queue)
                 finally:
                     active.discard(bus_queue)
                 continue
-            bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
+            for can_id, data in frames:
+                bus_queue.put(self._copy(can_id, data, timestamp, bus_queue))
+
+    def _deliver(self, handlers, can_id: int, data: bytes, timestamp: float, bus_queue) -> None:
+        for on_frame, listener in handlers:
+            try:
+                if on_frame is not None:
+                    on_frame(can_id, data, timestamp)
+                else:
+                    listener.on_message_received(self._copy(can_id, data, timestamp, bus_queue))
+            except Exception as exc:   # a receiver's bug must not fail the sender
+                listener.on_error(exc)
 
     def _copy(self, can_id: int, data: bytes, timestamp: float, bus_queue) -> can.Message:
         return can.Message(timestamp=timestamp, arbitration_id=can_id, is_extended_id=False,
@@ -238,7 +266,7 @@ class _Taps:
 
     def __init__(self) -> None:
         self.listeners: tuple[can.Listener, ...] = ()
-        self.on_frame: tuple = ()
+        self.on_frames: tuple = ()
         self._lock = threading.Lock()
 
     def add(self, listener: can.Listener) -> None:
@@ -249,14 +277,22 @@ class _Taps:
         with self._lock:
             self._set(tuple(t for t in self.listeners if t is not listener))
 
-    def failed(self, on_frame, exc: Exception) -> None:
-        for listener, handler in zip(self.listeners, self.on_frame):
-            if handler is on_frame:
+    def failed(self, on_frames, exc: Exception) -> None:
+        for listener, handler in zip(self.listeners, self.on_frames):
+            if handler is on_frames:
                 listener.on_error(exc)
 
     def _set(self, listeners: tuple) -> None:
         self.listeners = listeners
-        self.on_frame = tuple(t.on_frame for t in listeners)
+        self.on_frames = tuple(getattr(t, "on_frames", None) or _burst_of(t.on_frame) for t in listeners)
+
+
+def _burst_of(on_frame):
+    """A tap that takes frames one by one, given a burst: each frame, in order."""
+    def on_frames(frames, timestamp: float) -> None:
+        for can_id, data in frames:
+            on_frame(can_id, data, timestamp)
+    return on_frames
 
 
 _TAPS: dict = {}

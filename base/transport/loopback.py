@@ -249,22 +249,32 @@ class LoopbackBus(can.BusABC):
     # ------------------------------------------------------------ hot path (base/transport)
     def add_inline_listener(self, listener: can.Listener) -> None:
         """Standard data frames for this bus go to listener.on_frame(can_id, data, timestamp)
-        in the thread that receives (the Notifier's), without a can.Message; other frames
-        still reach the Notifier. Same contract as the in-process bus's inline listeners."""
-        self._inline = self._inline + [(getattr(listener, "on_frame", None), listener)]
+        in the thread that receives (the Notifier's), without a can.Message, or all those of
+        one read to listener.on_frames([(can_id, data), ...], timestamp) in one call where it
+        has that; other frames still reach the Notifier. Same contract as the in-process bus's
+        inline listeners."""
+        self._inline = self._inline + [(getattr(listener, "on_frame", None), getattr(listener, "on_frames", None),
+                                        listener)]
         self._plain = self._deliver
 
-    def _deliver(self, can_id: int, data: bytes, timestamp: float) -> None:
-        for on_frame, listener in self._inline:
-            try:
-                if on_frame is not None:
-                    on_frame(can_id, data, timestamp)
-                else:
-                    listener.on_message_received(can.Message(timestamp=timestamp, arbitration_id=can_id,
-                                                             is_extended_id=False, data=data,
-                                                             channel=self.hub_channel, check=False))
-            except Exception as exc:   # a receiver's bug must not end the receive thread
-                listener.on_error(exc)
+    def _deliver(self, frames: list, timestamp: float) -> None:
+        for on_frame, on_frames, listener in self._inline:
+            if on_frames is not None:    # a burst in one call (issue 35)
+                try:
+                    on_frames(frames, timestamp)
+                except Exception as exc:   # a receiver's bug must not end the receive thread
+                    listener.on_error(exc)
+                continue
+            for can_id, data in frames:
+                try:
+                    if on_frame is not None:
+                        on_frame(can_id, data, timestamp)
+                    else:
+                        listener.on_message_received(can.Message(timestamp=timestamp, arbitration_id=can_id,
+                                                                 is_extended_id=False, data=data,
+                                                                 channel=self.hub_channel, check=False))
+                except Exception as exc:   # a receiver's bug must not end the receive thread
+                    listener.on_error(exc)
 
     def send_frame(self, can_id: int, data: bytes) -> None:
         """Send a standard-ID data frame given as plain values (no can.Message)."""

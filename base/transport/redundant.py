@@ -426,6 +426,7 @@ class _LineQueue:
         so a sender iterating it sees the old list or the new one."""
         self.inline_handlers = [(on_frame if each is listener else handler, each)
                                 for handler, each in self.inline_handlers]
+        self.inline_burst = None      # bursts go frame by frame through the new handler
 
 
 class InlineRedundantBus(RedundantBus):

@@ -140,18 +140,20 @@ def frames_end(buf: bytearray) -> tuple[int, int]:
 
 def decode_stream(buf: bytearray, timestamp: float, channel: str | None, plain=None) -> list[can.Message]:
     """Decode every complete FRAME record at the start of buf (removing them).
-    With `plain`, a standard-ID data frame (no flags) is handed to plain(can_id, data,
-    timestamp) instead of becoming a can.Message; the list holds only the other frames.
-    Raises ProtocolError (and removes nothing) if any record is not a well-formed FRAME."""
+    With `plain`, the standard-ID data frames (no flags) are handed to plain([(can_id, data),
+    ...], timestamp) in one call, in order, instead of becoming can.Messages; the list holds
+    only the other frames. Raises ProtocolError (and removes nothing) if any record is not a
+    well-formed FRAME."""
     stop, _ = frames_end(buf)
     out = []
+    burst = []
     pos = 0
     while pos < stop:
         end = pos + 1 + buf[pos]
         flags = buf[pos + 2]
         can_id = int.from_bytes(buf[pos + 3:pos + 7], "big")
         if plain is not None and not flags:
-            plain(can_id, bytes(buf[pos + 8:end]), timestamp)
+            burst.append((can_id, bytes(buf[pos + 8:end])))
         else:
             out.append(_Message(
                 timestamp=timestamp, arbitration_id=can_id,
@@ -162,6 +164,8 @@ def decode_stream(buf: bytearray, timestamp: float, channel: str | None, plain=N
         pos = end
     if stop:
         del buf[:stop]
+    if burst:
+        plain(burst, timestamp)
     return out
 
 

@@ -293,8 +293,10 @@ class Daemon:
     def _watch_nodes(self, m: Measurement, starved: bool) -> None:
         # the snapshot is still the last cycle's: the nodes missing at its read
         last_missing = self.snapshot.measurement.missing if self.snapshot is not None else ()
-        self.node_timing.add(self.hardware.last_io_wait, not m.missing,
-                             {name: (h.last_heartbeat, period) for name, h, period in self._heartbeat_sources},
+        # lockstep: heartbeat gaps follow the machine's speed, and the timing leaves them out
+        heartbeats = {} if self.node_timing.lockstep else {
+            name: (h.last_heartbeat, period) for name, h, period in self._heartbeat_sources}
+        self.node_timing.add(self.hardware.last_io_wait, not m.missing, heartbeats,
                              host_stalled=m.host_stalled,
                              last_answered_late=bool(m.answered_late)
                              and set(m.answered_late) >= set(last_missing), starved=starved,

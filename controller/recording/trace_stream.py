@@ -49,6 +49,11 @@ class StreamTap(can.Listener):
         extend = self._frames.extend
         if line_channels is None:
             self.on_frame = lambda can_id, data, timestamp: extend((timestamp, can_id, data))
+
+            def on_frames(frames, timestamp: float) -> None:   # a burst (base/transport send_frames)
+                for can_id, data in frames:
+                    extend((timestamp, can_id, data))
+            self.on_frames = on_frames
         else:
             self.on_frame = lambda can_id, data, timestamp: extend((timestamp, can_id, data, rx_state.line))
         self._stride = _stride(line_channels)

@@ -63,6 +63,46 @@ def test_send_frame_delivers_what_send_does_to_every_kind_of_receiver():
             bus.shutdown()
 
 
+class _Bursts(_Raw):
+    def __init__(self):
+        super().__init__()
+        self.calls = 0
+
+    def on_frames(self, frames, timestamp):
+        self.calls += 1
+        self.frames += [(can_id, bytes(data)) for can_id, data in frames]
+
+
+def test_a_burst_reaches_every_kind_of_receiver_whole_and_in_order():
+    """send_frames: a receiver that takes bursts gets one call, the others every frame in
+    order (inline or queued), and a tap sees the burst before any receiver."""
+    name = f"virtual:burst-{uuid.uuid4().hex[:8]}"
+    sender, bursts_bus, raw_bus, queued, tap_bus = (open_bus(name) for _ in range(5))
+    try:
+        seen = []
+
+        class Tap(_Raw):
+            def on_frame(self, can_id, data, timestamp):
+                seen.append(("tap", can_id, len(bursts.frames)))
+
+        bursts, raw = _Bursts(), _Raw()
+        bursts_bus.add_inline_listener(bursts)
+        raw_bus.add_inline_listener(raw)
+        tap_bus.add_tap(Tap())
+        frames = [(0x80, b""), (0x201, bytes(range(8))), (0x7FF, b"\x01")]
+        sender.send_frames(frames)
+        assert bursts.calls == 1 and bursts.frames == frames and raw.frames == frames
+        assert seen == [("tap", can_id, 0) for can_id, _ in frames]    # every frame before the receivers
+        got = [queued.recv(1.0) for _ in range(3)]
+        assert [(m.arbitration_id, bytes(m.data)) for m in got] == frames
+        with pytest.raises(can.CanOperationError):
+            sender.send_frames([(0x100, b""), (0x800, b"")])     # checked whole before any frame goes out
+        assert bursts.frames == frames
+    finally:
+        for bus in (sender, bursts_bus, raw_bus, queued, tap_bus):
+            bus.shutdown()
+
+
 def test_compiled_pdo_codecs_match_the_library_coding():
     net = ArmNetwork("virtual:unused", load_bus_config())     # not connected: drivers and layouts only
     rng = random.Random(3)
