@@ -67,6 +67,11 @@ _can_id = itemgetter(0)
 class _RxState(threading.local):
     line: int | None = None     # every thread starts with it: a hot path reads `.line`, no getattr call
     held: "RedundantBus | None" = None     # the pair whose frame this reader handed out under a hold
+    # The pair whose recv() set `.line` in this thread: that tag outlives the call (the reader
+    # asks rx_line() after it), so it ends when the pair does, or a later in-process run in
+    # the same thread read a frame of a pair long gone as "on line B" (a lockstep test after
+    # tests/transport: both bus lines lost).
+    read_from: "RedundantBus | None" = None
 
 
 _rx = _RxState()
@@ -279,7 +284,7 @@ class RedundantBus(can.BusABC):
         if gating.gate is not None and line != gating.raw_line:
             gating.hold()           # until this reader comes back for the next frame
             _rx.held = self
-        _rx.line = line
+        _rx.line, _rx.read_from = line, self
         msg.channel = self.line_channels[line]     # a trace of the pair names each frame's line
         return msg, False
 
@@ -393,6 +398,8 @@ class RedundantBus(can.BusABC):
             return
         self._closing.set()
         self.rx_gating.detach()
+        if _rx.read_from is self:
+            _rx.line = _rx.read_from = None
         for reader in self._readers:
             reader.join(2 * _READ_POLL + 0.5)
         for line in self.lines:

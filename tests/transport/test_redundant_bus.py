@@ -63,6 +63,22 @@ def test_receives_both_lines_tagged(lines):
             bus.shutdown()
 
 
+def test_a_read_frames_line_ends_with_its_pair(lines):
+    """rx_line() names the line of the frame recv() handed out until the pair shuts down, then
+    None: a lockstep stack run later in this thread took its own frames for line B's and
+    lost both lines (test_lockstep_determinism's line-cut run after this file)."""
+    a, b = lines
+    pair, tap_b = open_bus(f"{a}+{b}"), open_bus(b)
+    try:
+        tap_b.send(can.Message(arbitration_id=0x182, data=b"\x02", is_extended_id=False))
+        assert pair.recv(1.0) is not None
+        assert rx_line() == 1
+    finally:
+        pair.shutdown()
+        tap_b.shutdown()
+    assert rx_line() is None
+
+
 def test_inline_listeners_see_the_line(lines):
     a, b = lines
     pair, tap_b = open_bus(f"{a}+{b}"), open_bus(b)
