@@ -17,14 +17,14 @@ IN_VM = os.environ.get("SPACEARM_IN_VM") == "1"
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(runner.DEFAULT_BUDGET + 120)
+@pytest.mark.timeout(runner.DEFAULT_BUDGET * runner.BUDGET_MAX_SCALE + 120)
 def test_scenarios_pass_on_real_socketcan_vcan(record_property):
     if IN_VM:
         pytest.skip("already inside the vcan VM")
     if os.environ.get("SPACEARM_SKIP_VM") == "1" and not os.environ.get("CI"):
         pytest.skip("SPACEARM_SKIP_VM=1 (developer opt-out; never honoured when CI is set)")
     try:
-        res = runner.run_suite()
+        res = runner.run_suite(budget=runner.machine_budget())
     except runner.VMUnavailable as exc:
         pytest.fail(f"vcan suite cannot run: no vcan0 on this host and the VM cannot start: {exc}")
     where = "directly on this host's vcan0" if res.where == "host" else \

@@ -2,6 +2,9 @@
 (where vcan0 exists and everything runs as root) fails the run instead of hiding in a count."""
 from __future__ import annotations
 
+import pytest
+
+from hil_tests.vm import runner
 from hil_tests.vm.runner import SuiteResult, _fill_counts
 
 JUNIT = """<?xml version="1.0" encoding="utf-8"?><testsuites><testsuite name="pytest" errors="0" failures="0"
@@ -29,3 +32,12 @@ def test_a_skip_inside_the_vm_is_named_and_fails_the_run(tmp_path):
 
 def test_on_a_host_with_vcan0_a_skip_is_shown_not_fatal(tmp_path):
     assert _result("host", tmp_path).ok
+
+
+@pytest.mark.parametrize("loop, scale", [(0.045, 1.0), (0.09, 1.0), (0.18, 2.0), (0.36, 3.0)])
+def test_the_vms_kill_limit_follows_the_machines_speed(monkeypatch, loop, scale):
+    """The VM emulates in software: on a machine whose reference loop takes twice as long the
+    run takes about twice as long, and its kill limit grows with it (up to 3x)."""
+    import bench.reference_work
+    monkeypatch.setattr(bench.reference_work, "reference_loop_seconds", lambda repeats=5: (loop, loop))
+    assert runner.machine_budget(1000.0) == pytest.approx(1000.0 * scale)
