@@ -80,6 +80,8 @@ class FrameFaults:
             elif op == "clear":
                 self.drop_prob = self.reorder_prob = 0.0
                 self.blackout_until = 0.0
+            else:
+                raise KeyError(f"unknown request {op!r}")
 
     def counters(self) -> dict:
         with self._lock:
@@ -104,7 +106,7 @@ def serve(seed: int) -> int:
                 break
             if op == "disconnect":
                 hub.disconnect(str(arg))
-            elif op not in ("counters",):
+            elif op != "counters":
                 faults.apply(op, arg)
             answer = faults.counters()
         except (ValueError, KeyError, TypeError) as exc:
