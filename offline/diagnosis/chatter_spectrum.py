@@ -54,13 +54,15 @@ def distance(a: np.ndarray, b: np.ndarray, floor: float) -> float:
     return float(np.sqrt(np.mean((np.log(a + floor) - np.log(b + floor)) ** 2)))
 
 
-def screened(real: np.ndarray, nominal: np.ndarray, null: np.ndarray, train: np.ndarray) -> bool:
+def screened(real: np.ndarray, model: np.ndarray, nominal: np.ndarray, null: np.ndarray, train: np.ndarray) -> bool:
     """Whether the recording's chatter spectrum (`real`: torque less the ideal-sensor nominal
-    replay's) is further from the nominal replay's than SCREEN times the null replay's is."""
+    replay's) is further from the `model`'s (the nominal replay, or the replay of the law chosen
+    so far) than SCREEN times the null replay's is from the `nominal` replay's. Stiction whose
+    replay already chatters as the recording does leaves nothing for a gear to explain."""
     rows = np.flatnonzero(train)
-    p = {k: periodograms(x[rows]).mean(axis=1) for k, x in (("real", real), ("nom", nominal), ("null", null))}
-    floor = FLOOR * float(p["real"].mean())
-    return distance(p["real"], p["nom"], floor) > SCREEN * distance(p["null"], p["nom"], floor)
+    p = [periodograms(x[rows]).mean(axis=1) for x in (real, model, nominal, null)]
+    floor = FLOOR * float(p[0].mean())
+    return distance(p[0], p[1], floor) > SCREEN * distance(p[3], p[2], floor)
 
 
 def fit_spectral_gear(nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray, base_tau: np.ndarray,
