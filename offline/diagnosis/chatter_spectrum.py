@@ -43,6 +43,7 @@ SCREEN = 1.5
 # times it at most): a stiffness that only partly mimics another effect on the chatter is no
 # explanation (stiction of 43 N m on slow ramps: 2.49 -> 0.98 at 9e5 N m/rad, the null 0.2-0.4).
 NULL_MARGIN = 2.0
+MIN_SEGMENTS = 4             # per part (training, held-out): fewer make no spectrum (a ten-row recording)
 
 
 def periodograms(x: np.ndarray) -> np.ndarray:
@@ -61,6 +62,8 @@ def screened(real: np.ndarray, model: np.ndarray, nominal: np.ndarray, null: np.
     so far) than SCREEN times the null replay's is from the `nominal` replay's. Stiction whose
     replay already chatters as the recording does leaves nothing for a gear to explain."""
     rows = np.flatnonzero(train)
+    if min(len(rows), int((~train).sum())) < (MIN_SEGMENTS + 1) * SEGMENT // 2:
+        return False
     p = [periodograms(x[rows]).mean(axis=1) for x in (real, model, nominal, null)]
     floor = FLOOR * float(p[0].mean())
     return distance(p[0], p[1], floor) > SCREEN * distance(p[3], p[2], floor)

@@ -5,6 +5,8 @@ named stiction by its breakaway, and the development bench's diagnosis took 18 s
 instead of 4."""
 from __future__ import annotations
 
+import numpy as np
+
 from spacearm.offline.diagnosis import analysis
 
 from test_stiction_breakaway import NOMINAL, recorded
@@ -18,3 +20,10 @@ def test_stiction_whose_replay_chatters_as_recorded_runs_no_stiffness_grid(monke
     assert [f.fit.effects for f in result.findings] == [("stribeck",)], result.verdict
     assert result.findings[0].fit.judged_by == "breakaway"
     assert runs == []
+
+
+def test_a_recording_too_short_for_a_spectrum_is_not_screened_in():
+    """Ten rows make no Welch segment: the screen said ValueError (tests/fuzz, seven joints, ten rows)."""
+    from spacearm.offline.diagnosis.chatter_spectrum import screened
+    x = np.random.default_rng(1).normal(size=10)
+    assert not screened(x, 0 * x, 0 * x, 0 * x, np.arange(10) < 6)
