@@ -41,6 +41,7 @@ from spacearm.offline.diagnosis.physical import parameter_violations
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
 from spacearm.offline.diagnosis.recording_io import RecordingTable
 from spacearm.offline.diagnosis.breakaway import at_breakaway
+from spacearm.offline.diagnosis.chatter_spectrum import fit_spectral_gear, screened
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.offline.diagnosis.stick_slip import stiction_by_breakaway
 from spacearm.offline.diagnosis.stribeck_replay import stribeck_by_replay
@@ -405,6 +406,18 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                                         table.dq_cmd)
             if _stiff_gear_wins(stiff, fit):
                 fit, alternatives[j] = stiff, []
+        chosen = sim.tau[:, j] + (0.0 if fit is None else fit.prediction)
+        if kinds[j] == "revolute" and (fit is None or fit.judged_by == "breakaway") and \
+                screened(*(x - quiet.tau[:, j] for x in (table.tau[:, j], chosen, sim.tau[:, j], null.tau[:, j])),
+                         train):
+            # a gear that shows only in how the drive chatters, out of phase with every replay: judged
+            # by the chatter's spectrum (chatter_spectrum.py), and against stiction read from the
+            # same reversals by that stiction's own replay
+            gear = fit_spectral_gear(nominal, table.q_cmd, table.dt, table.q[0], quiet.tau[:, j], sim.tau[:, j],
+                                     table.tau[:, j], null.tau[:, j], j, train, table.dq_cmd,
+                                     () if fit is None else (chosen,))
+            if gear is not None and gear.significant:
+                fit, alternatives[j] = gear, []
         if fit is not None:
             if fit.by_envelope:
                 # play and a soft gear both make the drive hunt; where their envelopes fit alike

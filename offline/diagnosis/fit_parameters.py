@@ -100,15 +100,19 @@ def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversal
                          "drive hunts, torque ripple the nominal model lacks")
         elif effect == "elasticity":
             parts.append(f"elastic gear, stiffness about {p['joint_stiffness']:.3g}{pm('joint_stiffness')} "
-                         f"{u.stiffness}: " + ("the motor runs ahead of the link by the gear's deflection, a "
-                                               "smooth torque term the nominal model lacks" if fit.judged_by ==
-                                               "stiff gear" else "the drive rings, torque ripple the nominal "
-                                               "model lacks"))
+                         f"{u.stiffness}: " + GEAR_SIGNS.get(fit.judged_by, GEAR_SIGNS["envelope"]))
         elif effect == "ft_bias":
             parts.append(f"constant offset {p['bias']:.3g}{pm('bias')} {unit}")
         elif effect == "ft_drift":
             parts.append(f"offset drifting by {60 * p['drift']:.3g} {unit} per minute (from {p['bias']:.3g} {unit})")
     return f"{where}: " + " and ".join(parts) + (" (+- : 95 % interval)" if e else "")
+
+
+GEAR_SIGNS = {"stiff gear": "the motor runs ahead of the link by the gear's deflection, a smooth torque term the "
+                             "nominal model lacks",
+              "spectrum": "the drive chatters against the resolver at other frequencies than the nominal model's "
+                          "(judged by the chatter's spectrum)",
+              "envelope": "the drive rings, torque ripple the nominal model lacks"}
 
 
 def apply_fits(nominal: PlantConfig, fits: list[ChannelFit]) -> PlantConfig:
