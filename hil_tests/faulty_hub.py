@@ -127,7 +127,6 @@ class FaultyHub:
             self.stop()
             raise RuntimeError(f"faulty hub did not start: {line!r}")
         self.port = int(line.split()[1])
-        self._loss = (0.0, 0.0)
 
     def spec(self, name: str) -> str:
         return f"loopback:{name}@127.0.0.1:{self.port}"
@@ -143,26 +142,9 @@ class FaultyHub:
             raise ValueError(answer["error"])
         return answer
 
-    @property
-    def drop_prob(self) -> float:
-        return self._loss[0]
-
-    @drop_prob.setter
-    def drop_prob(self, value: float) -> None:
-        self.set_loss(value, self._loss[1])
-
-    @property
-    def reorder_prob(self) -> float:
-        return self._loss[1]
-
-    @reorder_prob.setter
-    def reorder_prob(self, value: float) -> None:
-        self.set_loss(self._loss[0], value)
-
     def set_loss(self, drop: float, reorder: float) -> None:
         """Each frame lost with probability `drop`, held back behind the next with `reorder`."""
         self._ask("loss", {"drop": drop, "reorder": reorder})
-        self._loss = (drop, reorder)
 
     def blackout(self, seconds: float) -> None:
         """Every frame lost for `seconds` from now."""
@@ -170,7 +152,6 @@ class FaultyHub:
 
     def clear(self) -> None:
         self._ask("clear")
-        self._loss = (0.0, 0.0)
 
     def disconnect(self, channel: str) -> None:
         """Cut every client of `channel` (they reconnect by themselves)."""
