@@ -6,6 +6,7 @@ One stack serves the faults a reset recovers from; node restarts and the simulat
 killed get their own stack (test_faults_process.py)."""
 from __future__ import annotations
 
+import ctypes
 import time
 
 import numpy as np
@@ -150,22 +151,17 @@ def test_waiting_console_keeps_its_jog_alive(enabled):
 
 
 def _gil_holder(seconds: float):
-    """A call that keeps this process's GIL for about `seconds` (one C call: no other thread
-    here runs meanwhile), as a full garbage collection late in the suite does (0.1-0.19 s
-    measured); sized here and now, before the jog, so it keeps its length on a slower machine."""
-    n = 100_000
-    while True:
-        t0 = time.perf_counter()
-        sum(range(n))
-        took = time.perf_counter() - t0
-        if took >= 0.05:
-            break
-        n *= 4
-    n = int(n * seconds / took)
+    """A call that keeps this process's GIL for `seconds` of wall time, as a full garbage
+    collection late in the suite does (0.1-0.19 s measured). libc's usleep through
+    ctypes.PyDLL, which keeps the GIL over the call: no other thread here runs meanwhile, and
+    the stall lasts as long on a loaded or slower machine (a CPU-bound hold sized beforehand
+    came out 0.05 s or 1 s long, depending on the load while it was sized and while it ran)."""
+    usleep = ctypes.PyDLL(None).usleep
+    usleep.argtypes = [ctypes.c_uint]
 
     def hold() -> float:
         t0 = time.perf_counter()
-        sum(range(n))
+        usleep(int(seconds * 1e6))
         return time.perf_counter() - t0
     return hold
 
