@@ -541,6 +541,12 @@ class Plant:
                     self.ee.step(h)
             self._end_period(dt)
             return
+        if self.environment is None and self.dynamics.held_period(self, fractions, h):
+            if self.ee is not None:
+                for _ in range(n):
+                    self.ee.step(h)
+            self._end_period(dt)
+            return
         # coupled: every joint moves one sub-step, then the end effector and the environment
         steppers = None if self.dynamics is not None else [joint.stepper(fractions, h) for joint in self.joints]
         for s in fractions:
