@@ -331,6 +331,36 @@ class JointModel:
         law[5](q_ref, v_ref)
         return True
 
+    def held_period(self, fractions, h: float) -> None:
+        """stepper()'s held branch (braked or jammed, rigid gear) for the whole period: the
+        coupled plant's resting arm (rigid_body.ArmDynamics.held_period). In the compiled core
+        while the drive is powered off (_core_held), else in Python."""
+        servo = self.period_servo
+        if simcore.core is not None and servo is not None and servo[0] is self.controller:
+            law = servo[1]()
+            if law is not None and law[0] == simcore.SERVO_OFF and self._core_held(fractions, h, law):
+                return
+        for _ in self.stepper(fractions, h, coupled=False):
+            pass
+
+    def _core_held(self, fractions, h: float, law: tuple) -> bool:
+        """_core_period for a held joint whose drive is powered off, leaving every value the
+        Python path's type: the core hands numbers back as floats, where a coupled plant's
+        positions are numpy scalars. The position and motor angle stand still, so they are not
+        taken back; the servo's reference is the encoder's reading, a float in both paths where
+        there is an encoder step (round() gives an int); its torque is 0.0, not the limit,
+        while the limit is above 0. False, nothing changed: the Python path's turn."""
+        constants = self._core_constants()
+        if not (constants[1] > 0.0 and constants[2] > 0.0):
+            return False
+        out = simcore.core.rigid_period(fractions, law[0], h, True, self.external_torque, self.q, self.qd, self.theta,
+                                        self.thetad, self.motor_torque, law[1], law[2], law[3], law[4], constants)
+        if out is None:
+            return False
+        _, self.qd, _, self.thetad, self.motor_torque, q_ref, v_ref = out
+        law[5](q_ref, v_ref)
+        return True
+
     _core_key = None      # _core_constants' cache (no annotation: class attributes, not dataclass fields)
     _core_values = ()
 

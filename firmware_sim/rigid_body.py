@@ -114,8 +114,7 @@ class ArmDynamics:
             if not (joint.brake_engaged or joint.stalled) or joint.two_mass:
                 return False
         for joint in joints:
-            for _ in joint.stepper(fractions, h, coupled=False):
-                pass
+            joint.held_period(fractions, h)
         return True
 
     def _stiffest_gear(self, plant: "Plant", samples: int = 50) -> float:
