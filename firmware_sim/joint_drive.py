@@ -33,8 +33,7 @@ from spacearm.firmware_sim.cia402_state_machine import next_state
 from spacearm.firmware_sim.node import SimNode
 from spacearm.firmware_sim.od_cyclic import CyclicObjects
 from spacearm.firmware_sim import simcore
-
-SERVO_OFF, SERVO_CSP = 0, 1    # the servo laws the compiled core runs (_simcore.c)
+from spacearm.firmware_sim.simcore import SERVO_CSP, SERVO_OFF
 # the commands in the order of the core's stay masks (decode_controlword's order), and the masks
 # worked out per (state, quick-stop option): bit i set when command i leaves the state as it is
 _COMMANDS = (Command.DISABLE_VOLTAGE, Command.QUICK_STOP, Command.SHUTDOWN, Command.SWITCH_ON,

@@ -232,7 +232,9 @@ class SimNode:
     _send_many = None   # set by the simulator: send_many([(can_id, data), ...])
 
     def heartbeat_period(self) -> float:
-        return self.get(od.PRODUCER_HEARTBEAT) / 1000.0
+        # param(): every SYNC asks for every node (issue 35: decoding 1017h each time was a
+        # fifth of the SYNC-time timers' CPU); a write drops the cached value (LocalNode.set_data)
+        return self.param(od.PRODUCER_HEARTBEAT) / 1000.0
 
     def send_heartbeat(self) -> None:
         if not self.faults.heartbeat_stopped and self.nmt_state != od.NMT_STATE_BOOTUP:

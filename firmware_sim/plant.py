@@ -322,14 +322,35 @@ class JointModel:
         (kind, q_start, q_end, v_ff, torque_ff, finish): finish(q_ref, v_ref) hands the drive
         its reference at the period's end. False: the core left this period to Python (a value
         Python's round() or cos() raises on), nothing changed."""
-        out = simcore.core.rigid_period(fractions, law[0], h, self.brake_engaged or self.stalled, self.external_torque,
-                                        self.q, self.qd, self.theta, self.thetad, self.motor_torque, law[1], law[2],
-                                        law[3], law[4], self._core_constants())
+        held = self.brake_engaged or self.stalled
+        out = simcore.core.rigid_period(fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta,
+                                        self.thetad, self.motor_torque, law[1], law[2], law[3], law[4],
+                                        self._core_constants())
         if out is None:
             return False
-        self.q, self.qd, self.theta, self.thetad, self.motor_torque, q_ref, v_ref = out
+        q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = out
+        if not held:      # held, they stand still: kept as they are (held_period: numpy scalars stay)
+            self.q, self.theta = q, theta
         law[5](q_ref, v_ref)
         return True
+
+    def held_period(self, fractions, h: float) -> None:
+        """stepper()'s held branch (braked or jammed, rigid gear) for the whole period: the
+        coupled plant's resting arm (rigid_body.ArmDynamics.held_period). In the compiled core
+        where what it hands back is the Python path's types too: the core's numbers are floats,
+        a coupled plant's positions numpy scalars. Held, the position and motor angle are not
+        taken back (_core_period); with the drive powered off the servo's reference is the
+        encoder's reading, a float in both paths where there is an encoder step (round() gives
+        an int), and its torque 0.0 while the torque limit is above 0 (not the limit's object)."""
+        servo = self.period_servo
+        if simcore.core is not None and servo is not None and servo[0] is self.controller:
+            law = servo[1]()
+            constants = self._core_constants()
+            if law is not None and law[0] == simcore.SERVO_OFF and constants[1] > 0.0 and constants[2] > 0.0 \
+                    and self._core_period(fractions, h, law):
+                return
+        for _ in self.stepper(fractions, h, coupled=False):
+            pass
 
     _core_key = None      # _core_constants' cache (no annotation: class attributes, not dataclass fields)
     _core_values = ()
@@ -532,15 +553,20 @@ class Plant:
         n = self.config.substeps
         h = dt / n
         fractions = [(k + 1) / n for k in range(n)]
-        if self.dynamics is None and self.environment is None:
-            # no coupling between the joints within a period: each runs its sub-steps at once
-            for joint in self.joints:
-                joint.substeps(fractions, h)
-            if self.ee is not None:
-                for _ in range(n):
-                    self.ee.step(h)
-            self._end_period(dt)
-            return
+        if self.environment is None:
+            if self.dynamics is None:
+                # no coupling between the joints within a period: each runs its sub-steps at once
+                for joint in self.joints:
+                    joint.substeps(fractions, h)
+                apart = True
+            else:     # an arm at rest (every joint held) has none either
+                apart = self.dynamics.held_period(self, fractions, h)
+            if apart:
+                if self.ee is not None:
+                    for _ in range(n):
+                        self.ee.step(h)
+                self._end_period(dt)
+                return
         # coupled: every joint moves one sub-step, then the end effector and the environment
         steppers = None if self.dynamics is not None else [joint.stepper(fractions, h) for joint in self.joints]
         for s in fractions:

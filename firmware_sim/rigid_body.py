@@ -101,6 +101,22 @@ class ArmDynamics:
         for _ in range(pieces):
             substep(plant, self, s, h / pieces)
 
+    def held_period(self, plant: "Plant", fractions, h: float) -> bool:
+        """A whole SYNC period of sub-steps while every joint is braked or jammed behind a rigid
+        gear (an arm at rest with its drives off): all are locked, so there is no dynamics to
+        solve, and each joint runs its drive's servo on its standing position the period
+        through (JointModel.stepper's held branch: the same servo calls and floats as
+        substep() one sub-step at a time; a servo reads only its own joint). Issue 35: the
+        sub-steps' arrays and per-joint calls were most of a resting Panda's simulator CPU.
+        False, nothing changed: a joint is free or elastic."""
+        joints = plant.joints
+        for joint in joints:
+            if not (joint.brake_engaged or joint.stalled) or joint.two_mass:
+                return False
+        for joint in joints:
+            joint.held_period(fractions, h)
+        return True
+
     def _stiffest_gear(self, plant: "Plant", samples: int = 50) -> float:
         """rad/s of the fastest motor-link mode of the two-mass joints (0 if none), with the
         smallest link inertia the arm shows over random postures (M_ii without rotors)."""

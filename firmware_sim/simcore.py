@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 
+SERVO_OFF, SERVO_CSP = 0, 1    # the servo laws the compiled core runs (_simcore.c)
+
 core = None
 if os.environ.get("SPACEARM_PURE_PYTHON", "") in ("", "0"):
     try:

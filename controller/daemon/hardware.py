@@ -19,7 +19,7 @@ from spacearm.base.canopen.od import EeCommand
 from spacearm.base.config.arm import DriveLimits
 from spacearm.base.config.bus import BusConfig, JointSettings
 from spacearm.base.runtime.host_cpus import HostStallWatch
-from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement
+from spacearm.controller.cycle import Command, DeviceEvent, EndEffectorState, FindingCode, Measurement, built
 from spacearm.controller.daemon.stops import DriveRequest
 from spacearm.drivers.network import ArmCommand, ArmNetwork, ArmState
 from spacearm.drivers.peer_timing import PeerTimingListener
@@ -199,19 +199,19 @@ class CanopenHardware:
                                        f"{', '.join(missing)} counted only after the stall"),)
         ft = state.ft
         wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
-        return Measurement(
-            time=time, sync_counter=sync,
-            q=np.array([j.position for j in joints]),
-            dq=np.array([j.velocity for j in joints]),
-            tau=np.array([j.torque for j in joints]),
-            joints_enabled=np.array([j.enabled for j in joints]),
-            joints_powered=np.array([j.state in POWERED for j in joints]),
-            joints_faulted=np.array([j.fault for j in joints]),
-            wrench=wrench, wrench_overload=bool(ft.overload) if ft else False,
-            end_effector=(EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
-                          else EndEffectorState.NONE),
-            events=events, missing=missing, late=late > 0.0 and bool(missing),
-            host_stalled=host_stalled and late <= 0.0)
+        return built(Measurement, {
+            "time": time, "sync_counter": sync,
+            "q": np.array([j.position for j in joints]),
+            "dq": np.array([j.velocity for j in joints]),
+            "tau": np.array([j.torque for j in joints]),
+            "joints_enabled": np.array([j.enabled for j in joints]),
+            "joints_faulted": np.array([j.fault for j in joints]),
+            "wrench": wrench, "wrench_overload": bool(ft.overload) if ft else False,
+            "end_effector": (EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
+                             else EndEffectorState.NONE),
+            "events": events, "missing": missing, "late": late > 0.0 and bool(missing), "bridged": False,
+            "host_stalled": host_stalled and late <= 0.0, "answered_late": (),
+            "joints_powered": np.array([j.state in POWERED for j in joints])})
 
     def write(self, command: Command, stop: DriveRequest | None = None) -> None:
         """`stop`: what a protective stop asks of drives the command no longer enables (None:

@@ -206,3 +206,19 @@ def test_a_new_layout_is_compiled_for_the_frames_that_follow():
         offset += e.size
     assert {k: driver.values[k] for k in expected} == expected
     assert driver.tpdo_codecs[spec.cob_id].spec is spec and driver.tpdos == tuple(swapped)
+
+
+def test_a_joint_state_built_without_init_is_the_dataclass_built_one():
+    """JointDriver.state() fills JointState's fields directly: every field, in order, the same
+    values as JointState(...) with them (a field added to the dataclass must be added there)."""
+    import dataclasses
+    from spacearm.drivers.devices import JointState
+    net = ArmNetwork("virtual:unused", load_bus_config())
+    driver = net.drivers["joint_1"]
+    rng = random.Random(5)
+    for spec in driver.tpdos:
+        driver.decode(spec, bytes(rng.randrange(256) for _ in range(spec.length)))
+    state = driver.state()
+    names = [f.name for f in dataclasses.fields(JointState)]
+    assert list(vars(state)) == names
+    assert repr(state) == repr(JointState(**{name: getattr(state, name) for name in names}))

@@ -76,3 +76,15 @@ def test_a_silent_node_among_late_ones_still_stops_after_missing_pdo_cycles(late
     # the first read after the silence is the first of its gap: the stop comes at the limit's read
     first = next(k for k, found in enumerate(stops) if found)
     assert first == sup.limits.missing_pdo_cycles - 1 and stops[first] == ["joint_3"]
+
+
+def test_a_measurement_names_every_field_as_its_dataclass_does(late_nodes):
+    """hardware._measurement builds the frozen Measurement without its __init__ (cycle.built):
+    every field in the class's order, the same object as Measurement(**fields)."""
+    import dataclasses
+    from spacearm.controller.cycle import Measurement
+    hw, sim, answer = late_nodes
+    m = hw.read(0.0)
+    names = [f.name for f in dataclasses.fields(Measurement)]
+    assert list(vars(m)) == names
+    assert repr(m) == repr(Measurement(**{name: getattr(m, name) for name in names}))
