@@ -521,10 +521,7 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             rejected.append((fit, f"{text} (makes {', '.join(worse)} worse on the held-out rows by more than its "
                                   "noise: not accepted)"))
             continue
-        # stiction judged by its breakaway peaks or swing is sized by replays with no test of its own
-        # beyond the held-out one: its size, too, must be known (1.09 +- 2.9 N m was named on a joint
-        # with no effect, development seed 5402); a gear's size passed its own significance test
-        if (not fit.by_envelope or fit.effects == ("stribeck",)) and uncertain(params, errs):
+        if not fit.by_envelope and uncertain(params, errs):
             rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
             continue
         if not fit.by_envelope and not confirmed(ch.rms_before, ch.rms_after):
