@@ -44,6 +44,7 @@ from spacearm.offline.diagnosis.breakaway import at_breakaway
 from spacearm.offline.diagnosis.chatter_spectrum import fit_spectral_gear, screened
 from spacearm.offline.diagnosis.sim_refit import refine_size, refine_stiction
 from spacearm.offline.diagnosis.stick_slip import stiction_by_breakaway
+from spacearm.offline.diagnosis.stick_slip_envelope import stiction_by_swing
 from spacearm.offline.diagnosis.stribeck_replay import stribeck_by_replay
 from spacearm.controller.recording.csv_export import WRENCH_COLUMNS
 from spacearm.firmware_sim.plant import PlantConfig
@@ -369,6 +370,12 @@ def diagnose(table: RecordingTable, nominal: PlantConfig, sim: SimTraces | None 
                 swing = stribeck_by_replay(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
                                            table.dq_cmd, table.tau[:, j], quiet.dq[:, j],
                                            np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train)
+                if swing is None:
+                    # slower still, stiction that falls to the running level drives stick-slip along
+                    # the whole run, judged by its envelope (stick_slip_envelope.py)
+                    swing = stiction_by_swing(fit, j, nominal, apply_fits, table.q_cmd, table.dt, table.q[0],
+                                              table.dq_cmd, table.tau[:, j], quiet.dq[:, j],
+                                              np.abs(quiet.dq[:, j]) > VELOCITY_DEADBAND, train)
                 if swing is not None:
                     fit, alternatives[j] = swing, []
         residual = table.tau[:, j] - sim.tau[:, j]
