@@ -13,9 +13,9 @@ need the control lease, which one session holds at a time (see `leases.py`).
 """
 from __future__ import annotations
 
-import hmac
 import ipaddress
 import json
+import logging
 import os
 import socket
 import socketserver
@@ -27,6 +27,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
+from spacearm.controller.daemon.keys import key_matches
+
+logger = logging.getLogger(__name__)
 
 MAX_REQUEST_BYTES = 64 * 1024
 DEFAULT_PORT = 7440
@@ -180,7 +183,7 @@ class CommandServer:
                 raise ApiError("id must be an integer or a string")
             if self.token is not None and not session.authenticated:
                 given = request.get("token")
-                if not isinstance(given, str) or not hmac.compare_digest(given, self.token):
+                if not key_matches(given, self.token):
                     raise ApiError("missing or wrong token", ErrorCode.UNAUTHORIZED)
                 session.authenticated = True
             command = request.get("cmd")
@@ -193,6 +196,11 @@ class CommandServer:
         except ApiError as exc:
             self.rejected += 1
             self._reply(wfile, request_id, error=str(exc), code=exc.code)
+            return
+        except Exception as exc:     # a bug in a handler: the console still gets its one answer
+            logger.exception("API: request %.200r failed", line)
+            self.rejected += 1
+            self._reply(wfile, request_id, error=f"internal error: {exc!r}", code=ErrorCode.INTERNAL)
             return
         self._reply(wfile, request_id, result=result)
 

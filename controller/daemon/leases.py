@@ -10,12 +10,12 @@ The holder names who took it (user@host, terminal or web session, pid; console/o
 """
 from __future__ import annotations
 
-import hmac
 import secrets
 import threading
 import time
 
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
+from spacearm.controller.daemon.keys import key_matches
 
 
 class LeaseError(CodedError):
@@ -34,7 +34,7 @@ class ControlLease:
         """A new key for `holder`; a console that already holds control (it presents the current
         key) gets the same key back: taking what you hold is not an error."""
         with self._lock:
-            if self._key is not None and isinstance(key, str) and hmac.compare_digest(key, self._key):
+            if self._key is not None and key_matches(key, self._key):
                 return self._key
             if self._key is not None:
                 raise LeaseError(f"control is held by {self.holder!r}; watch only until it is released")
@@ -54,7 +54,7 @@ class ControlLease:
     def _check(self, key: str | None) -> None:
         if self._key is None:
             raise LeaseError("no console holds control: take it first (`spacearm control take`)", ErrorCode.NO_LEASE)
-        if not isinstance(key, str) or not hmac.compare_digest(key, self._key):
+        if not key_matches(key, self._key):
             raise LeaseError(f"control is held by {self.holder!r}; this console may only watch")
 
     @property

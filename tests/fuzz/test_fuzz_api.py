@@ -161,3 +161,17 @@ def test_replayed_command_with_an_old_lease_is_refused(daemon):
     finally:
         c.close()
     assert answer["ok"] is False and "control is held" in answer["error"]
+
+
+@pytest.mark.parametrize("key", ["\x80", "\ud800", "é" * 32])
+def test_a_non_ascii_lease_or_token_gets_an_answer(daemon, key):
+    """hmac.compare_digest refuses non-ASCII str: such a lease once crashed the handler and the
+    console got no answer (found by this file's random requests)."""
+    d, port = daemon
+    c = Raw(port)
+    try:
+        answer = c.send(json.dumps({"id": 7, "cmd": "control.take", "args": {"lease": key}}).encode() + b"\n")
+    finally:
+        c.close()
+    assert answer == {"id": 7, "ok": False, "code": "lease_held",
+                      "error": "control is held by 'operator'; watch only until it is released"}
