@@ -41,23 +41,28 @@ ARMS = {   # name: (plant, arm, bus config, offsets of the second goal from home
 }
 
 
+def _stack(arm: tuple, records: Path, enable: bool):
+    plant, arm_file, bus, _ = arm
+    return scripted_daemon(ROOT / plant, arm=arm_file and ROOT / arm_file, bus_config=ROOT / bus,
+                           record_dir=records, enable=enable)
+
+
 def moving_cost(arm: tuple, cycles: int, records: Path) -> tuple[float, float]:
     """(CPU s per cycle while moving, share of those cycles with a motion running)."""
-    plant, arm_file, bus, offsets = arm
-    with scripted_daemon(ROOT / plant, arm=arm_file and ROOT / arm_file, bus_config=ROOT / bus,
-                         record_dir=records) as script:
+    with _stack(arm, records, enable=True) as script:
         home = [j["q"] for j in script.daemon.status()["joints"]]
-        goals = [[q + d for q, d in zip(home, offsets)], home]
+        goals = [[q + d for q, d in zip(home, arm[3])], home]
         cpu, counted, moving = 0.0, 0, 0
+        core = script.daemon.core     # its counter, not status(): building a status is no part of a cycle
         while counted < cycles:
-            finished = script.daemon.status()["motions_finished"]
+            finished = core.motions_finished
             script.call("move_joints", q=goals[0])
             goals.reverse()
             started = time.process_time()
             while counted < cycles:
                 script.daemon.cycle_once()
                 counted += 1
-                if script.daemon.status()["motions_finished"] > finished:
+                if core.motions_finished > finished:
                     break
                 moving += 1
             cpu += time.process_time() - started
@@ -65,9 +70,7 @@ def moving_cost(arm: tuple, cycles: int, records: Path) -> tuple[float, float]:
 
 
 def resting_cost(arm: tuple, cycles: int, records: Path) -> float:
-    plant, arm_file, bus, _ = arm
-    with scripted_daemon(ROOT / plant, arm=arm_file and ROOT / arm_file, bus_config=ROOT / bus,
-                         record_dir=records, enable=False) as script:
+    with _stack(arm, records, enable=False) as script:
         script.run(50)      # first calls, not measured
         started = time.process_time()
         script.run(cycles)
@@ -84,8 +87,8 @@ def main() -> None:
     rows: dict[str, dict[str, list[float]]] = {name: {"moving": [], "resting": [], "share": []} for name in ARMS}
     with tempfile.TemporaryDirectory(prefix="spacearm-bench-moving-") as folder:
         for k in range(args.rounds):
-            for name, arm in ARMS.items():
-                records = Path(folder) / f"{k}-{len(rows[name]['moving'])}"
+            for i, (name, arm) in enumerate(ARMS.items()):
+                records = Path(folder) / f"{k}-{i}"
                 per_cycle, share = moving_cost(arm, args.cycles, records / "moving")
                 rows[name]["moving"].append(per_cycle)
                 rows[name]["share"].append(share)
@@ -93,7 +96,7 @@ def main() -> None:
             loads.append(os.getloadavg()[0])
     reference.append(reference_loop_seconds()[1])
     ref = statistics.median(reference)
-    print(f"reference loop {1e3 * ref:.0f} ms CPU (median of {reference_loop_seconds.__name__} before and after); "
+    print(f"reference loop {1e3 * ref:.0f} ms CPU (median of the timings before and after); "
           f"load {min(loads):.1f}-{max(loads):.1f}, host steal {100 * steal.fraction():.1f} %; "
           f"{args.rounds} rounds x {args.cycles} cycles, Python {sys.version.split()[0]}, "
           f"{'pure Python' if os.environ.get('SPACEARM_PURE_PYTHON') == '1' else 'compiled core if built'}")
