@@ -31,8 +31,8 @@ from spacearm.offline.diagnosis.fitting import ChannelFit
 from spacearm.offline.diagnosis.gear_effects import envelope
 from spacearm.offline.diagnosis.honesty import MIN_CONFIRMED_REDUCTION
 from spacearm.offline.diagnosis.running_mean import running_mean
-from spacearm.offline.diagnosis.stribeck_replay import (DECAY_RANGE, MIN_EVENTS, MIN_HELD_EVENTS, SLOW,
-                                                        START_OFFSETS, _jackknife_spread)
+from spacearm.offline.diagnosis.stribeck_replay import (MIN_EVENTS, MIN_HELD_EVENTS, SLOW, START_OFFSETS,
+                                                        _jackknife_spread, coulomb_law, fading_speed)
 
 SWING_S = 1.0               # s: the running mean the swing is taken about (a slip cycle is shorter)
 # static / running level tried: from just above the running level (no stick-slip) to where the
@@ -94,8 +94,7 @@ def stiction_by_swing(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: np
                                                                                "maxiter": REFINE_EVALS})
     log_ratio = float(best.x) if best.fun <= loss(grid[at]) else grid[at]
     fit = _law(j, running, math.exp(log_ratio), speed, train)
-    coulomb = ChannelFit(("coulomb",), "tau", j, np.array([running]), np.zeros(1), ("coulomb_friction",),
-                         (math.nan,), math.nan, math.nan, 0.0, 0.0, 1.0, 1, n_params=1)
+    coulomb = coulomb_law(j, running)
     rms = lambda tau: float(np.sqrt(np.mean(errors(tau, held))))
     replays = [[replay(law, offset) for law in (fit, chosen, coulomb)] for offset in START_OFFSETS]
     if any(tau is None for row in replays for tau in row):
@@ -110,9 +109,7 @@ def stiction_by_swing(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: np
                        np.minimum(scores[:, 1], scores[:, 2]) - NULL_MARGIN * null)
     if not np.all(np.isfinite(scores)) or not np.all(scores[:, 0] <= limit):
         return None
-    nominal_law = ChannelFit(("coulomb",), "tau", j, np.zeros(1), np.zeros(1), ("coulomb_friction",), (math.nan,),
-                             math.nan, math.nan, 0.0, 0.0, 1.0, 1)
-    tau_fit, tau_chosen, tau_nominal = replay(fit), replay(chosen), replay(nominal_law)
+    tau_fit, tau_chosen, tau_nominal = replay(fit), replay(chosen), replay(coulomb_law(j, 0.0))
     if tau_fit is None or tau_chosen is None or tau_nominal is None:
         return None
     # the level's standard error: the spread of the best level among the replays made, each
@@ -143,6 +140,5 @@ def stiction_by_swing(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: np
 
 def _law(j: int, running: float, ratio: float, speed: float, train: np.ndarray) -> ChannelFit:
     """Stiction `ratio` times the running level, fading so that it is `running` at `speed`."""
-    decay = float(np.clip(speed / math.sqrt(math.log(max(ratio, 1.0001))), *DECAY_RANGE))
     return ChannelFit(("stribeck",), "tau", j, np.array([running * ratio]), np.zeros(1), ("stribeck_friction",),
-                      (decay,), math.nan, math.nan, 0.0, 0.0, 1.0, 1, n_train=int(train.sum()), n_params=2)
+                      (fading_speed(speed, ratio),), math.nan, math.nan, 0.0, 0.0, 1.0, 1, n_train=int(train.sum()), n_params=2)

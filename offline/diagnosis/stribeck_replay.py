@@ -82,15 +82,11 @@ def stribeck_by_replay(chosen: ChannelFit, j: int, nominal, apply_fits, q_cmd: n
     if running <= 0.0:
         return None
 
-    def decay(level: float, run: float) -> float:
-        ratio = level / run if run > 0 else math.inf
-        return float(np.clip(speed / math.sqrt(math.log(max(ratio, 1.0001))), *DECAY_RANGE))
-
     def trial(x: np.ndarray) -> ChannelFit:
-        level = math.exp(float(x[0]))
+        level, run = math.exp(float(x[0])), math.exp(float(x[1]))
         return ChannelFit(("stribeck",), "tau", j, np.array([level]), np.zeros(1), ("stribeck_friction",),
-                          (decay(level, math.exp(float(x[1]))),), math.nan, math.nan, 0.0, 0.0, 1.0, 1,
-                          n_train=int(train.sum()), n_params=2)
+                          (fading_speed(speed, level / run if run > 0 else math.inf),), math.nan, math.nan,
+                          0.0, 0.0, 1.0, 1, n_train=int(train.sum()), n_params=2)
 
     # the training loss over the rows just after each start and reversal, where the laws differ
     after_event = np.zeros(rows, bool)
@@ -190,13 +186,23 @@ def _jackknife_spread(errors: dict[tuple[float, float], np.ndarray], rows: np.nd
     return float(math.sqrt((m - 1) / m * np.sum((picks - picks.mean()) ** 2)))
 
 
+def fading_speed(speed: float, ratio: float) -> float:
+    """The Stribeck decay speed at which stiction `ratio` times the running level has fallen to
+    the running level at `speed` (within DECAY_RANGE)."""
+    return float(np.clip(speed / math.sqrt(math.log(max(ratio, 1.0001))), *DECAY_RANGE))
+
+
+def coulomb_law(j: int, level: float) -> ChannelFit:
+    """Coulomb friction `level` on joint `j`, as a fit to replay (not sized by rows)."""
+    return ChannelFit(("coulomb",), "tau", j, np.array([level]), np.zeros(1), ("coulomb_friction",), (math.nan,),
+                      math.nan, math.nan, 0.0, 0.0, 1.0, 1, n_params=1)
+
+
 def _coulomb_by_replay(running: float, j: int, replay, errors_of, last: int,
                        errors: dict[tuple[float, float], np.ndarray]) -> ChannelFit:
     """The Coulomb friction of joint `j` (within 30 % of `running`) whose replay's first `last`
     rows have the least mean of `errors_of(torque)` (per row; each kept in `errors` by log level)."""
-    law = lambda log_level: ChannelFit(("coulomb",), "tau", j, np.array([math.exp(log_level)]), np.zeros(1),
-                                       ("coulomb_friction",), (math.nan,), math.nan, math.nan, 0.0, 0.0, 1.0, 1,
-                                       n_params=1)
+    law = lambda log_level: coulomb_law(j, math.exp(log_level))
 
     def cost(log_level: float) -> float:
         tau = replay(law(log_level), last)
