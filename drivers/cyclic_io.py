@@ -15,8 +15,10 @@ from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState,
                                       PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
+_NO_PLAN_YET = object()     # a burst's COB-ID sequence not seen before (None: seen, no plan)
 
 
 @dataclass
@@ -245,7 +247,10 @@ class CyclicIO:
         """Standard data frames in order (the in-process bus hands a SYNC's TPDOs over as one
         burst: the listener's on_frames; never raises). A TPDO is decoded here, with its compiled
         route, and a burst's TPDOs under one hold of the lock (one acquire, one wake-up check per
-        burst, not per frame); anything else goes to _other_frame, outside the lock."""
+        burst, not per frame); anything else goes to _other_frame, outside the lock. A burst
+        with a plan (a SYNC's TPDOs, drivers/tpdo_burst.py) is decoded node by node instead."""
+        if len(frames) > 1 and self._decode_burst(frames):
+            return
         stats, routes, lock = self.stats, self._tpdo_in, self._lock
         held = False
         decoded = 0      # counted once a hold ends: per frame it is two attribute writes more
@@ -281,6 +286,35 @@ class CyclicIO:
                 stats.tpdos += decoded
                 self._wake_if_complete()
                 lock.release()
+
+    def _decode_burst(self, frames) -> bool:
+        """A burst of compiled TPDOs in a known order and of their PDOs' lengths: each node's
+        values in one unpack from the joined payloads, the health and the arrived set updated
+        once per node and per burst. False (nothing done) where the per-frame path must run."""
+        ids = tuple(map(first, frames))
+        plans = self._burst_plans
+        plan = plans.get(ids, _NO_PLAN_YET)
+        if plan is _NO_PLAN_YET:
+            if len(plans) >= MAX_PLANS:
+                plans.clear()
+            plan = plans[ids] = build_plan(ids, self._tpdo_in)
+        if plan is None:
+            return False
+        payloads = tuple(map(second, frames))
+        if tuple(map(len, payloads)) != plan.lengths:
+            return False
+        joined = b"".join(payloads)
+        stats, count = self.stats, plan.count
+        with self._lock:
+            sync = self._sync
+            for node in plan.nodes:
+                node.driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
+                node.health.life_sync = sync
+            self._received.update(plan.cobs)
+            stats.rx_frames += count
+            stats.tpdos += count
+            self._wake_if_complete()
+        return True
 
     def _wake_if_complete(self) -> None:
         """Under the lock: wake a lockstep wait once every expected TPDO is in."""
