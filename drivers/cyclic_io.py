@@ -135,7 +135,7 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        bringup = self.bringup
+        append, bringup = frames.append, self.bringup
         with self._lock:
             for d, joint, h in self._cycle_drivers:
                 if joint:
@@ -155,7 +155,13 @@ class CyclicIO:
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
-                    frames += d.rpdo_frames()
+                    packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
+                    if packs is None:
+                        frames += d.rpdo_frames()
+                    else:
+                        get = d.rpdo_values.get
+                        for cob_id, pack, keys, zeros in packs:
+                            append((cob_id, pack(*map(get, keys, zeros))))
         if frames:
             if not self._connected:
                 raise DriverError("the network is not connected: call boot() first")
@@ -193,13 +199,19 @@ class CyclicIO:
             return self._send_frame(can_id, data)
 
     def _apply(self, c: ArmCommand) -> None:
-        for i, j in enumerate(self.joints):
-            if c.joint_positions is not None and i < len(c.joint_positions) and c.joint_positions[i] is not None:
-                j.target = float(c.joint_positions[i])
-            if c.joint_velocities is not None and i < len(c.joint_velocities):
-                j.velocity_ff = float(c.joint_velocities[i])
-            if c.joint_torques is not None and i < len(c.joint_torques):
-                j.torque_ff = float(c.joint_torques[i])
+        # one pass per given sequence, up to the shorter of it and the joints (zip), not three
+        # tests and lengths per joint (issue 35): the same assignments in the same order per field
+        joints = self.joints
+        if c.joint_positions is not None:
+            for j, position in zip(joints, c.joint_positions):
+                if position is not None:
+                    j.target = float(position)
+        if c.joint_velocities is not None:
+            for j, velocity in zip(joints, c.joint_velocities):
+                j.velocity_ff = float(velocity)
+        if c.joint_torques is not None:
+            for j, torque in zip(joints, c.joint_torques):
+                j.torque_ff = float(torque)
         if c.end_effector is not None and self.end_effector is not None:
             self.end_effector.command(c.end_effector)
 
