@@ -111,3 +111,25 @@ def test_end_effector_and_ft_states_are_what_they_were():
         got = ft.state()
         assert got.force == tuple(x / s.force_counts_per_n for x in v[:3])
         assert got.torque == tuple(x / s.torque_counts_per_nm for x in v[3:])
+
+
+def test_the_cycles_array_shortcuts_are_what_numpy_gives():
+    """core._zeros_as is np.zeros_like, np.count_nonzero is ndarray.any() as a truth value
+    (supervision.py), hardware's end-effector state is EndEffectorState(name.lower())."""
+    import numpy as np
+    from spacearm.controller.cycle import EndEffectorState
+    from spacearm.controller.daemon.core import _zeros_as
+    from spacearm.controller.daemon.hardware import _end_effector_state
+    from spacearm.drivers.devices import EndEffectorState as DriverEeState
+    for q in (np.arange(6.0), np.array([], float), np.arange(6), np.float32([1, 2]), np.arange(12.0)[::2], [1.0, 2.0]):
+        z, reference = _zeros_as(q), np.zeros_like(q)
+        assert (type(z), z.dtype, z.shape, z.tobytes()) == (type(reference), reference.dtype, reference.shape,
+                                                            reference.tobytes())
+    rng = np.random.default_rng(45)
+    for _ in range(200):
+        a = rng.choice([0.0, -0.0, 1.0, np.nan, np.inf], size=rng.integers(0, 8))
+        assert bool(np.count_nonzero(a)) == bool(a.any())
+        assert bool(np.count_nonzero(a > 0.5)) == bool((a > 0.5).any())
+    assert _end_effector_state(None) is EndEffectorState.NONE
+    for raw in EeState:
+        assert _end_effector_state(DriverEeState("ee", 9, raw)) is EndEffectorState(raw.name.lower())
