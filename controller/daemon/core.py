@@ -329,7 +329,10 @@ class ControllerCore:
         self.events.append(Event(t, kind, message, finding))
 
     def _apply_pending(self, m: Measurement) -> None:
-        while True:
+        # Nearly every cycle takes no request: one look at the queue (empty(), ~0.4 us) instead of
+        # get_nowait's raised and caught Empty (~2 us, issue 35). A request put after the look
+        # is taken next cycle, as one put after get_nowait's look always was.
+        while not self._pending.empty():
             try:
                 pending = self._pending.get_nowait()
             except queue.Empty:
