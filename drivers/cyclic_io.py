@@ -309,7 +309,13 @@ class CyclicIO:
         if plan is _NO_PLAN_YET:
             if len(plans) >= MAX_PLANS:
                 plans.clear()
-            plan = plans[ids] = build_plan(ids, self._tpdo_in)
+            try:
+                plan = build_plan(ids, self._tpdo_in)
+            except Exception:     # a bug here must not cost the frames: said once, frame by frame after
+                logger.exception("no TPDO burst plan for COB-IDs %s: decoding them frame by frame",
+                                 " ".join(f"0x{cob:03X}" for cob in ids))
+                plan = None
+            plans[ids] = plan
         if plan is None:
             return False
         payloads = tuple(map(second, frames))

@@ -131,3 +131,20 @@ def test_odd_mappings_interleaved_nodes_padding_and_the_same_object_twice():
     assert build_plan(ids, routes) is None
     assert build_plan((0x181, 0x181), routes) is None
     assert build_plan((0x181, 0x7E), routes) is None
+
+
+def test_a_plan_that_cannot_be_built_is_said_once_and_the_frames_still_decoded(monkeypatch, caplog):
+    import spacearm.drivers.cyclic_io as cyclic_io
+
+    def broken(ids, routes):
+        raise RuntimeError("broken plan")
+    monkeypatch.setattr(cyclic_io, "build_plan", broken)
+    burst_net, frame_net = _nets()
+    rng = random.Random(39)
+    for _ in range(3):
+        frames = _tpdo_frames(burst_net, rng)
+        burst_net.network.listeners[0].on_frames(frames, 0.0)
+        _per_frame(frame_net, frames)
+        assert _observed(burst_net) == _observed(frame_net)
+    lines = [r for r in caplog.records if "no TPDO burst plan" in r.getMessage()]
+    assert len(lines) == 1 and "0x18" in lines[0].getMessage()
