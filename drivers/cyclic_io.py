@@ -15,8 +15,10 @@ from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState,
                                       PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
+_NO_PLAN_YET = object()     # a burst's COB-ID sequence not seen before (None: seen, no plan)
 
 
 @dataclass
@@ -133,7 +135,7 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        bringup = self.bringup
+        append, bringup = frames.append, self.bringup
         with self._lock:
             for d, joint, h in self._cycle_drivers:
                 if joint:
@@ -153,7 +155,13 @@ class CyclicIO:
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == od.NMT_STATE_OPERATIONAL:
-                    frames += d.rpdo_frames()
+                    packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
+                    if packs is None:
+                        frames += d.rpdo_frames()
+                    else:
+                        get = d.rpdo_values.get
+                        for cob_id, pack, keys, zeros in packs:
+                            append((cob_id, pack(*map(get, keys, zeros))))
         if frames:
             if not self._connected:
                 raise DriverError("the network is not connected: call boot() first")
@@ -191,13 +199,19 @@ class CyclicIO:
             return self._send_frame(can_id, data)
 
     def _apply(self, c: ArmCommand) -> None:
-        for i, j in enumerate(self.joints):
-            if c.joint_positions is not None and i < len(c.joint_positions) and c.joint_positions[i] is not None:
-                j.target = float(c.joint_positions[i])
-            if c.joint_velocities is not None and i < len(c.joint_velocities):
-                j.velocity_ff = float(c.joint_velocities[i])
-            if c.joint_torques is not None and i < len(c.joint_torques):
-                j.torque_ff = float(c.joint_torques[i])
+        # one pass per given sequence, up to the shorter of it and the joints (zip), not three
+        # tests and lengths per joint (issue 35): the same assignments in the same order per field
+        joints = self.joints
+        if c.joint_positions is not None:
+            for j, position in zip(joints, c.joint_positions):
+                if position is not None:
+                    j.target = float(position)
+        if c.joint_velocities is not None:
+            for j, velocity in zip(joints, c.joint_velocities):
+                j.velocity_ff = float(velocity)
+        if c.joint_torques is not None:
+            for j, torque in zip(joints, c.joint_torques):
+                j.torque_ff = float(torque)
         if c.end_effector is not None and self.end_effector is not None:
             self.end_effector.command(c.end_effector)
 
@@ -245,7 +259,10 @@ class CyclicIO:
         """Standard data frames in order (the in-process bus hands a SYNC's TPDOs over as one
         burst: the listener's on_frames; never raises). A TPDO is decoded here, with its compiled
         route, and a burst's TPDOs under one hold of the lock (one acquire, one wake-up check per
-        burst, not per frame); anything else goes to _other_frame, outside the lock."""
+        burst, not per frame); anything else goes to _other_frame, outside the lock. A burst
+        with a plan (a SYNC's TPDOs, drivers/tpdo_burst.py) is decoded node by node instead."""
+        if len(frames) > 1 and self._decode_burst(frames):
+            return
         stats, routes, lock = self.stats, self._tpdo_in, self._lock
         held = False
         decoded = 0      # counted once a hold ends: per frame it is two attribute writes more
@@ -281,6 +298,41 @@ class CyclicIO:
                 stats.tpdos += decoded
                 self._wake_if_complete()
                 lock.release()
+
+    def _decode_burst(self, frames) -> bool:
+        """A burst of compiled TPDOs in a known order and of their PDOs' lengths: each node's
+        values in one unpack from the joined payloads, the health and the arrived set updated
+        once per node and per burst. False (nothing done) where the per-frame path must run."""
+        ids = tuple(map(first, frames))
+        plans = self._burst_plans
+        plan = plans.get(ids, _NO_PLAN_YET)
+        if plan is _NO_PLAN_YET:
+            if len(plans) >= MAX_PLANS:
+                plans.clear()
+            try:
+                plan = build_plan(ids, self._tpdo_in)
+            except Exception:     # a bug here must not cost the frames: said once, frame by frame after
+                logger.exception("no TPDO burst plan for COB-IDs %s: decoding them frame by frame",
+                                 " ".join(f"0x{cob:03X}" for cob in ids))
+                plan = None
+            plans[ids] = plan
+        if plan is None:
+            return False
+        payloads = tuple(map(second, frames))
+        if tuple(map(len, payloads)) != plan.lengths:
+            return False
+        joined = b"".join(payloads)
+        stats, count = self.stats, plan.count
+        with self._lock:
+            sync = self._sync
+            for node in plan.nodes:
+                node.driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
+                node.health.life_sync = sync
+            self._received.update(plan.cobs)
+            stats.rx_frames += count
+            stats.tpdos += count
+            self._wake_if_complete()
+        return True
 
     def _wake_if_complete(self) -> None:
         """Under the lock: wake a lockstep wait once every expected TPDO is in."""

@@ -108,6 +108,10 @@ class DeviceDriver:
         self._rpdos, self._tpdos = tuple(rpdos), tuple(tpdos)
         self.tpdo_codecs = {spec.cob_id: PdoCodec(spec) for spec in self._tpdos}
         self._rpdo_codecs = tuple(PdoCodec(spec) for spec in self._rpdos)
+        # what CyclicIO.write packs each cycle without a call per driver: (COB-ID, pack, keys,
+        # zeros) per RPDO; None where one codes entry by entry (rpdo_frames then)
+        packs = tuple((c.cob_id, c.struct.pack, c.keys, c.zeros) for c in self._rpdo_codecs if c.struct is not None)
+        self.rpdo_packs = packs if len(packs) == len(self._rpdo_codecs) else None
 
     @property
     def rpdos(self) -> tuple[PdoSpec, ...]:
@@ -284,10 +288,15 @@ class JointDriver(DeviceDriver):
             cw |= CW_HALT
         rpdo, k = self.rpdo_values, self.k
         rpdo[_CONTROLWORD] = cw
-        rpdo[_TARGET_POSITION] = max(_I32_MIN, min(_I32_MAX, round(target * k)))
-        rpdo[_VELOCITY_OFFSET] = max(_I32_MIN, min(_I32_MAX, round(self.velocity_ff * k)))
-        ratio = self.rated_joint_torque
-        rpdo[_TORQUE_OFFSET] = max(-32768, min(32767, round(self.torque_ff / ratio * 1000)))
+        # clamped to the objects' ranges by comparisons, not min/max calls (issue 35: 12 of
+        # the cycle's built-in calls per joint); the same ints either way
+        position, velocity = round(target * k), round(self.velocity_ff * k)
+        torque = round(self.torque_ff / self.rated_joint_torque * 1000)
+        rpdo[_TARGET_POSITION] = (position if _I32_MIN <= position <= _I32_MAX
+                                  else _I32_MIN if position < 0 else _I32_MAX)
+        rpdo[_VELOCITY_OFFSET] = (velocity if _I32_MIN <= velocity <= _I32_MAX
+                                  else _I32_MIN if velocity < 0 else _I32_MAX)
+        rpdo[_TORQUE_OFFSET] = torque if -32768 <= torque <= 32767 else -32768 if torque < 0 else 32767
 
     def state(self) -> JointState:
         get, k = self.values.get, self.k
@@ -323,6 +332,9 @@ _CONTROLWORD, _TARGET_POSITION = (od.CONTROLWORD, 0), (od.TARGET_POSITION, 0)
 _VELOCITY_OFFSET, _TORQUE_OFFSET = (od.VELOCITY_OFFSET, 0), (od.TORQUE_OFFSET, 0)
 _I32_MIN, _I32_MAX = -2**31, 2**31 - 1
 _FT_VALUES, _FT_STATUS = tuple((od.FT_VALUES, i) for i in range(1, 7)), (od.FT_STATUS, 0)
+_EE_STATE, _EE_GRIP, _EE_FAULT_CODE = (od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0), (od.EE_FAULT_CODE, 0)
+_EE_SCREW_TORQUE, _EE_SCREW_TURNS = (od.EE_SCREW_TORQUE, 0), (od.EE_SCREW_TURNS, 0)
+_EE_STATES = dict(EeState._value2member_map_)   # raw value -> member, as EeState(raw)
 _STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
 _new = object.__new__
 
@@ -340,14 +352,15 @@ class EndEffectorDriver(DeviceDriver):
         self.rpdo_values[(od.EE_COMMAND, 0)] = int(command)
 
     def state(self) -> EndEffectorState:
-        raw = self.value(od.EE_STATE)
+        get = self.values.get       # every cycle: the dict's get, not value()'s call per object
         return EndEffectorState(
             name=self.name, node_id=self.node_id,
-            state=EeState(raw) if raw in EeState._value2member_map_ else EeState.UNKNOWN,
-            grip=self.value(od.EE_GRIP_POSITION) / 1000.0,
-            screw_torque=self.value(od.EE_SCREW_TORQUE) / 1000.0,
-            screw_turns=self.value(od.EE_SCREW_TURNS) / 1000.0,
-            fault_code=self.value(od.EE_FAULT_CODE))
+            # the member EeState(raw) returns, looked up without the enum's call
+            state=_EE_STATES.get(get(_EE_STATE, 0), EeState.UNKNOWN),
+            grip=get(_EE_GRIP, 0) / 1000.0,
+            screw_torque=get(_EE_SCREW_TORQUE, 0) / 1000.0,
+            screw_turns=get(_EE_SCREW_TURNS, 0) / 1000.0,
+            fault_code=get(_EE_FAULT_CODE, 0))
 
 
 class FtDriver(DeviceDriver):
@@ -362,12 +375,13 @@ class FtDriver(DeviceDriver):
 
     def state(self) -> FtState:
         s, get = self.cfg.ft, self.values.get
-        v = [get(key, 0) for key in _FT_VALUES]
+        fx, fy, fz, tx, ty, tz = [get(key, 0) for key in _FT_VALUES]
         status = get(_FT_STATUS, 0)
-        return FtState(
+        per_n, per_nm = s.force_counts_per_n, s.torque_counts_per_nm
+        return FtState(   # the tuples written out: two generators a cycle cost more than the divisions
             name=self.name, node_id=self.node_id,
-            force=tuple(x / s.force_counts_per_n for x in v[:3]),
-            torque=tuple(x / s.torque_counts_per_nm for x in v[3:]),
+            force=(fx / per_n, fy / per_n, fz / per_n),
+            torque=(tx / per_nm, ty / per_nm, tz / per_nm),
             overload=bool(status & od.FT_STATUS_OVERLOAD), tared=bool(status & od.FT_STATUS_TARED))
 
 

@@ -119,6 +119,7 @@ class ArmNetwork(BootMaster, HealthMonitor, CyclicIO):
         self._tpdo_routes: dict[int, tuple[DeviceDriver, object]] = {}
         self._tpdo_in: dict[int, TpdoRoute] = {}        # COB-ID -> its compiled route (cyclic_io.py)
         self._tpdo_owner: dict[int, str] = {}           # COB-ID -> node name
+        self._burst_plans: dict = {}                    # a burst's COB-IDs -> its plan (tpdo_burst.py)
         self.bringup: dict[str, BringupReport] = {}    # what bring-up did per node (status)
         self._tpdo_misses: dict[int, int] = {}          # COB-ID -> SYNCs in a row without it
         self._guarded: dict[int, float] = {}            # node-guarded node ID -> next poll (monotonic)

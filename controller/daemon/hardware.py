@@ -79,6 +79,20 @@ def with_drive_limits(bus: BusConfig, q_min, q_max, drives: Sequence[DriveLimits
     return bus.model_copy(update={"nodes": nodes})
 
 
+_EE_STATES: dict = {}    # the driver's EeState -> the cycle's EndEffectorState (a handful)
+
+
+def _end_effector_state(ee) -> EndEffectorState:
+    """EndEffectorState(ee.state.name.lower()), looked up once per state (the enum's name and
+    call cost ~1 us a cycle, issue 35); NONE without an end effector."""
+    if ee is None:
+        return EndEffectorState.NONE
+    state = _EE_STATES.get(ee.state)
+    if state is None:
+        state = _EE_STATES[ee.state] = EndEffectorState(ee.state.name.lower())
+    return state
+
+
 class CanopenHardware:
     """The one owner of the CAN network in the daemon (boot, SYNC, PDOs, fault reset, statistics)."""
 
@@ -207,8 +221,7 @@ class CanopenHardware:
             "joints_enabled": np.array([j.enabled for j in joints]),
             "joints_faulted": np.array([j.fault for j in joints]),
             "wrench": wrench, "wrench_overload": bool(ft.overload) if ft else False,
-            "end_effector": (EndEffectorState(state.end_effector.state.name.lower()) if state.end_effector
-                             else EndEffectorState.NONE),
+            "end_effector": _end_effector_state(state.end_effector),
             "events": events, "missing": missing, "late": late > 0.0 and bool(missing), "bridged": False,
             "host_stalled": host_stalled and late <= 0.0, "answered_late": (),
             "joints_powered": np.array([j.state in POWERED for j in joints])})
@@ -227,8 +240,12 @@ class CanopenHardware:
             elif self._goal != "disabled":
                 self.network.disable_all()
         self._goal = goal
-        self.network.write(ArmCommand(joint_positions=list(command.q),
-                                      joint_velocities=list(command.dq) if len(command.dq) else None,
+        q, dq = command.q, command.dq
+        # Python floats straight from the arrays (tolist), not a numpy scalar per joint that
+        # _apply converts again: the same values (issue 35)
+        self.network.write(ArmCommand(joint_positions=q.tolist() if type(q) is np.ndarray else list(q),
+                                      joint_velocities=(dq.tolist() if type(dq) is np.ndarray else list(dq))
+                                      if len(dq) else None,
                                       end_effector=(EeCommand[command.end_effector.name] if command.end_effector
                                                     else None)))
 

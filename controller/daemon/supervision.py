@@ -106,26 +106,28 @@ class Supervisor:
             findings.append(Finding(FindingCode.PDO_MISSING, f"{node}: no process data for "
                                     f"{self._missing_count[node]} cycles"
                                     + (f" ({', '.join(others)} silent too)" if others else ""), node=node))
-        # each array test first as one any(): the indices are looked up only for a finding
-        if m.joints_faulted.any():
+        # each array test first as one count of true elements (np.count_nonzero: ~0.2 us against
+        # ndarray.any()'s ~0.9 us on these few joints, issue 35; nonzero either way, NaN included):
+        # the indices are looked up only for a finding
+        if np.count_nonzero(m.joints_faulted):
             for i in np.flatnonzero(m.joints_faulted):
                 findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
         low = m.q < bounds.q_low
         high = m.q > bounds.q_high
-        if low.any() or high.any():
+        if np.count_nonzero(low) or np.count_nonzero(high):
             for i in np.flatnonzero(low | high):
                 bound = lim.q_min[i] if low[i] else lim.q_max[i]
                 findings.append(Finding(FindingCode.POSITION_LIMIT, f"{self.names[i]}: position {m.q[i]:.4f} rad "
                                         f"beyond limit {bound:.4f} rad", joint=self.names[i]))
         fast = np.abs(m.dq) > bounds.v_high
-        if fast.any():
+        if np.count_nonzero(fast):
             for i in np.flatnonzero(fast):
                 findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} "
                                         f"rad/s above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
         if moving and last_target is not None and not m.bridged:    # bridged: the positions are stale
             error = np.abs(last_target - m.q)
             behind = error > lim.following_error
-            if behind.any():
+            if np.count_nonzero(behind):
                 window = np.broadcast_to(lim.following_error, error.shape)
                 for i in np.flatnonzero(behind):
                     findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
@@ -157,7 +159,7 @@ class Supervisor:
             findings.append(Finding(FindingCode.FT_JUMP, f"force/torque sensor: reading jumped by {df:.1f} N / "
                                     f"{dt:.2f} N m in one cycle (limits {lim.ft_jump_force:.0f} N / "
                                     f"{lim.ft_jump_torque:.0f} N m)"))
-        if not step.any():      # every component exactly 0 (a NaN counts as a change, as in array_equal)
+        if not np.count_nonzero(step):   # every component exactly 0 (a NaN counts as a change, as in array_equal)
             self._wrench_same += 1
             if not self._ft_live:
                 self._wrench_changes = 0
