@@ -464,8 +464,10 @@ class Simulator:
                     for pdo in node._tpdos or ():
                         if pdo.next_event > 0.0:
                             wake = min(wake, pdo.next_event)
-                with self._sync_lock:
-                    due_hb = self._heartbeat_due(node, now)
+                due_hb = self._heartbeat_pending(node, now)
+                if due_hb is None:
+                    with self._sync_lock:
+                        due_hb = self._heartbeat_due(node, now)
                 if due_hb:
                     wake = min(wake, due_hb)
             selection = self.line_selection
@@ -491,6 +493,19 @@ class Simulator:
             self.stats.held_time += max(0.0, end - now - STARVED_SLACK)
             due = max(wake, now + TIMER_MIN_SLEEP, end + cpu * TIMER_DUTY_SLEEP)
             self._stop.wait(max(0.0, due - end))
+
+    @staticmethod
+    def _heartbeat_pending(node: SimNode, now: float) -> float | None:
+        """When the node's running heartbeat falls due, if not yet; None: _heartbeat_due has
+        something to do (send it, start or stop the producer). Asked without the SYNC lock:
+        each acquisition while the SYNC thread holds it costs the timer thread GIL hand-overs
+        (issue 35: most of a pass's CPU beside lockstep cycles, a lock per node and pass). The
+        SYNC thread may send the heartbeat meanwhile; _heartbeat_due then finds it sent."""
+        due = node.next_heartbeat
+        try:
+            return due if 0.0 < now < due and node.heartbeat_period() > 0.0 else None
+        except Exception:       # _heartbeat_due's answer to a period it cannot read
+            return None
 
     def _heartbeat_due(self, node: SimNode, now: float) -> float:
         """Send the node's heartbeat if due; returns when the next one is due (0: none)."""
