@@ -465,44 +465,39 @@ static int count_malformed(PyObject *stats) {
     return rc;
 }
 
-static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    (void)self;
-    if (nargs != 8) {
-        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
-        return NULL;
-    }
-    PyObject *codec = args[0], *data = args[1], *store = args[2], *params = args[3], *on_write = args[4],
-             *write_rules = args[5], *aborted = args[6], *stats = args[7];
+/* rpdo_store's loop: 0, or -1 with an exception set */
+static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject *params, PyObject *on_write,
+                      PyObject *write_rules, PyObject *aborted, PyObject *stats) {
     if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
         PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
-        return NULL;
+        return -1;
     }
     for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(codec); i++) {
         PyObject *e = PyTuple_GET_ITEM(codec, i);
         if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 8) {
             PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 8-tuples");
-            return NULL;
+            return -1;
         }
         PyObject *index = PyTuple_GET_ITEM(e, 0), *sub = PyTuple_GET_ITEM(e, 1), *obj = PyTuple_GET_ITEM(e, 4),
                  *key = PyTuple_GET_ITEM(e, 6);
         Py_ssize_t start = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 2)), end = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 3));
         long index_value = PyLong_AsLong(index);
         if (PyErr_Occurred())
-            return NULL;
+            return -1;
         PyObject *chunk = PySequence_GetSlice(data, start, end);
         if (chunk == NULL)
-            return NULL;
+            return -1;
         int size_ok = PyObject_IsTrue(PyTuple_GET_ITEM(e, 5));
         if (size_ok <= 0) {
             Py_DECREF(chunk);
             if (size_ok < 0 || count_malformed(stats) < 0)
-                return NULL;
+                return -1;
             continue;
         }
         int reacts = index_value < 0x2000 ? 1 : PyObject_IsTrue(PyTuple_GET_ITEM(e, 7));
         if (reacts < 0) {
             Py_DECREF(chunk);
-            return NULL;
+            return -1;
         }
         PyObject *result = index_value < 0x2000
             ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
@@ -510,12 +505,12 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         if (result == NULL) {
             if (!PyErr_ExceptionMatches(aborted)) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
             PyErr_Clear();
             Py_DECREF(chunk);
             if (count_malformed(stats) < 0)
-                return NULL;
+                return -1;
             continue;
         }
         Py_DECREF(result);
@@ -523,26 +518,225 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         if (entry == NULL) {
             if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
             int rc = PyDict_SetItem(store, index, entry);
             Py_DECREF(entry);                      /* the store holds it */
             if (rc < 0) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
         }
         int rc = PyObject_SetItem(entry, sub, chunk);
         Py_DECREF(chunk);
         if (rc < 0)
-            return NULL;
+            return -1;
         if (PyDict_GET_SIZE(params) > 0) {
             int cached = PyDict_Contains(params, key);
             if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0))
-                return NULL;
+                return -1;
         }
     }
+    return 0;
+}
+
+static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7]) < 0)
+        return NULL;
     Py_RETURN_NONE;
+}
+
+/* Interned attribute names rpdo_burst reads (module init) */
+static PyObject *s_powered, *s_silent, *s_nmt_state, *s_rpdos, *s_codec, *s_rx_frames, *s_in_rpdo,
+    *s_on_write, *s_on_rpdo, *one_;
+
+/* obj.name += 1 */
+static int count_up(PyObject *obj, PyObject *name) {
+    PyObject *n = PyObject_GetAttr(obj, name);
+    if (n == NULL)
+        return -1;
+    PyObject *m = PyNumber_Add(n, one_);
+    Py_DECREF(n);
+    if (m == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, name, m);
+    Py_DECREF(m);
+    return rc;
+}
+
+/* 1: obj.name is true, 0: false, -1: an exception */
+static int attr_true(PyObject *obj, PyObject *name) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    int t = PyObject_IsTrue(v);
+    Py_DECREF(v);
+    return t;
+}
+
+/* A route (runner._direct_route): the node, its PDO engine, its write rules (the bound method in
+ * its write callbacks), SimNode.on_rpdo, and what the node sets once in __init__: its write
+ * callbacks list, data store, param() cache, statistics, fault switches, and its lock's acquire
+ * and release. */
+enum { R_NODE, R_ENGINE, R_WRITE_RULES, R_ON_RPDO, R_CALLBACKS, R_STORE, R_PARAMS, R_STATS, R_FAULTS, R_ACQUIRE,
+       R_RELEASE, R_SIZE };
+
+/* The frame's RPDO codec when it takes runner.Simulator._route_frames's direct path (a live
+ * node, OPERATIONAL, its RPDO compiled, the frame long enough, the node's write rules its only
+ * write callback, on_rpdo not wrapped by a line gate): 1 with a new reference in *codec_out, 0
+ * when Python is to handle the frame, -1 on an exception. Nothing is changed before it says 1. */
+static int direct_rpdo(PyObject **route, PyObject *cid, PyObject *data, long operational, PyObject **codec_out) {
+    PyObject *node = route[R_NODE], *callbacks = route[R_CALLBACKS];
+    if (!PyList_Check(callbacks) || PyList_GET_SIZE(callbacks) != 1 || PyList_GET_ITEM(callbacks, 0) != route[R_WRITE_RULES])
+        return 0;
+    int t = attr_true(node, s_powered);
+    if (t <= 0)
+        return t;
+    t = attr_true(route[R_FAULTS], s_silent);
+    if (t != 0)
+        return t < 0 ? -1 : 0;
+    /* node.on_rpdo is SimNode's (a line gate in the instance, a subclass's own: Python's call) */
+    PyObject *on_rpdo = PyObject_GetAttr(node, s_on_rpdo);
+    if (on_rpdo == NULL)
+        return -1;
+    t = PyMethod_Check(on_rpdo) && PyMethod_GET_FUNCTION(on_rpdo) == route[R_ON_RPDO] && PyMethod_GET_SELF(on_rpdo) == node;
+    Py_DECREF(on_rpdo);
+    if (!t)
+        return 0;
+    PyObject *state = PyObject_GetAttr(node, s_nmt_state);
+    if (state == NULL)
+        return -1;
+    long nmt = PyLong_Check(state) ? PyLong_AsLong(state) : -1;
+    Py_DECREF(state);
+    if (nmt != operational)
+        return PyErr_Occurred() ? -1 : 0;
+    PyObject *rpdos = PyObject_GetAttr(route[R_ENGINE], s_rpdos);
+    if (rpdos == NULL)
+        return -1;
+    PyObject *pdo = PyDict_Check(rpdos) ? PyDict_GetItemWithError(rpdos, cid) : NULL;
+    PyObject *codec = pdo != NULL ? PyObject_GetAttr(pdo, s_codec) : NULL;
+    Py_DECREF(rpdos);
+    if (codec == NULL)
+        return PyErr_Occurred() ? -1 : 0;
+    if (!PyTuple_Check(codec)) {
+        Py_DECREF(codec);
+        return 0;
+    }
+    if (PyTuple_GET_SIZE(codec) > 0) {           /* the mapped length: the last entry's end */
+        PyObject *last = PyTuple_GET_ITEM(codec, PyTuple_GET_SIZE(codec) - 1);
+        Py_ssize_t size = PyObject_Length(data);
+        Py_ssize_t end = PyTuple_Check(last) && PyTuple_GET_SIZE(last) == 8 ? PyLong_AsSsize_t(PyTuple_GET_ITEM(last, 3)) : -1;
+        if (size < 0 || end < 0 || size < end) {
+            Py_DECREF(codec);
+            return PyErr_Occurred() ? -1 : 0;
+        }
+    }
+    *codec_out = codec;
+    return 1;
+}
+
+/* One RPDO on the direct path, as PdoEngine.on_rpdo stores it: the frame counted, then under
+ * the node's lock with in_rpdo set, store_rpdo. 0, or -1 with an exception set (the lock
+ * released and in_rpdo cleared, as on_rpdo's `finally`). */
+static int route_rpdo(PyObject **route, PyObject *data, PyObject *codec, PyObject *sim_stats, PyObject *aborted) {
+    PyObject *node = route[R_NODE], *stats = route[R_STATS];
+    if (count_up(sim_stats, s_rx_frames) < 0 || count_up(stats, s_rx_frames) < 0)
+        return -1;
+    PyObject *on_write = PyObject_GetAttr(node, s_on_write);
+    if (on_write == NULL)
+        return -1;
+    PyObject *got = PyObject_CallNoArgs(route[R_ACQUIRE]);
+    if (got == NULL) {
+        Py_DECREF(on_write);
+        return -1;
+    }
+    Py_DECREF(got);
+    int rc = -1;
+    if (PyObject_SetAttr(node, s_in_rpdo, Py_True) == 0)
+        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats);
+    Py_DECREF(on_write);
+    PyObject *type, *value, *tb;                      /* the finally: keep the exception aside */
+    PyErr_Fetch(&type, &value, &tb);
+    int cleared = PyObject_SetAttr(node, s_in_rpdo, Py_False);
+    PyObject *released = PyObject_CallNoArgs(route[R_RELEASE]);
+    if (type != NULL) {
+        Py_XDECREF(released);
+        PyErr_Restore(type, value, tb);     /* the first exception wins, as in Python's finally */
+        return -1;
+    }
+    if (cleared < 0 || released == NULL) {
+        Py_XDECREF(released);
+        return -1;
+    }
+    Py_DECREF(released);
+    return rc;
+}
+
+/* rpdo_burst(frames, start, routes, sim_stats, aborted, operational) -> next, or (i, exception)
+ * runner.Simulator._route_frames's direct path for a burst of (cob_id, data) frames from
+ * frames[start]: each RPDO of `routes` ({cob_id: route}, R_* above) that direct_rpdo takes is counted and stored as PdoEngine.on_rpdo
+ * does. Returns the index of the first frame left to Python (len(frames): none), or (i, exc)
+ * when frame i raised an Exception (its cleanup done; the frames before it are handled). The
+ * caller holds the simulator's SYNC lock. */
+static PyObject *rpdo_burst(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 6 || !PyDict_Check(args[2])) {
+        PyErr_SetString(PyExc_TypeError, "rpdo_burst(frames, start, routes, sim_stats, aborted, operational)");
+        return NULL;
+    }
+    PyObject *routes = args[2], *sim_stats = args[3], *aborted = args[4];
+    Py_ssize_t start = PyLong_AsSsize_t(args[1]);
+    long operational = PyLong_AsLong(args[5]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *frames = PySequence_Fast(args[0], "frames must be a sequence");
+    if (frames == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(frames), i = start < 0 ? 0 : start;
+    for (; i < n; i++) {
+        PyObject *frame = PySequence_Fast_GET_ITEM(frames, i);
+        if (!PyTuple_Check(frame) || PyTuple_GET_SIZE(frame) != 2)
+            break;
+        PyObject *cid = PyTuple_GET_ITEM(frame, 0), *data = PyTuple_GET_ITEM(frame, 1);
+        PyObject *route = PyDict_GetItemWithError(routes, cid);
+        if (route == NULL) {
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        if (!PyTuple_Check(route) || PyTuple_GET_SIZE(route) != R_SIZE)
+            break;
+        PyObject **items = &PyTuple_GET_ITEM(route, 0), *codec = NULL;
+        int direct = direct_rpdo(items, cid, data, operational, &codec);
+        if (direct < 0)
+            goto error;
+        if (direct == 0)
+            break;
+        int rc = route_rpdo(items, data, codec, sim_stats, aborted);
+        Py_DECREF(codec);
+        if (rc < 0)
+            goto error;
+    }
+    Py_DECREF(frames);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(frames);
+    if (!PyErr_ExceptionMatches(PyExc_Exception))
+        return NULL;                        /* KeyboardInterrupt and the like: not the frame's */
+    PyObject *type, *value, *tb;
+    PyErr_Fetch(&type, &value, &tb);
+    PyErr_NormalizeException(&type, &value, &tb);
+    if (tb != NULL)
+        PyException_SetTraceback(value, tb);
+    Py_XDECREF(type);
+    Py_XDECREF(tb);
+    PyObject *out = Py_BuildValue("(nN)", i, value);
+    return out;
 }
 
 /* tpdo_frames(table, counter) -> [(cob_id, bytes), ...] or None
@@ -713,6 +907,8 @@ static PyMethodDef methods[] = {
      "A CSP drive's SYNC end that changes no state (see the module source)."},
     {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
      "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
+    {"rpdo_burst", (PyCFunction)(void (*)(void))rpdo_burst, METH_FASTCALL,
+     "runner.Simulator._route_frames's direct path for a burst of RPDOs (see the module source)."},
     {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,
      "PdoEngine.on_rpdo's loop over the mapped objects (see the module source)."},
     {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,
@@ -728,4 +924,17 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_simcore", NULL, -1, methods};
 
-PyMODINIT_FUNC PyInit__simcore(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__simcore(void) {
+    struct {
+        PyObject **name;
+        const char *text;
+    } names[] = {{&s_powered, "powered"}, {&s_silent, "silent"}, {&s_nmt_state, "nmt_state"},
+                 {&s_rpdos, "rpdos"}, {&s_codec, "codec"}, {&s_rx_frames, "rx_frames"}, {&s_in_rpdo, "in_rpdo"},
+                 {&s_on_write, "on_write"}, {&s_on_rpdo, "on_rpdo"}};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if ((*names[i].name = PyUnicode_InternFromString(names[i].text)) == NULL)
+            return NULL;
+    if ((one_ = PyLong_FromLong(1)) == NULL)
+        return NULL;
+    return PyModule_Create(&module);
+}
