@@ -552,8 +552,10 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
 }
 
 /* Interned attribute names rpdo_burst reads (module init) */
-static PyObject *s_powered, *s_silent, *s_nmt_state, *s_rpdos, *s_codec, *s_rx_frames, *s_in_rpdo,
-    *s_on_write, *s_on_rpdo, *one_;
+static PyObject *s_powered, *s_silent, *s_faults, *s_stats, *s_nmt_state, *s_rpdos, *s_codec, *s_rx_frames, *s_in_rpdo,
+    *s_on_write, *s_on_rpdo, *s_send_tpdos, *s_ignore_sync, *s_drop_tx, *s_corrupt_tx, *s_plain_cobs,
+    *s_read_callbacks, *s_send, *s_send_many_name, *s_tpdos, *s_core_key, *s_store_generation, *s_core_rows,
+    *s_sync_counter, *s_syncs, *s_tx_frames, *one_;
 
 /* obj.name += 1 */
 static int count_up(PyObject *obj, PyObject *name) {
@@ -745,16 +747,22 @@ error:
  * at this SYNC counter when synchronous (0..240) and, beyond type 1, every type-th SYNC. Its
  * bytes are the mapped objects' stored bytes joined. None when an object is not stored as
  * bytes (the Python path samples it through SimNode.raw). */
+static PyObject *sample_tpdos(PyObject *table, long long counter);
+
 static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     (void)self;
     if (nargs != 2 || !PyTuple_Check(args[0])) {
         PyErr_SetString(PyExc_TypeError, "tpdo_frames(table, counter)");
         return NULL;
     }
-    PyObject *table = args[0];
     long long counter = PyLong_AsLongLong(args[1]);
     if (counter == -1 && PyErr_Occurred())
         return NULL;
+    return sample_tpdos(args[0], counter);
+}
+
+/* tpdo_frames' work: a new list, None (new reference), or NULL with an exception set */
+static PyObject *sample_tpdos(PyObject *table, long long counter) {
     PyObject *frames = PyList_New(0);
     if (frames == NULL)
         return NULL;
@@ -815,6 +823,174 @@ static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t n
 python:
     Py_DECREF(frames);
     Py_RETURN_NONE;
+}
+
+/* A node's TPDO route (runner._tpdo_route): the node, its PDO engine, its LocalNode, its lock's
+ * acquire and release, SimNode.send_tpdos, and the simulator's send_many as the node holds it. */
+enum { T_NODE, T_ENGINE, T_LOCAL, T_ACQUIRE, T_RELEASE, T_SEND_TPDOS, T_SEND_MANY, T_SIZE };
+
+/* 1: attr is a bound method of `self` whose function is `func` */
+static int bound_to(PyObject *self, PyObject *name, PyObject *func) {
+    PyObject *m = PyObject_GetAttr(self, name);
+    if (m == NULL)
+        return -1;
+    int t = PyMethod_Check(m) && PyMethod_GET_FUNCTION(m) == func && PyMethod_GET_SELF(m) == self;
+    Py_DECREF(m);
+    return t;
+}
+
+/* 1: obj.name is the int `value` */
+static int attr_is_long(PyObject *obj, PyObject *name, long value) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    long x = PyLong_Check(v) ? PyLong_AsLong(v) : value - 1;
+    Py_DECREF(v);
+    if (x == -1 && PyErr_Occurred())
+        return -1;
+    return x == value;
+}
+
+/* The node's compiled TPDO table (PdoEngine._core_table's rows, new reference) when its SYNC's
+ * TPDOs take the direct path: send_tpdos not wrapped (line gate) or overridden, OPERATIONAL and
+ * not ignoring SYNC, the table read and its rows current (the store generation they were made
+ * for), no SDO-answer COB-ID among them, no fault switch on its frames, no read callbacks, and
+ * the node sending through the simulator's send_many. NULL without an exception: Python's. */
+static PyObject *direct_tpdo_rows(PyObject **route, PyObject *faults, long operational) {
+    PyObject *node = route[T_NODE], *engine = route[T_ENGINE];
+    if (bound_to(node, s_send_tpdos, route[T_SEND_TPDOS]) != 1 || attr_is_long(node, s_nmt_state, operational) != 1 ||
+        attr_true(faults, s_ignore_sync) != 0 || attr_true(faults, s_drop_tx) != 0 ||
+        attr_true(faults, s_corrupt_tx) != 0 || attr_true(engine, s_plain_cobs) != 1 ||
+        attr_true(route[T_LOCAL], s_read_callbacks) != 0 || attr_true(node, s_powered) != 1)
+        return NULL;
+    PyObject *send = PyObject_GetAttr(node, s_send), *send_many = PyObject_GetAttr(node, s_send_many_name);
+    int sends = send != NULL && send != Py_None && send_many == route[T_SEND_MANY];
+    Py_XDECREF(send);
+    Py_XDECREF(send_many);
+    if (!sends)
+        return NULL;
+    PyObject *tpdos = PyObject_GetAttr(engine, s_tpdos), *key = PyObject_GetAttr(engine, s_core_key);
+    PyObject *generation = PyObject_GetAttr(node, s_store_generation);
+    PyObject *rows = NULL;
+    if (tpdos != NULL && tpdos != Py_None && key != NULL && PyTuple_Check(key) && PyTuple_GET_SIZE(key) == 2 &&
+        PyTuple_GET_ITEM(key, 0) == tpdos && generation != NULL &&
+        PyObject_RichCompareBool(PyTuple_GET_ITEM(key, 1), generation, Py_EQ) == 1) {
+        rows = PyObject_GetAttr(engine, s_core_rows);
+        if (rows != NULL && !PyTuple_Check(rows))
+            Py_CLEAR(rows);
+    }
+    Py_XDECREF(tpdos);
+    Py_XDECREF(key);
+    Py_XDECREF(generation);
+    return rows;
+}
+
+/* obj.name += n */
+static int add_to(PyObject *obj, PyObject *name, Py_ssize_t n) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    PyObject *k = PyLong_FromSsize_t(n);
+    PyObject *sum = k != NULL ? PyNumber_Add(v, k) : NULL;
+    Py_DECREF(v);
+    Py_XDECREF(k);
+    if (sum == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, name, sum);
+    Py_DECREF(sum);
+    return rc;
+}
+
+/* tpdo_burst(nodes, start, routes, batch, operational) -> next
+ * runner.Simulator._sync_step's TPDO loop from nodes[start]: a silent node sends nothing; a
+ * node of `routes` ({node: route}, T_* above) that takes the direct path (direct_tpdo_rows,
+ * and every mapped object stored) has its SYNC counted and its due TPDOs sampled under its lock
+ * (tpdo_frames) and appended to `batch`, the SYNC's burst, as PdoEngine.send_tpdos and
+ * SimNode.send_frames do. Returns the index of the first node left to Python (len(nodes):
+ * none); a node is left to Python untouched. The caller batches this SYNC's frames. */
+static PyObject *tpdo_burst(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 5 || !PyDict_Check(args[2]) || !PyList_Check(args[3])) {
+        PyErr_SetString(PyExc_TypeError, "tpdo_burst(nodes, start, routes, batch, operational)");
+        return NULL;
+    }
+    PyObject *routes = args[2], *batch = args[3];
+    Py_ssize_t start = PyLong_AsSsize_t(args[1]);
+    long operational = PyLong_AsLong(args[4]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *nodes = PySequence_Fast(args[0], "nodes must be a sequence");
+    if (nodes == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(nodes), i = start < 0 ? 0 : start;
+    for (; i < n; i++) {
+        PyObject *route = PyDict_GetItemWithError(routes, PySequence_Fast_GET_ITEM(nodes, i));
+        if (route == NULL || !PyTuple_Check(route) || PyTuple_GET_SIZE(route) != T_SIZE)
+            break;
+        PyObject **r = &PyTuple_GET_ITEM(route, 0);
+        PyObject *faults = PyObject_GetAttr(r[T_NODE], s_faults);
+        int silent = faults != NULL ? attr_true(faults, s_silent) : -1;
+        if (silent != 0) {
+            Py_XDECREF(faults);
+            if (silent < 0)
+                goto error;
+            continue;                                   /* the SYNC loop skips it */
+        }
+        PyObject *rows = direct_tpdo_rows(r, faults, operational);
+        Py_DECREF(faults);
+        if (rows == NULL) {
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        PyObject *counter = PyObject_GetAttr(r[T_ENGINE], s_sync_counter);
+        PyObject *next = counter != NULL ? PyNumber_Add(counter, one_) : NULL;
+        Py_XDECREF(counter);
+        long long count = next != NULL ? PyLong_AsLongLong(next) : -1;
+        PyObject *got = count == -1 && PyErr_Occurred() ? NULL : PyObject_CallNoArgs(r[T_ACQUIRE]);
+        PyObject *frames = got != NULL ? sample_tpdos(rows, count) : NULL;
+        Py_XDECREF(got);
+        Py_DECREF(rows);
+        if (got != NULL) {
+            PyObject *type, *value, *tb;
+            PyErr_Fetch(&type, &value, &tb);
+            PyObject *released = PyObject_CallNoArgs(r[T_RELEASE]);
+            if (type != NULL) {
+                Py_XDECREF(released);
+                PyErr_Restore(type, value, tb);
+            } else if (released == NULL) {
+                Py_CLEAR(frames);
+            } else {
+                Py_DECREF(released);
+            }
+        }
+        if (frames == NULL || frames == Py_None) {      /* an object not stored: Python samples it */
+            Py_XDECREF(next);
+            Py_XDECREF(frames);
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        Py_ssize_t sent = PyList_GET_SIZE(frames);
+        PyObject *stats = PyObject_GetAttr(r[T_NODE], s_stats);
+        int rc = stats != NULL ? PyObject_SetAttr(r[T_ENGINE], s_sync_counter, next) : -1;
+        Py_DECREF(next);
+        if (rc == 0)
+            rc = count_up(stats, s_syncs);
+        if (rc == 0 && sent > 0)
+            rc = PyList_SetSlice(batch, PyList_GET_SIZE(batch), PyList_GET_SIZE(batch), frames);
+        if (rc == 0 && sent > 0)
+            rc = add_to(stats, s_tx_frames, sent);
+        Py_XDECREF(stats);
+        Py_DECREF(frames);
+        if (rc < 0)
+            goto error;
+    }
+    Py_DECREF(nodes);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(nodes);
+    return NULL;
 }
 
 /* statusword bits (base/canopen/cia402_defs.py) */
@@ -905,6 +1081,8 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
 static PyMethodDef methods[] = {
     {"drive_end", (PyCFunction)(void (*)(void))drive_end, METH_FASTCALL,
      "A CSP drive's SYNC end that changes no state (see the module source)."},
+    {"tpdo_burst", (PyCFunction)(void (*)(void))tpdo_burst, METH_FASTCALL,
+     "runner.Simulator._sync_step's TPDO loop for the nodes on the direct path (see the module source)."},
     {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
      "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
     {"rpdo_burst", (PyCFunction)(void (*)(void))rpdo_burst, METH_FASTCALL,
@@ -928,9 +1106,14 @@ PyMODINIT_FUNC PyInit__simcore(void) {
     struct {
         PyObject **name;
         const char *text;
-    } names[] = {{&s_powered, "powered"}, {&s_silent, "silent"}, {&s_nmt_state, "nmt_state"},
+    } names[] = {{&s_powered, "powered"}, {&s_faults, "faults"}, {&s_stats, "stats"}, {&s_silent, "silent"}, {&s_nmt_state, "nmt_state"},
                  {&s_rpdos, "rpdos"}, {&s_codec, "codec"}, {&s_rx_frames, "rx_frames"}, {&s_in_rpdo, "in_rpdo"},
-                 {&s_on_write, "on_write"}, {&s_on_rpdo, "on_rpdo"}};
+                 {&s_on_write, "on_write"}, {&s_on_rpdo, "on_rpdo"}, {&s_send_tpdos, "send_tpdos"},
+                 {&s_ignore_sync, "ignore_sync"}, {&s_drop_tx, "drop_tx"}, {&s_corrupt_tx, "corrupt_tx"},
+                 {&s_plain_cobs, "_plain_cobs"}, {&s_read_callbacks, "_read_callbacks"}, {&s_send, "_send"},
+                 {&s_send_many_name, "_send_many"}, {&s_tpdos, "tpdos"}, {&s_core_key, "_core_key"},
+                 {&s_store_generation, "store_generation"}, {&s_core_rows, "_core_rows"},
+                 {&s_sync_counter, "sync_counter"}, {&s_syncs, "syncs"}, {&s_tx_frames, "tx_frames"}};
     for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
         if ((*names[i].name = PyUnicode_InternFromString(names[i].text)) == NULL)
             return NULL;
