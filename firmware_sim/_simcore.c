@@ -1,6 +1,9 @@
 /* Compiled core of the simulator's SYNC hot path (issue 35): a drive's SYNC begin that changes no state
  * (its RPDO objects read straight from the data store), a rigid-gear joint's whole SYNC period
- * of sub-steps with its drive's servo law, and the drive's actual values as integers.
+ * of sub-steps with its drive's servo law, and the drive's actual values as integers; and the
+ * frames: a burst's RPDOs stored (rpdo_burst) and a SYNC's TPDOs sampled into its burst
+ * (tpdo_burst), for the nodes whose frames the Python path would handle plainly, each checked
+ * per frame or SYNC and any other handed back to Python (runner.Simulator).
  *
  * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
  * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
