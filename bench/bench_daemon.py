@@ -43,6 +43,26 @@ inflates every Python call, so the shares overstate per-call parts):
 | controller: supervision | 0.06 | 2.2 % |
 | other spacearm code | 0.03 | 1 % |
 
+The simulator's frames in the core (issue 35, 2026-11-30): a burst's RPDOs are stored by one
+call of the compiled core (_simcore.c rpdo_burst, under one hold of the SYNC lock) and a SYNC's
+TPDOs of every node sampled into its burst by another (tpdo_burst), for the nodes whose frames
+the Python path would handle plainly (live, OPERATIONAL, no line gate, no fault switch on the
+frames, decoders and tables current); any other frame or node goes the Python way, which is also
+the pure-Python path. The drives read their settings, encoder readings and tables without a
+call for a cached answer, the end effector's sub-steps are one call, and the simulator's
+wall-clock timer takes the SYNC lock only for a heartbeat that is due (each acquisition while the
+SYNC thread held it cost GIL hand-overs) and lists /proc/self/task only when the threads changed.
+profile_lockstep --record, 1000 cycles (load 10.8 / 11.6): 1225 -> 967 Python calls per cycle,
+the simulator's parts 1.05 -> 0.74 ms profiled. This bench over main (01067d0) and this tree
+alternating (12 / 11 runs, load 9.6-16.5, steal 0 %), medians: 8 nodes virtual recording on
+0.518 -> 0.437 % (process CPU 0.476 -> 0.394 ms, the simulator's part 0.140 -> 0.118 ms),
+recording off 0.468 -> 0.397 %, Panda 0.562 -> 0.480 % (simulator 0.153 -> 0.146 ms), loopback
+0.450 -> 0.463 % (the daemon's process; the simulator's 0.283 -> 0.275 ms). At that load one run's
+share varies by up to 2x; lockstep_fingerprint identical to main with the core and without.
+What is left in the simulator: per drive the Python around the core's calls (the SYNC begin and
+end, the plant's period), the F/T sample, the SYNC-time heartbeat and consumer checks (9 nodes a
+SYNC), and the timer's per-thread /proc reads (each pread a GIL hand-over beside the cycle).
+
 Bursts (issue 35): a cycle's frames go over the bus as two bursts and a SYNC, not as ~38
 frames one by one. The in-process bus's send_frames hands a burst (the master's RPDOs, a
 SYNC's TPDOs) to each receiver whole, taps first, as the loopback hub forwards one, in one

@@ -1,6 +1,9 @@
 /* Compiled core of the simulator's SYNC hot path (issue 35): a drive's SYNC begin that changes no state
  * (its RPDO objects read straight from the data store), a rigid-gear joint's whole SYNC period
- * of sub-steps with its drive's servo law, and the drive's actual values as integers.
+ * of sub-steps with its drive's servo law, and the drive's actual values as integers; and the
+ * frames: a burst's RPDOs stored (rpdo_burst) and a SYNC's TPDOs sampled into its burst
+ * (tpdo_burst), for the nodes whose frames the Python path would handle plainly, each checked
+ * per frame or SYNC and any other handed back to Python (runner.Simulator).
  *
  * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
  * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
@@ -465,44 +468,39 @@ static int count_malformed(PyObject *stats) {
     return rc;
 }
 
-static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    (void)self;
-    if (nargs != 8) {
-        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
-        return NULL;
-    }
-    PyObject *codec = args[0], *data = args[1], *store = args[2], *params = args[3], *on_write = args[4],
-             *write_rules = args[5], *aborted = args[6], *stats = args[7];
+/* rpdo_store's loop: 0, or -1 with an exception set */
+static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject *params, PyObject *on_write,
+                      PyObject *write_rules, PyObject *aborted, PyObject *stats) {
     if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
         PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
-        return NULL;
+        return -1;
     }
     for (Py_ssize_t i = 0; i < PyTuple_GET_SIZE(codec); i++) {
         PyObject *e = PyTuple_GET_ITEM(codec, i);
         if (!PyTuple_Check(e) || PyTuple_GET_SIZE(e) != 8) {
             PyErr_SetString(PyExc_TypeError, "rpdo_store: codec entries are 8-tuples");
-            return NULL;
+            return -1;
         }
         PyObject *index = PyTuple_GET_ITEM(e, 0), *sub = PyTuple_GET_ITEM(e, 1), *obj = PyTuple_GET_ITEM(e, 4),
                  *key = PyTuple_GET_ITEM(e, 6);
         Py_ssize_t start = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 2)), end = PyLong_AsSsize_t(PyTuple_GET_ITEM(e, 3));
         long index_value = PyLong_AsLong(index);
         if (PyErr_Occurred())
-            return NULL;
+            return -1;
         PyObject *chunk = PySequence_GetSlice(data, start, end);
         if (chunk == NULL)
-            return NULL;
+            return -1;
         int size_ok = PyObject_IsTrue(PyTuple_GET_ITEM(e, 5));
         if (size_ok <= 0) {
             Py_DECREF(chunk);
             if (size_ok < 0 || count_malformed(stats) < 0)
-                return NULL;
+                return -1;
             continue;
         }
         int reacts = index_value < 0x2000 ? 1 : PyObject_IsTrue(PyTuple_GET_ITEM(e, 7));
         if (reacts < 0) {
             Py_DECREF(chunk);
-            return NULL;
+            return -1;
         }
         PyObject *result = index_value < 0x2000
             ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
@@ -510,12 +508,12 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         if (result == NULL) {
             if (!PyErr_ExceptionMatches(aborted)) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
             PyErr_Clear();
             Py_DECREF(chunk);
             if (count_malformed(stats) < 0)
-                return NULL;
+                return -1;
             continue;
         }
         Py_DECREF(result);
@@ -523,26 +521,227 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         if (entry == NULL) {
             if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
             int rc = PyDict_SetItem(store, index, entry);
             Py_DECREF(entry);                      /* the store holds it */
             if (rc < 0) {
                 Py_DECREF(chunk);
-                return NULL;
+                return -1;
             }
         }
         int rc = PyObject_SetItem(entry, sub, chunk);
         Py_DECREF(chunk);
         if (rc < 0)
-            return NULL;
+            return -1;
         if (PyDict_GET_SIZE(params) > 0) {
             int cached = PyDict_Contains(params, key);
             if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0))
-                return NULL;
+                return -1;
         }
     }
+    return 0;
+}
+
+static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 8) {
+        PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7]) < 0)
+        return NULL;
     Py_RETURN_NONE;
+}
+
+/* Interned attribute names rpdo_burst reads (module init) */
+static PyObject *s_powered, *s_silent, *s_faults, *s_stats, *s_nmt_state, *s_rpdos, *s_codec, *s_rx_frames, *s_in_rpdo,
+    *s_on_write, *s_on_rpdo, *s_send_tpdos, *s_ignore_sync, *s_drop_tx, *s_corrupt_tx, *s_plain_cobs,
+    *s_read_callbacks, *s_send, *s_send_many_name, *s_tpdos, *s_core_key, *s_store_generation, *s_core_rows,
+    *s_sync_counter, *s_syncs, *s_tx_frames, *one_;
+
+/* obj.name += 1 */
+static int count_up(PyObject *obj, PyObject *name) {
+    PyObject *n = PyObject_GetAttr(obj, name);
+    if (n == NULL)
+        return -1;
+    PyObject *m = PyNumber_Add(n, one_);
+    Py_DECREF(n);
+    if (m == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, name, m);
+    Py_DECREF(m);
+    return rc;
+}
+
+/* 1: obj.name is true, 0: false, -1: an exception */
+static int attr_true(PyObject *obj, PyObject *name) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    int t = PyObject_IsTrue(v);
+    Py_DECREF(v);
+    return t;
+}
+
+/* A route (runner._direct_route): the node, its PDO engine, its write rules (the bound method in
+ * its write callbacks), SimNode.on_rpdo, and what the node sets once in __init__: its write
+ * callbacks list, data store, param() cache, statistics, fault switches, and its lock's acquire
+ * and release. */
+enum { R_NODE, R_ENGINE, R_WRITE_RULES, R_ON_RPDO, R_CALLBACKS, R_STORE, R_PARAMS, R_STATS, R_FAULTS, R_ACQUIRE,
+       R_RELEASE, R_SIZE };
+
+/* The frame's RPDO codec when it takes runner.Simulator._route_frames's direct path (a live
+ * node, OPERATIONAL, its RPDO compiled, the frame long enough, the node's write rules its only
+ * write callback, on_rpdo not wrapped by a line gate): 1 with a new reference in *codec_out, 0
+ * when Python is to handle the frame, -1 on an exception. Nothing is changed before it says 1. */
+static int direct_rpdo(PyObject **route, PyObject *cid, PyObject *data, long operational, PyObject **codec_out) {
+    PyObject *node = route[R_NODE], *callbacks = route[R_CALLBACKS];
+    if (!PyList_Check(callbacks) || PyList_GET_SIZE(callbacks) != 1 || PyList_GET_ITEM(callbacks, 0) != route[R_WRITE_RULES])
+        return 0;
+    int t = attr_true(node, s_powered);
+    if (t <= 0)
+        return t;
+    t = attr_true(route[R_FAULTS], s_silent);
+    if (t != 0)
+        return t < 0 ? -1 : 0;
+    /* node.on_rpdo is SimNode's (a line gate in the instance, a subclass's own: Python's call) */
+    PyObject *on_rpdo = PyObject_GetAttr(node, s_on_rpdo);
+    if (on_rpdo == NULL)
+        return -1;
+    t = PyMethod_Check(on_rpdo) && PyMethod_GET_FUNCTION(on_rpdo) == route[R_ON_RPDO] && PyMethod_GET_SELF(on_rpdo) == node;
+    Py_DECREF(on_rpdo);
+    if (!t)
+        return 0;
+    PyObject *state = PyObject_GetAttr(node, s_nmt_state);
+    if (state == NULL)
+        return -1;
+    long nmt = PyLong_Check(state) ? PyLong_AsLong(state) : -1;
+    Py_DECREF(state);
+    if (nmt != operational)
+        return PyErr_Occurred() ? -1 : 0;
+    PyObject *rpdos = PyObject_GetAttr(route[R_ENGINE], s_rpdos);
+    if (rpdos == NULL)
+        return -1;
+    PyObject *pdo = PyDict_Check(rpdos) ? PyDict_GetItemWithError(rpdos, cid) : NULL;
+    PyObject *codec = pdo != NULL ? PyObject_GetAttr(pdo, s_codec) : NULL;
+    Py_DECREF(rpdos);
+    if (codec == NULL)
+        return PyErr_Occurred() ? -1 : 0;
+    if (!PyTuple_Check(codec)) {
+        Py_DECREF(codec);
+        return 0;
+    }
+    if (PyTuple_GET_SIZE(codec) > 0) {           /* the mapped length: the last entry's end */
+        PyObject *last = PyTuple_GET_ITEM(codec, PyTuple_GET_SIZE(codec) - 1);
+        Py_ssize_t size = PyObject_Length(data);
+        Py_ssize_t end = PyTuple_Check(last) && PyTuple_GET_SIZE(last) == 8 ? PyLong_AsSsize_t(PyTuple_GET_ITEM(last, 3)) : -1;
+        if (size < 0 || end < 0 || size < end) {
+            Py_DECREF(codec);
+            return PyErr_Occurred() ? -1 : 0;
+        }
+    }
+    *codec_out = codec;
+    return 1;
+}
+
+/* One RPDO on the direct path, as PdoEngine.on_rpdo stores it: the frame counted, then under
+ * the node's lock with in_rpdo set, store_rpdo. 0, or -1 with an exception set (the lock
+ * released and in_rpdo cleared, as on_rpdo's `finally`). */
+static int route_rpdo(PyObject **route, PyObject *data, PyObject *codec, PyObject *sim_stats, PyObject *aborted) {
+    PyObject *node = route[R_NODE], *stats = route[R_STATS];
+    if (count_up(sim_stats, s_rx_frames) < 0 || count_up(stats, s_rx_frames) < 0)
+        return -1;
+    PyObject *on_write = PyObject_GetAttr(node, s_on_write);
+    if (on_write == NULL)
+        return -1;
+    PyObject *got = PyObject_CallNoArgs(route[R_ACQUIRE]);
+    if (got == NULL) {
+        Py_DECREF(on_write);
+        return -1;
+    }
+    Py_DECREF(got);
+    int rc = -1;
+    if (PyObject_SetAttr(node, s_in_rpdo, Py_True) == 0)
+        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats);
+    Py_DECREF(on_write);
+    PyObject *type, *value, *tb;                      /* the finally: keep the exception aside */
+    PyErr_Fetch(&type, &value, &tb);
+    int cleared = PyObject_SetAttr(node, s_in_rpdo, Py_False);
+    PyObject *released = PyObject_CallNoArgs(route[R_RELEASE]);
+    if (type != NULL) {
+        Py_XDECREF(released);
+        PyErr_Restore(type, value, tb);     /* the first exception wins, as in Python's finally */
+        return -1;
+    }
+    if (cleared < 0 || released == NULL) {
+        Py_XDECREF(released);
+        return -1;
+    }
+    Py_DECREF(released);
+    return rc;
+}
+
+/* rpdo_burst(frames, start, routes, sim_stats, aborted, operational) -> next, or (i, exception)
+ * runner.Simulator._route_frames's direct path for a burst of (cob_id, data) frames from
+ * frames[start]: each RPDO of `routes` ({cob_id: route}, R_* above) that direct_rpdo takes is counted and stored as PdoEngine.on_rpdo
+ * does. Returns the index of the first frame left to Python (len(frames): none), or (i, exc)
+ * when frame i raised an Exception (its cleanup done; the frames before it are handled). The
+ * caller holds the simulator's SYNC lock. */
+static PyObject *rpdo_burst(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 6 || !PyDict_Check(args[2])) {
+        PyErr_SetString(PyExc_TypeError, "rpdo_burst(frames, start, routes, sim_stats, aborted, operational)");
+        return NULL;
+    }
+    PyObject *routes = args[2], *sim_stats = args[3], *aborted = args[4];
+    Py_ssize_t start = PyLong_AsSsize_t(args[1]);
+    long operational = PyLong_AsLong(args[5]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *frames = PySequence_Fast(args[0], "frames must be a sequence");
+    if (frames == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(frames), i = start < 0 ? 0 : start;
+    for (; i < n; i++) {
+        PyObject *frame = PySequence_Fast_GET_ITEM(frames, i);
+        if (!PyTuple_Check(frame) || PyTuple_GET_SIZE(frame) != 2)
+            break;
+        PyObject *cid = PyTuple_GET_ITEM(frame, 0), *data = PyTuple_GET_ITEM(frame, 1);
+        PyObject *route = PyDict_GetItemWithError(routes, cid);
+        if (route == NULL) {
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        if (!PyTuple_Check(route) || PyTuple_GET_SIZE(route) != R_SIZE)
+            break;
+        PyObject **items = &PyTuple_GET_ITEM(route, 0), *codec = NULL;
+        int direct = direct_rpdo(items, cid, data, operational, &codec);
+        if (direct < 0)
+            goto error;
+        if (direct == 0)
+            break;
+        int rc = route_rpdo(items, data, codec, sim_stats, aborted);
+        Py_DECREF(codec);
+        if (rc < 0)
+            goto error;
+    }
+    Py_DECREF(frames);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(frames);
+    if (!PyErr_ExceptionMatches(PyExc_Exception))
+        return NULL;                        /* KeyboardInterrupt and the like: not the frame's */
+    PyObject *type, *value, *tb;
+    PyErr_Fetch(&type, &value, &tb);
+    PyErr_NormalizeException(&type, &value, &tb);
+    if (tb != NULL)
+        PyException_SetTraceback(value, tb);
+    Py_XDECREF(type);
+    Py_XDECREF(tb);
+    PyObject *out = Py_BuildValue("(nN)", i, value);
+    return out;
 }
 
 /* tpdo_frames(table, counter) -> [(cob_id, bytes), ...] or None
@@ -551,16 +750,22 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
  * at this SYNC counter when synchronous (0..240) and, beyond type 1, every type-th SYNC. Its
  * bytes are the mapped objects' stored bytes joined. None when an object is not stored as
  * bytes (the Python path samples it through SimNode.raw). */
+static PyObject *sample_tpdos(PyObject *table, long long counter);
+
 static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
     (void)self;
     if (nargs != 2 || !PyTuple_Check(args[0])) {
         PyErr_SetString(PyExc_TypeError, "tpdo_frames(table, counter)");
         return NULL;
     }
-    PyObject *table = args[0];
     long long counter = PyLong_AsLongLong(args[1]);
     if (counter == -1 && PyErr_Occurred())
         return NULL;
+    return sample_tpdos(args[0], counter);
+}
+
+/* tpdo_frames' work: a new list, None (new reference), or NULL with an exception set */
+static PyObject *sample_tpdos(PyObject *table, long long counter) {
     PyObject *frames = PyList_New(0);
     if (frames == NULL)
         return NULL;
@@ -621,6 +826,174 @@ static PyObject *tpdo_frames(PyObject *self, PyObject *const *args, Py_ssize_t n
 python:
     Py_DECREF(frames);
     Py_RETURN_NONE;
+}
+
+/* A node's TPDO route (runner._tpdo_route): the node, its PDO engine, its LocalNode, its lock's
+ * acquire and release, SimNode.send_tpdos, and the simulator's send_many as the node holds it. */
+enum { T_NODE, T_ENGINE, T_LOCAL, T_ACQUIRE, T_RELEASE, T_SEND_TPDOS, T_SEND_MANY, T_SIZE };
+
+/* 1: attr is a bound method of `self` whose function is `func` */
+static int bound_to(PyObject *self, PyObject *name, PyObject *func) {
+    PyObject *m = PyObject_GetAttr(self, name);
+    if (m == NULL)
+        return -1;
+    int t = PyMethod_Check(m) && PyMethod_GET_FUNCTION(m) == func && PyMethod_GET_SELF(m) == self;
+    Py_DECREF(m);
+    return t;
+}
+
+/* 1: obj.name is the int `value` */
+static int attr_is_long(PyObject *obj, PyObject *name, long value) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    long x = PyLong_Check(v) ? PyLong_AsLong(v) : value - 1;
+    Py_DECREF(v);
+    if (x == -1 && PyErr_Occurred())
+        return -1;
+    return x == value;
+}
+
+/* The node's compiled TPDO table (PdoEngine._core_table's rows, new reference) when its SYNC's
+ * TPDOs take the direct path: send_tpdos not wrapped (line gate) or overridden, OPERATIONAL and
+ * not ignoring SYNC, the table read and its rows current (the store generation they were made
+ * for), no SDO-answer COB-ID among them, no fault switch on its frames, no read callbacks, and
+ * the node sending through the simulator's send_many. NULL without an exception: Python's. */
+static PyObject *direct_tpdo_rows(PyObject **route, PyObject *faults, long operational) {
+    PyObject *node = route[T_NODE], *engine = route[T_ENGINE];
+    if (bound_to(node, s_send_tpdos, route[T_SEND_TPDOS]) != 1 || attr_is_long(node, s_nmt_state, operational) != 1 ||
+        attr_true(faults, s_ignore_sync) != 0 || attr_true(faults, s_drop_tx) != 0 ||
+        attr_true(faults, s_corrupt_tx) != 0 || attr_true(engine, s_plain_cobs) != 1 ||
+        attr_true(route[T_LOCAL], s_read_callbacks) != 0 || attr_true(node, s_powered) != 1)
+        return NULL;
+    PyObject *send = PyObject_GetAttr(node, s_send), *send_many = PyObject_GetAttr(node, s_send_many_name);
+    int sends = send != NULL && send != Py_None && send_many == route[T_SEND_MANY];
+    Py_XDECREF(send);
+    Py_XDECREF(send_many);
+    if (!sends)
+        return NULL;
+    PyObject *tpdos = PyObject_GetAttr(engine, s_tpdos), *key = PyObject_GetAttr(engine, s_core_key);
+    PyObject *generation = PyObject_GetAttr(node, s_store_generation);
+    PyObject *rows = NULL;
+    if (tpdos != NULL && tpdos != Py_None && key != NULL && PyTuple_Check(key) && PyTuple_GET_SIZE(key) == 2 &&
+        PyTuple_GET_ITEM(key, 0) == tpdos && generation != NULL &&
+        PyObject_RichCompareBool(PyTuple_GET_ITEM(key, 1), generation, Py_EQ) == 1) {
+        rows = PyObject_GetAttr(engine, s_core_rows);
+        if (rows != NULL && !PyTuple_Check(rows))
+            Py_CLEAR(rows);
+    }
+    Py_XDECREF(tpdos);
+    Py_XDECREF(key);
+    Py_XDECREF(generation);
+    return rows;
+}
+
+/* obj.name += n */
+static int add_to(PyObject *obj, PyObject *name, Py_ssize_t n) {
+    PyObject *v = PyObject_GetAttr(obj, name);
+    if (v == NULL)
+        return -1;
+    PyObject *k = PyLong_FromSsize_t(n);
+    PyObject *sum = k != NULL ? PyNumber_Add(v, k) : NULL;
+    Py_DECREF(v);
+    Py_XDECREF(k);
+    if (sum == NULL)
+        return -1;
+    int rc = PyObject_SetAttr(obj, name, sum);
+    Py_DECREF(sum);
+    return rc;
+}
+
+/* tpdo_burst(nodes, start, routes, batch, operational) -> next
+ * runner.Simulator._sync_step's TPDO loop from nodes[start]: a silent node sends nothing; a
+ * node of `routes` ({node: route}, T_* above) that takes the direct path (direct_tpdo_rows,
+ * and every mapped object stored) has its SYNC counted and its due TPDOs sampled under its lock
+ * (tpdo_frames) and appended to `batch`, the SYNC's burst, as PdoEngine.send_tpdos and
+ * SimNode.send_frames do. Returns the index of the first node left to Python (len(nodes):
+ * none); a node is left to Python untouched. The caller batches this SYNC's frames. */
+static PyObject *tpdo_burst(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 5 || !PyDict_Check(args[2]) || !PyList_Check(args[3])) {
+        PyErr_SetString(PyExc_TypeError, "tpdo_burst(nodes, start, routes, batch, operational)");
+        return NULL;
+    }
+    PyObject *routes = args[2], *batch = args[3];
+    Py_ssize_t start = PyLong_AsSsize_t(args[1]);
+    long operational = PyLong_AsLong(args[4]);
+    if (PyErr_Occurred())
+        return NULL;
+    PyObject *nodes = PySequence_Fast(args[0], "nodes must be a sequence");
+    if (nodes == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(nodes), i = start < 0 ? 0 : start;
+    for (; i < n; i++) {
+        PyObject *route = PyDict_GetItemWithError(routes, PySequence_Fast_GET_ITEM(nodes, i));
+        if (route == NULL || !PyTuple_Check(route) || PyTuple_GET_SIZE(route) != T_SIZE)
+            break;
+        PyObject **r = &PyTuple_GET_ITEM(route, 0);
+        PyObject *faults = PyObject_GetAttr(r[T_NODE], s_faults);
+        int silent = faults != NULL ? attr_true(faults, s_silent) : -1;
+        if (silent != 0) {
+            Py_XDECREF(faults);
+            if (silent < 0)
+                goto error;
+            continue;                                   /* the SYNC loop skips it */
+        }
+        PyObject *rows = direct_tpdo_rows(r, faults, operational);
+        Py_DECREF(faults);
+        if (rows == NULL) {
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        PyObject *counter = PyObject_GetAttr(r[T_ENGINE], s_sync_counter);
+        PyObject *next = counter != NULL ? PyNumber_Add(counter, one_) : NULL;
+        Py_XDECREF(counter);
+        long long count = next != NULL ? PyLong_AsLongLong(next) : -1;
+        PyObject *got = count == -1 && PyErr_Occurred() ? NULL : PyObject_CallNoArgs(r[T_ACQUIRE]);
+        PyObject *frames = got != NULL ? sample_tpdos(rows, count) : NULL;
+        Py_XDECREF(got);
+        Py_DECREF(rows);
+        if (got != NULL) {
+            PyObject *type, *value, *tb;
+            PyErr_Fetch(&type, &value, &tb);
+            PyObject *released = PyObject_CallNoArgs(r[T_RELEASE]);
+            if (type != NULL) {
+                Py_XDECREF(released);
+                PyErr_Restore(type, value, tb);
+            } else if (released == NULL) {
+                Py_CLEAR(frames);
+            } else {
+                Py_DECREF(released);
+            }
+        }
+        if (frames == NULL || frames == Py_None) {      /* an object not stored: Python samples it */
+            Py_XDECREF(next);
+            Py_XDECREF(frames);
+            if (PyErr_Occurred())
+                goto error;
+            break;
+        }
+        Py_ssize_t sent = PyList_GET_SIZE(frames);
+        PyObject *stats = PyObject_GetAttr(r[T_NODE], s_stats);
+        int rc = stats != NULL ? PyObject_SetAttr(r[T_ENGINE], s_sync_counter, next) : -1;
+        Py_DECREF(next);
+        if (rc == 0)
+            rc = count_up(stats, s_syncs);
+        if (rc == 0 && sent > 0)
+            rc = PyList_SetSlice(batch, PyList_GET_SIZE(batch), PyList_GET_SIZE(batch), frames);
+        if (rc == 0 && sent > 0)
+            rc = add_to(stats, s_tx_frames, sent);
+        Py_XDECREF(stats);
+        Py_DECREF(frames);
+        if (rc < 0)
+            goto error;
+    }
+    Py_DECREF(nodes);
+    return PyLong_FromSsize_t(i);
+error:
+    Py_DECREF(nodes);
+    return NULL;
 }
 
 /* statusword bits (base/canopen/cia402_defs.py) */
@@ -711,8 +1084,12 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
 static PyMethodDef methods[] = {
     {"drive_end", (PyCFunction)(void (*)(void))drive_end, METH_FASTCALL,
      "A CSP drive's SYNC end that changes no state (see the module source)."},
+    {"tpdo_burst", (PyCFunction)(void (*)(void))tpdo_burst, METH_FASTCALL,
+     "runner.Simulator._sync_step's TPDO loop for the nodes on the direct path (see the module source)."},
     {"tpdo_frames", (PyCFunction)(void (*)(void))tpdo_frames, METH_FASTCALL,
      "PdoEngine.send_tpdos's due TPDOs sampled (see the module source)."},
+    {"rpdo_burst", (PyCFunction)(void (*)(void))rpdo_burst, METH_FASTCALL,
+     "runner.Simulator._route_frames's direct path for a burst of RPDOs (see the module source)."},
     {"rpdo_store", (PyCFunction)(void (*)(void))rpdo_store, METH_FASTCALL,
      "PdoEngine.on_rpdo's loop over the mapped objects (see the module source)."},
     {"cyclic_write", (PyCFunction)(void (*)(void))cyclic_write, METH_FASTCALL,
@@ -728,4 +1105,22 @@ static PyMethodDef methods[] = {
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_simcore", NULL, -1, methods};
 
-PyMODINIT_FUNC PyInit__simcore(void) { return PyModule_Create(&module); }
+PyMODINIT_FUNC PyInit__simcore(void) {
+    struct {
+        PyObject **name;
+        const char *text;
+    } names[] = {{&s_powered, "powered"}, {&s_faults, "faults"}, {&s_stats, "stats"}, {&s_silent, "silent"}, {&s_nmt_state, "nmt_state"},
+                 {&s_rpdos, "rpdos"}, {&s_codec, "codec"}, {&s_rx_frames, "rx_frames"}, {&s_in_rpdo, "in_rpdo"},
+                 {&s_on_write, "on_write"}, {&s_on_rpdo, "on_rpdo"}, {&s_send_tpdos, "send_tpdos"},
+                 {&s_ignore_sync, "ignore_sync"}, {&s_drop_tx, "drop_tx"}, {&s_corrupt_tx, "corrupt_tx"},
+                 {&s_plain_cobs, "_plain_cobs"}, {&s_read_callbacks, "_read_callbacks"}, {&s_send, "_send"},
+                 {&s_send_many_name, "_send_many"}, {&s_tpdos, "tpdos"}, {&s_core_key, "_core_key"},
+                 {&s_store_generation, "store_generation"}, {&s_core_rows, "_core_rows"},
+                 {&s_sync_counter, "sync_counter"}, {&s_syncs, "syncs"}, {&s_tx_frames, "tx_frames"}};
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++)
+        if ((*names[i].name = PyUnicode_InternFromString(names[i].text)) == NULL)
+            return NULL;
+    if ((one_ = PyLong_FromLong(1)) == NULL)
+        return NULL;
+    return PyModule_Create(&module);
+}

@@ -125,17 +125,33 @@ class JointDriveNode(SimNode):
 
     def _settings(self) -> tuple:
         """(k, rated torque, max motor torque, quick-stop and slow-down decelerations, following
-        error window, quick-stop option): the settings every SYNC reads, derived again only
-        after a write or a reset dropped a cached value (ParamCache.epoch)."""
+        error window, quick-stop option, following error timeout, the software position limits'
+        and maximum profile velocity's counts): the settings every SYNC reads, derived again
+        only after a write or a reset dropped a cached value (ParamCache.epoch)."""
         key = (self._params.epoch, self.joint.params)
         if self._settings_key != key:
             k, rated = self._scale(), self._rated_torque()
             self._settings_values = (k, rated, self.param(od.MAX_TORQUE) / 1000.0 * rated,
                                      self.param(od.QUICK_STOP_DECELERATION) / k,
                                      self.param(od.PROFILE_DECELERATION) / k,
-                                     self.param(od.FOLLOWING_ERROR_WINDOW) / k, self.param(od.QUICK_STOP_OPTION))
+                                     self.param(od.FOLLOWING_ERROR_WINDOW) / k, self.param(od.QUICK_STOP_OPTION),
+                                     *self._optional_settings())
             self._settings_key = (self._params.epoch, self.joint.params)
         return self._settings_values
+
+    def _optional_settings(self) -> tuple:
+        """The following error timeout and the limits' counts for _settings; None for those the
+        EDS lacks: read where they are used, which raises as it did before they were kept."""
+        try:
+            timeout = self.param(od.FOLLOWING_ERROR_TIMEOUT)
+        except SdoAbortedError:
+            timeout = None
+        try:
+            limits = (self.param(od.SOFTWARE_POSITION_LIMIT, 1), self.param(od.SOFTWARE_POSITION_LIMIT, 2),
+                      self.param(od.MAX_PROFILE_VELOCITY))
+        except SdoAbortedError:
+            limits = None
+        return timeout, limits
 
     _settings_key = None
 
@@ -143,11 +159,14 @@ class JointDriveNode(SimNode):
     def on_sync_begin(self, dt: float) -> None:
         self._dt = dt
         self._h = dt / self.plant.config.substeps
-        k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = self._settings()
+        key = self._settings_key       # _settings' usual answer inline: every drive, every SYNC
+        settings = self._settings_values if key is not None and key[0] == self._params.epoch \
+            and key[1] is self.joint.params else self._settings()
+        k, rated, max_motor_torque, self.qs_dec, self.slow_dec, self._fe_window, self._qs_option = settings[:7]
         self._k = k
         core = simcore.core
         if core is not None and self._begin_objects is not None and not self.local._read_callbacks \
-                and self._steady_begin(core, dt, k, rated, max_motor_torque):
+                and self._steady_begin(core, dt, k, rated, max_motor_torque, settings[8]):
             return
         cw = self.get(od.CONTROLWORD)
         self._apply_controlword(cw)
@@ -198,17 +217,18 @@ class JointDriveNode(SimNode):
         self.halt = halt
         self.ramp_dec = self.qs_dec if self.ramp_quick else self.slow_dec
 
-    def _steady_begin(self, core, dt: float, k: float, rated: float, max_motor_torque: float) -> bool:
+    def _steady_begin(self, core, dt: float, k: float, rated: float, max_motor_torque: float, limits: tuple) -> bool:
         """The rest of on_sync_begin in the compiled core, for a SYNC that changes no state (no
         transition, mode change or halt starting; CSP when enabled). False: it was not such a
-        SYNC, nothing changed."""
+        SYNC, nothing changed. limits: the software position limits' and maximum profile
+        velocity's counts (_settings)."""
         state = self.state
         enabled = state == State.OPERATION_ENABLED
-        if enabled:
+        if not enabled:
+            limits = (0, 0, 0)
+        elif limits is None:
             limits = (self.param(od.SOFTWARE_POSITION_LIMIT, 1), self.param(od.SOFTWARE_POSITION_LIMIT, 2),
                       self.param(od.MAX_PROFILE_VELOCITY))
-        else:
-            limits = (0, 0, 0)
         stay = _STAY.get((state, self._qs_option))
         if stay is None:
             stay = _STAY[(state, self._qs_option)] = sum(1 << i for i, command in enumerate(_COMMANDS)
@@ -328,11 +348,13 @@ class JointDriveNode(SimNode):
         flags = ((state in ENERGISED) | (state == State.OPERATION_ENABLED) << 1
                  | (state == State.FAULT_REACTION_ACTIVE) << 2 | (state == State.QUICK_STOP_ACTIVE) << 3
                  | bool(self._ramp_from_actual) << 4 | bool(self.limit_active) << 5)
+        q_measured, q_reported, qd_reported = j.readings()
+        settings = self._settings_values
+        timeout = settings[7] if settings[7] is not None else self.param(od.FOLLOWING_ERROR_TIMEOUT)
         out = core.drive_end(dt, flags, self._qs_option, self.v_ref, self.brake_closing, BRAKE_ENGAGE_TIME - 1e-9,
-                             self.q_ref, j.q_measured, self._fe_window, self.fe_time,
-                             self.param(od.FOLLOWING_ERROR_TIMEOUT), j.temperature, OVER_TEMPERATURE, WARN_TEMPERATURE,
-                             STATE_BITS[state], self._k, self._settings_values[1], j.q_reported, j.qd_reported,
-                             j.torque_reported)
+                             self.q_ref, q_measured, self._fe_window, self.fe_time, timeout, j.temperature,
+                             OVER_TEMPERATURE, WARN_TEMPERATURE, STATE_BITS[state], self._k, settings[1], q_reported,
+                             qd_reported, j.torque_reported)
         if out is None:
             return False
         self.brake_closing, engaged, self.fe_time, self.following_error, sw = out[:5]

@@ -378,7 +378,9 @@ class SimNode:
     def check_consumers(self, now: float) -> None:
         if not self.consumer_last:
             return
-        entries = self.consumer_entries()
+        # consumer_entries()'s usual answer inline: on the SYNC time base every node, every SYNC
+        cached = self._consumer_entries
+        entries = cached[0] if cached is not None and cached[2] == self._params.epoch else self.consumer_entries()
         for producer, last in list(self.consumer_last.items()):
             timeout = entries.get(producer)
             if timeout is None:

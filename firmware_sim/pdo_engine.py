@@ -145,12 +145,16 @@ class PdoEngine:
         node.stats.syncs += 1
         if node.nmt_state != od.NMT_STATE_OPERATIONAL or node.faults.ignore_sync:
             return
-        tpdos = self._tpdo_table()
+        tpdos = self.tpdos
+        if tpdos is None:
+            tpdos = self._tpdo_table()
         counter = self.sync_counter
         core, faults = simcore.core, node.faults
         if core is not None and self._plain_cobs and not faults.drop_tx and not faults.corrupt_tx \
                 and not node.local._read_callbacks:
-            table = self._core_table(tpdos)
+            key = self._core_key       # _core_table's usual answer inline: every node, every SYNC
+            table = self._core_rows if key is not None and key[0] is tpdos and key[1] == node.store_generation \
+                else self._core_table(tpdos)
             if table is not None:
                 with node._lock:
                     frames = core.tpdo_frames(table, counter)

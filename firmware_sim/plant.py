@@ -255,6 +255,14 @@ class JointModel:
     def qd_reported(self) -> float:
         return self.qd if self.feedback is None else self.feedback_velocity.output
 
+    def readings(self) -> tuple[float, float, float]:
+        """(q_measured, q_reported, qd_reported) in one call: a drive's SYNC end reads all three
+        (issue 35), the encoder's reading worked out once."""
+        q_measured = self.q_measured
+        if self.feedback is None:
+            return q_measured, q_measured, self.qd
+        return q_measured, self.feedback.output, self.feedback_velocity.output
+
     def end_cycle(self) -> None:
         """Called once per SYNC period after the physics: feeds the feedback delay line."""
         if self.feedback is not None:
@@ -310,7 +318,9 @@ class JointModel:
         and 80 property reads a cycle were a tenth of the simulator's CPU). With the compiled
         core (simcore.py) a rigid gear's period under a servo law the core models is one call."""
         servo = self.period_servo
-        if simcore.core is not None and servo is not None and servo[0] is self.controller and not self.two_mass:
+        p = self.params          # two_mass inlined: every joint, every SYNC
+        if simcore.core is not None and servo is not None and servo[0] is self.controller \
+                and not (p.joint_stiffness > 0.0 or p.backlash > 0.0):
             law = servo[1]()
             if law is not None and self._core_period(fractions, h, law):
                 return
@@ -323,9 +333,11 @@ class JointModel:
         its reference at the period's end. False: the core left this period to Python (a value
         Python's round() or cos() raises on), nothing changed."""
         held = self.brake_engaged or self.stalled
+        key = self._core_key     # _core_constants' usual answer inline: every joint, every SYNC
+        constants = self._core_values if key is not None and key[0] is self.params \
+            and key[1] == self.max_motor_torque and key[2] == self.load_amplitude else self._core_constants()
         out = simcore.core.rigid_period(fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta,
-                                        self.thetad, self.motor_torque, law[1], law[2], law[3], law[4],
-                                        self._core_constants())
+                                        self.thetad, self.motor_torque, law[1], law[2], law[3], law[4], constants)
         if out is None:
             return False
         q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = out
@@ -514,10 +526,18 @@ class EndEffectorModel:
         return max(0.0, self.turns - p.seat_turns) * p.screw_stiffness
 
     def step(self, h: float) -> None:
+        self.steps(h, 1)
+
+    def steps(self, h: float, n: int) -> None:
+        """n sub-steps of length h: step() n times, on locals (issue 35: a call per sub-step was
+        ten calls a SYNC for an end effector that is mostly at rest)."""
         if self.jammed:
             return
-        self.grip = min(1.0, max(0.0, self.grip + self.grip_speed * h))
-        self.turns = max(0.0, self.turns + self.screw_speed * h)
+        grip, turns, grip_speed, screw_speed = self.grip, self.turns, self.grip_speed, self.screw_speed
+        for _ in range(n):
+            grip = min(1.0, max(0.0, grip + grip_speed * h))
+            turns = max(0.0, turns + screw_speed * h)
+        self.grip, self.turns = grip, turns
 
 
 @dataclass
@@ -563,8 +583,7 @@ class Plant:
                 apart = self.dynamics.held_period(self, fractions, h)
             if apart:
                 if self.ee is not None:
-                    for _ in range(n):
-                        self.ee.step(h)
+                    self.ee.steps(h, n)
                 self._end_period(dt)
                 return
         # coupled: every joint moves one sub-step, then the end effector and the environment

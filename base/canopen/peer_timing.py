@@ -103,62 +103,93 @@ def _calling_thread_scheduling() -> tuple[int, int]:
     return {os.SCHED_FIFO: 1, os.SCHED_RR: 2}.get(policy, 0), priority
 
 
-def _schedstat(path: str) -> tuple[int, int]:
-    """(CPU ns, run-queue ns) of one thread; os.read, not a file object: read on every wake."""
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        fields = os.read(fd, 128).split()
-    finally:
-        os.close(fd)
-    return int(fields[0]), int(fields[1])
-
-
 _task_files: dict[str, int] = {}     # thread ID -> open descriptor of its schedstat (read with pread)
+_task_links = -1                     # /proc/self/task's link count at the last listing (2 + threads)
+_task_reads = 0                      # _task_times calls since that listing
+# list again at least this often, where the link count does not follow the threads (not Linux's procfs)
+TASKS_RELIST_EVERY = 64
 _task_lock = threading.Lock()
 
 
 def _forget_task_files() -> None:
+    global _task_links
     for fd in _task_files.values():
         try:
             os.close(fd)
         except OSError:
             pass
     _task_files.clear()
+    _task_links = -1
 
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_forget_task_files)    # a child's threads are others
 
 
+def _sum_tasks(own_tid: str, listed_now: bool) -> tuple[int, int, int | None] | None:
+    """(CPU ns, run-queue ns) over the threads listed, and the calling thread's run-queue ns
+    (None: not among them). A thread that has ended (ESRCH): None, to list them again, unless
+    they were listed just now; then it is left out, as it is gone."""
+    cpu = queue = 0
+    own = None
+    ended = []
+    for tid, fd in _task_files.items():
+        try:
+            fields = os.pread(fd, 128, 0).split()
+            c, q = int(fields[0]), int(fields[1])
+        except (OSError, ValueError, IndexError):
+            if not listed_now:
+                return None
+            ended.append(tid)
+            continue
+        cpu += c
+        queue += q
+        if tid == own_tid:
+            own = q
+    for tid in ended:
+        os.close(_task_files.pop(tid))
+    return cpu, queue, own
+
+
+def _list_tasks() -> None:
+    """Open the schedstat of every thread of the process now, close those of ended ones."""
+    tids = os.listdir("/proc/self/task")
+    for tid in set(_task_files) - set(tids):
+        os.close(_task_files.pop(tid))
+    for tid in tids:
+        if tid not in _task_files:
+            try:
+                _task_files[tid] = os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
+            except OSError:       # a thread that ended meanwhile
+                pass
+
+
 def _task_times() -> tuple[int, int, int]:
     """(CPU ns, run-queue ns) summed over this process's threads, and the calling thread's
     run-queue ns; zeros where /proc cannot say. Each thread's file stays open (one pread per
     thread and wake, not open/read/close): the cost of a pass grows with the process's
-    threads, and the simulator's timer pays it on every wake."""
-    cpu = queue = 0
+    threads, and the simulator's timer pays it on every wake. The threads are listed again only
+    when their number changed (the task folder's link count: one stat), one has ended (its
+    read fails: one ended and another started between two wakes) or the calling thread is new;
+    listing the folder and opening the calling thread's own file on every wake were most of
+    the cost of a wake (issue 35)."""
+    global _task_links, _task_reads
+    own_tid = str(threading.get_native_id())
     try:
-        own = _schedstat("/proc/thread-self/schedstat")[1]
         with _task_lock:
-            tids = os.listdir("/proc/self/task")
-            for tid in tids:
-                fd = _task_files.get(tid)
-                try:
-                    if fd is None:
-                        fd = _task_files[tid] = os.open(f"/proc/self/task/{tid}/schedstat", os.O_RDONLY)
-                    fields = os.pread(fd, 128, 0).split()
-                    c, q = int(fields[0]), int(fields[1])
-                except (OSError, ValueError, IndexError):
-                    if fd is not None:          # a thread that ended meanwhile
-                        os.close(_task_files.pop(tid))
-                    continue
-                cpu += c
-                queue += q
-            if len(_task_files) > len(tids):
-                for tid in set(_task_files) - set(tids):
-                    os.close(_task_files.pop(tid))
+            links = os.stat("/proc/self/task").st_nlink
+            _task_reads += 1
+            times = None
+            if links == _task_links and _task_reads < TASKS_RELIST_EVERY:
+                times = _sum_tasks(own_tid, listed_now=False)
+            if times is None or times[2] is None:
+                _list_tasks()
+                _task_links, _task_reads = links, 0
+                times = _sum_tasks(own_tid, listed_now=True)
     except (OSError, ValueError, IndexError):
         return 0, 0, 0
-    return cpu, queue, own
+    cpu, queue, own = times
+    return (cpu, queue, own) if own is not None else (0, 0, 0)
 
 
 def wake_cause(lateness: float, own_queue: float, own_cpu: float, all_busy: float) -> str:

@@ -3,6 +3,8 @@ reported at once (after the inhibit time), an on-time producer once per event-ti
 and the simulator sends its report on the bus where the master's listener receives it."""
 from __future__ import annotations
 
+import os
+import threading
 import time
 import uuid
 
@@ -211,3 +213,47 @@ def test_a_stopped_process_is_measured_as_stopped():
         proc.kill()
         proc.wait()
     assert float(worst) >= 0.25 and cause == "stopped", (worst, cause)
+
+
+def _listed_threads() -> list[tuple[int, int]]:
+    """(CPU ns, run-queue ns) of every thread of this process, listed and read afresh."""
+    out = []
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/schedstat", "rb") as handle:
+                fields = handle.read().split()
+        except OSError:
+            continue
+        out.append((int(fields[0]), int(fields[1])))
+    return out
+
+
+def test_task_times_follow_threads_that_start_and_end_between_wakes():
+    """_task_times lists the threads again only when their number changed or one ended: a
+    thread started (or ended and replaced) between two calls is still summed, an ended one no
+    longer is, as the listing on every call did."""
+    peer_timing._task_times()
+    gates = [threading.Event() for _ in range(2)]
+    started = threading.Thread(target=gates[0].wait)
+    started.start()
+    try:
+        time.sleep(0.01)
+        cpu, queue, own = peer_timing._task_times()
+        assert str(started.native_id) in peer_timing._task_files
+        after = _listed_threads()        # read later: every sum can only have grown
+        assert cpu <= sum(c for c, _ in after) and queue <= sum(q for _, q in after)
+        assert cpu >= sum(c for c, _ in after) - 50_000_000     # not a thread short (this one's CPU since)
+        gates[0].set()
+        started.join()
+        replacement = threading.Thread(target=gates[1].wait)     # same count, another thread
+        replacement.start()
+        time.sleep(0.01)
+        peer_timing._task_times()
+        assert str(started.native_id) not in peer_timing._task_files
+        assert str(replacement.native_id) in peer_timing._task_files
+        assert set(peer_timing._task_files) == set(os.listdir("/proc/self/task"))
+        assert own >= 0
+    finally:
+        for gate in gates:
+            gate.set()
+        replacement.join()
