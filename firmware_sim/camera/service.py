@@ -163,6 +163,19 @@ class CameraService:
         if self.render_process is not None:
             self.render_process.close()
 
+    def wait_rendered(self, timeout: float = 30.0) -> bool:
+        """Wait until every exposure taken so far is rendered (False if `timeout` s passed). The
+        exposures are fixed by plant time in lockstep; when their frames are done is the
+        machine's business, so a count of frames is read after this, never while one renders."""
+        end = time.monotonic() + timeout
+        with self._wake:
+            while self._pending and not self._stop:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self._wake.wait(min(left, 0.05))
+        return True
+
     def render_now(self, t: float, sync: int, base_T_camera: np.ndarray, stocked: frozenset[str] | None = None):
         """Render and publish one frame (also used directly by single-threaded tests). stocked:
         the stores that held an ORU at the exposure (None: ask the plant now)."""

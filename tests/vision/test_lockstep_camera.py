@@ -14,6 +14,13 @@ from tests.vision.views import pose_error
 TARGET, DZ = "exposed", 0.10
 
 
+def rendered(stack) -> int:
+    """Frames of the exposures taken so far: the last one may still be rendering when the cycle
+    that took it returns (seen at load 10-16: 93 frames in one run, 94 in the other)."""
+    assert stack.camera.wait_rendered(), "the camera's render thread did not finish its exposures"
+    return stack.camera.frames
+
+
 def fly_once() -> dict:
     stack = ApproachStack(threaded=False)
     try:
@@ -24,18 +31,18 @@ def fly_once() -> dict:
         stack.move_joints_to(stack.nominal_goal(TARGET, DZ) @ xyz_rpy_to_transform((0.008, -0.006, -0.04),
                                                                                    (0.02, -0.015, 0.01)))
         phases["moved"] = sync()
-        frames_before = stack.camera.frames
+        frames_before = rendered(stack)
         result = stack.approach(TARGET, DZ)
         phases["approached"] = sync()
         assert result["state"] == "enabled", result["stop_reason"]
         for _ in range(5):                        # acquisition stops once nothing reads vision
             stack.daemon.cycle_once()
-        frames = stack.camera.frames
+        frames = rendered(stack)
         for _ in range(20):
             stack.daemon.cycle_once()
         return {"q": stack.daemon.snapshot.measurement.q.copy(), "tool": stack.sim.plant.tool_pose(),
                 "goal": stack.true_goal(TARGET, DZ), "frames": frames - frames_before,
-                "idle_frames": stack.camera.frames - frames, "sync": stack.daemon.snapshot.measurement.sync_counter,
+                "idle_frames": rendered(stack) - frames, "sync": stack.daemon.snapshot.measurement.sync_counter,
                 "trigger": stack.frames.trigger(), "phases": phases}
     finally:
         stack.close()
