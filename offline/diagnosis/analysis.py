@@ -521,13 +521,15 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             rejected.append((fit, f"{text} (makes {', '.join(worse)} worse on the held-out rows by more than its "
                                   "noise: not accepted)"))
             continue
+        # a load is there if its amplitude, or its torque or slope over the travel, is known
         unknown = load_unknown(fit, quiet.q[:, fit.index]) if fit.channel == "tau" else None
-        if not fit.by_envelope and (uncertain(params, errs) if unknown is None else unknown):
+        if not fit.by_envelope and uncertain(params, errs) and unknown is not False:
             rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
             continue
-        if unknown is False and uncertain(params, errs):
+        at = load_at_centre(fit, quiet.q[:, fit.index]) if unknown is False and uncertain(params, errs) else None
+        if at is not None and abs(at[0]) > 2.0 * at[1]:
             # the load is there, its amplitude and angle are not pinned down: say what is known
-            text += stroke_load_text(load_at_centre(fit, quiet.q[:, fit.index]), quiet.q[:, fit.index])
+            text += stroke_load_text(at, quiet.q[:, fit.index])
         if not fit.by_envelope and not confirmed(ch.rms_before, ch.rms_after):
             rejected.append((fit, f"{text} (the re-simulation with it does not lower the held-out {name} RMS: "
                                   f"{ch.rms_before:.3g} -> {ch.rms_after:.3g}; not reported)"))
