@@ -114,6 +114,8 @@ def _centred(fit: ChannelFit, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, fl
     # torque c cos q - s sin q and its derivative -c sin q - s cos q, at the centre
     rotate = np.array([[np.cos(centre), -np.sin(centre)], [-np.sin(centre), -np.cos(centre)]])
     sd = fit.stderr[[i, k]]
+    if not (np.all(np.isfinite(sd)) and np.all(np.isfinite(fit.coef[[i, k]]))):
+        return None              # no error to judge by: the amplitude's own test decides
     cov = rotate @ (fit.correlation[np.ix_([i, k], [i, k])] * np.outer(sd, sd)) @ rotate.T
     return rotate @ fit.coef[[i, k]], np.sqrt(np.clip(np.diag(cov), 0.0, None)), centre
 
