@@ -30,12 +30,12 @@ from spacearm.offline.diagnosis.candidates import (FT_CANDIDATES, TORQUE_PAIRS, 
                                                    joint_candidates)
 from spacearm.offline.diagnosis.direct_sim import SimTraces, drive_settings, rated_joint_torque, simulate
 from spacearm.offline.diagnosis.fitting import ChannelFit, common_block, fit_candidate, fit_pair
-from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters
+from spacearm.offline.diagnosis.fit_parameters import apply_fits, describe, plant_parameters, stroke_load_text
 from spacearm.offline.diagnosis.gear_effects import GEAR_EFFECTS, envelope, fit_gear_effect
 from spacearm.offline.diagnosis.stiff_gear import chatters_more, fit_chattering_gear, fit_stiff_gear
 from spacearm.offline.diagnosis.stiff_gear import significant as stiff_significant
-from spacearm.offline.diagnosis.honesty import (confirmed, count_reversals, equally_good, moved,
-                                                stiction_unseparated, uncertain)
+from spacearm.offline.diagnosis.honesty import (confirmed, count_reversals, equally_good, load_at_centre,
+                                                load_unknown, moved, stiction_unseparated, uncertain)
 from spacearm.offline.diagnosis.joint_units import units_of
 from spacearm.offline.diagnosis.physical import parameter_violations
 from spacearm.offline.diagnosis.sensor_effects import SensorFinding, sensor_findings
@@ -521,9 +521,15 @@ def _findings(fits: list[ChannelFit], channels: list[ChannelResult], before: dic
             rejected.append((fit, f"{text} (makes {', '.join(worse)} worse on the held-out rows by more than its "
                                   "noise: not accepted)"))
             continue
-        if not fit.by_envelope and uncertain(params, errs):
+        # a load is there if its amplitude, or its torque or slope over the travel, is known
+        unknown = load_unknown(fit, quiet.q[:, fit.index]) if fit.channel == "tau" else None
+        if not fit.by_envelope and uncertain(params, errs) and unknown is not False:
             rejected.append((fit, f"{text} (standard error larger than half the value: not reported)"))
             continue
+        at = load_at_centre(fit, quiet.q[:, fit.index]) if unknown is False and uncertain(params, errs) else None
+        if at is not None and abs(at[0]) > 2.0 * at[1]:
+            # the load is there, its amplitude and angle are not pinned down: say what is known
+            text += stroke_load_text(at, quiet.q[:, fit.index])
         if not fit.by_envelope and not confirmed(ch.rms_before, ch.rms_after):
             rejected.append((fit, f"{text} (the re-simulation with it does not lower the held-out {name} RMS: "
                                   f"{ch.rms_before:.3g} -> {ch.rms_after:.3g}; not reported)"))

@@ -108,6 +108,15 @@ def describe(fit: ChannelFit, p: dict[str, float], e: dict[str, float], reversal
     return f"{where}: " + " and ".join(parts) + (" (+- : 95 % interval)" if e else "")
 
 
+def stroke_load_text(at: tuple[float, float, float], q: np.ndarray) -> str:
+    """What a load fit knows where its amplitude and angle are not pinned down (a short stroke):
+    its torque at the travel's centre, `at` = (torque, standard error, centre) in N m and rad."""
+    torque, err, centre = at
+    return (f"; over this stroke (q = {math.degrees(float(np.min(q))):.0f} .. {math.degrees(float(np.max(q))):.0f} "
+            f"deg) it is {torque:.3g} +- {CI95 * err:.2g} N m at q = {math.degrees(centre):.0f} deg, well known, while "
+            "its amplitude and angle are not: the stroke is too short to tell a constant from a slow cosine")
+
+
 GEAR_SIGNS = {"stiff gear": "the motor runs ahead of the link by the gear's deflection, a smooth torque term the "
                              "nominal model lacks",
               "spectrum": "the drive chatters against the resolver at other frequencies than the nominal model's "

@@ -48,6 +48,11 @@ class ChannelFit:
     n_train: int = 0
     n_params: int = 0
     judged_by: str = "samples"   # or "envelope", "breakaway": how its held-out figures were made
+    # the coefficients' correlation (least squares, from the design): None = taken as independent.
+    # A size that is a function of several coefficients (a load's amplitude from its cos and sin
+    # parts) needs it: over a short stroke those two trade off, their own errors are large, and
+    # the amplitude's can still be small
+    correlation: np.ndarray | None = field(repr=False, default=None)
 
     def bic_at(self, block: int) -> float:
         """BIC with a given block length. Candidates on one channel must be compared at one
@@ -132,9 +137,12 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     k = X.shape[1] + sum(1 for s in shape if not np.isnan(s))
     chi = max(sse0 - sse, 0.0) / sigma2 / block if np.isfinite(sse) else 0.0
     p = float(stats.chi2.sf(chi, k))
+    correlation = None
     try:
         cov = sigma2 * block * np.linalg.inv(X[train].T @ X[train])
         stderr = np.sqrt(np.clip(np.diag(cov), 0, None))
+        if np.all(np.isfinite(stderr) & (stderr > 0)):
+            correlation = cov / np.outer(stderr, stderr)
     except np.linalg.LinAlgError:
         stderr = np.full(X.shape[1], np.nan)
     if not fixed_gain and np.isfinite(sse):
@@ -143,7 +151,7 @@ def fit_features(effects: tuple[str, ...], channel: str, index: int, columns: tu
     before = float(np.sqrt(np.mean(y[held] ** 2))) if held.any() else 0.0
     after = float(np.sqrt(np.mean((y[held] - pred[held]) ** 2))) if held.any() else 0.0
     return ChannelFit(effects, channel, index, coef, stderr, columns, shape, sse, sse0, before, after, p,
-                      block, pred, n, k)
+                      block, pred, n, k, correlation=correlation)
 
 
 def _one_shape(X: np.ndarray) -> bool:
