@@ -5,28 +5,14 @@ frames (RPDOs of any length, NMT commands between them, unknown COB-IDs), the no
 (stopped, silent, behind a line gate) and a device reaction that raises."""
 from __future__ import annotations
 
-from contextlib import contextmanager
-
-import pytest
 from hypothesis import given, settings, strategies as st
 
 from spacearm.base.canopen import od
 from spacearm.firmware_sim import simcore
 from spacearm.firmware_sim.runner import Simulator
-
-needs_core = pytest.mark.skipif(simcore.core is None, reason="compiled core not built (no C compiler at install "
-                                                              "time) or SPACEARM_PURE_PYTHON=1: nothing to compare")
+from tests.firmware_sim.core_switch import core_switched, needs_core
 
 _SIMS: list[Simulator] = []
-
-
-@contextmanager
-def _core_switched(on: bool):
-    saved, simcore.core = simcore.core, simcore.core if on else None
-    try:
-        yield
-    finally:
-        simcore.core = saved
 
 
 def _simulator(sent: list) -> Simulator:
@@ -94,7 +80,7 @@ def test_a_burst_routed_in_the_core_is_routed_as_python_routes_it(frames, stoppe
                 def refuse(index, sub, data):
                     raise _Refusing(f"0x{index:04X}")
                 node.on_write = refuse
-        with _core_switched(use_core):
+        with core_switched(use_core):
             sim._route_frames(burst)
         for node in nodes:
             node.__dict__.pop("on_write", None)

@@ -5,28 +5,14 @@ states (stopped, silent, ignoring SYNC, dropping or shortening frames, behind a 
 mapped object missing from the store) over several SYNCs."""
 from __future__ import annotations
 
-from contextlib import contextmanager
-
-import pytest
 from hypothesis import given, settings, strategies as st
 
 from spacearm.base.canopen import od
 from spacearm.firmware_sim import simcore
 from spacearm.firmware_sim.runner import Simulator
-
-needs_core = pytest.mark.skipif(simcore.core is None, reason="compiled core not built (no C compiler at install "
-                                                              "time) or SPACEARM_PURE_PYTHON=1: nothing to compare")
+from tests.firmware_sim.core_switch import core_switched, needs_core
 
 _SIMS: list[Simulator] = []
-
-
-@contextmanager
-def _core_switched(on: bool):
-    saved, simcore.core = simcore.core, simcore.core if on else None
-    try:
-        yield
-    finally:
-        simcore.core = saved
 
 
 def _simulator(sent: list) -> Simulator:
@@ -65,7 +51,7 @@ def test_a_syncs_tpdos_from_the_core_are_the_python_tpdos(syncs, stopped, silent
     for use_core in (True, False):
         sent: list = []
         sim = _simulator(sent)
-        with _core_switched(use_core):
+        with core_switched(use_core):
             sim._on_sync()             # every node's tables and compiled rows made
             for i, node in enumerate(sim.nodes.values()):
                 if i in stopped:

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import random
-from contextlib import contextmanager
 
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -14,19 +13,7 @@ from hypothesis import given, settings, strategies as st
 from spacearm.firmware_sim import simcore
 from spacearm.firmware_sim.joint_drive import SERVO_CSP, SERVO_OFF
 from spacearm.firmware_sim.plant import JointModel, JointParams
-
-needs_core = pytest.mark.skipif(simcore.core is None, reason="compiled core not built (no C compiler at install "
-                                                              "time) or SPACEARM_PURE_PYTHON=1: nothing to compare")
-
-
-@contextmanager
-def _core_switched(on: bool):
-    """The core as built (on) or the pure-Python path (off) for what runs inside."""
-    saved, simcore.core = simcore.core, simcore.core if on else None
-    try:
-        yield
-    finally:
-        simcore.core = saved
+from tests.firmware_sim.core_switch import core_switched, needs_core
 
 
 class _Law:
@@ -212,7 +199,7 @@ def test_a_sync_begin_in_the_core_is_the_python_begin(state, cw, mode, own_mode,
                              (od.TARGET_POSITION, target if target % 2 else small_target),
                              (od.VELOCITY_OFFSET, velocity_offset)):
             drive.put(index, 0, value)
-        with _core_switched(use_core):
+        with core_switched(use_core):
             drive.on_sync_begin(0.02)
         after.append(repr({name: getattr(drive, name) for name in DRIVE_FIELDS}) + repr(drive.joint.max_motor_torque))
     assert after[0] == after[1]
@@ -239,7 +226,7 @@ def test_a_csp_sync_begin_in_operation_is_the_python_begin(cw, q_ref, delta, vel
         for index, value in ((od.CONTROLWORD, cw), (od.MODES_OF_OPERATION, od.MODE_CSP), (od.TORQUE_OFFSET, 100),
                              (od.TARGET_POSITION, round((q_ref + delta) * k)), (od.VELOCITY_OFFSET, velocity_offset)):
             drive.put(index, 0, value)
-        with _core_switched(use_core):
+        with core_switched(use_core):
             drive.on_sync_begin(0.02)
         after.append(repr({name: getattr(drive, name) for name in DRIVE_FIELDS}))
     assert after[0] == after[1]
@@ -268,7 +255,7 @@ def test_cyclic_writes_in_the_core_are_the_python_writes(operations):
         layout = CyclicObjects(drive, objects)
         epoch = drive._params.epoch       # the drive is reused: its epoch counts on from here
         trace = []
-        with _core_switched(use_core):
+        with core_switched(use_core):
             for op, arg in operations:
                 if op == "write":
                     try:
@@ -314,7 +301,7 @@ def test_rpdos_in_the_core_are_stored_as_python_stores_them(frames, modes):
         drive.param(od.TARGET_POSITION)
         counts = drive.stats.malformed, drive.stats.emcy_sent    # the drive is reused: counted from here
         trace = []
-        with _core_switched(use_core):
+        with core_switched(use_core):
             for n, (which, data) in enumerate(frames):
                 cob = cobs[which % len(cobs)]
                 at = _offset_of(drive, cob, od.MODES_OF_OPERATION)
@@ -351,7 +338,7 @@ def test_tpdos_from_the_core_are_the_python_tpdos(types, syncs, drop, corrupt, f
         drive.faults.drop_tx, drive.faults.corrupt_tx = drop, corrupt
         if forget:
             del drive.local.data_store[od.STATUSWORD][0]
-        with _core_switched(use_core):
+        with core_switched(use_core):
             for _ in range(syncs):
                 drive.send_tpdos()
         traces.append((sent, drive.stats.dropped_tx, drive.stats.corrupted_tx))
@@ -387,7 +374,7 @@ def test_a_sync_end_in_the_core_is_the_python_end(state, v_ref, ramp, brake_clos
         drive.brake_closing, drive.q_ref, drive.fe_time, drive.limit_active = brake_closing, q + error, fe_time, limit
         drive._qs_option = qs_option
         emcy = drive.stats.emcy_sent
-        with _core_switched(use_core):
+        with core_switched(use_core):
             drive.on_sync_end(0.02)
         after.append(repr(({name: getattr(drive, name) for name in DRIVE_FIELDS + ("brake_closing", "following_error")},
                            j.brake_engaged, sorted((i, sorted(v.items())) for i, v in drive.local.data_store.items()),
