@@ -427,25 +427,25 @@ def test_spacearm_stop_mid_jog_beside_two_cpu_bound_processes(stack, console_pri
     _judge(stack, "operator_stop", 1, since)
 
 
-def _with_the_controller_held(stack, inject) -> None:
-    """Inject a fault mid-jog with the lockstep daemon held (SIGSTOP). It runs as fast as the
-    nodes answer, ~50x real time: the ~8 s of controller time left in a full-speed jog pass in
+def _with_the_daemon_held(daemon: subprocess.Popen, act):
+    """act() with the lockstep daemon held (SIGSTOP), e.g. a fault injected mid-jog. It runs as
+    fast as the nodes answer, ~50x real time: the ~8 s of controller time left in a full-speed jog pass in
     ~0.2 s of wall time, and the fault-injection unit's two SDOs, on a loaded machine, took
     longer (CI at load 5-7: the jog was over and the joint at rest when the node fell silent,
     v_stop 0). Held, no SYNC goes out: the fault lands at the controller time the test chose,
     whatever the machine's speed, and nothing counts the pause (lockstep judges silence per
     SYNC; the drives' consumers here are patient)."""
-    os.kill(stack.daemon.pid, signal.SIGSTOP)
+    os.kill(daemon.pid, signal.SIGSTOP)
     try:
-        inject()
+        return act()
     finally:
-        os.kill(stack.daemon.pid, signal.SIGCONT)
+        os.kill(daemon.pid, signal.SIGCONT)
 
 
 def test_drive_fault_mid_jog_stops_on_the_drives_ramps(lockstep_stack):
     stack = lockstep_stack
     since = _full_speed_jog(stack, 4, 1.5)
-    _with_the_controller_held(stack, lambda: stack.rig.raise_fault("joint_4", 0x5441))
+    _with_the_daemon_held(stack.daemon, lambda: stack.rig.raise_fault("joint_4", 0x5441))
     _judge(stack, "emcy", 4, since, faulted=("joint_4",))
     assert stack.status()["joints"][3]["fault"]
 
@@ -455,7 +455,7 @@ def test_lost_node_mid_jog_stops_on_the_drives_quick_stop(lockstep_stack):
     sending TPDOs counts as alive, so a stopped heartbeat alone is no loss there)."""
     stack = lockstep_stack
     since = _full_speed_jog(stack, 1, 1.5)
-    _with_the_controller_held(stack, lambda: stack.rig.ignore_sync("ft_sensor", True))
+    _with_the_daemon_held(stack.daemon, lambda: stack.rig.ignore_sync("ft_sensor", True))
     try:
         # the jogging console stays alive (its keep-alive) until the loss is detected
         wait_for(lambda: stack.status()["state"] == "stopped", 10, "process data loss detected", poll=0.05)
@@ -533,11 +533,9 @@ def test_stop_during_bring_up_is_taken_and_no_joint_moves(lockstep_stack):
     stack.rig
     # read back with the lockstep daemon held: flat out it floods the bus, and at load 6 the
     # test's own SDO reads went unanswered three times in a row (CI, 2026-11-30)
-    os.kill(daemon.pid, signal.SIGSTOP)
-    try:
-        states = [(decode_statusword(_sdo_read(stack, f"joint_{i}", od.STATUSWORD)),
-                   _sdo_read(stack, f"joint_{i}", od.BRAKE_STATUS)) for i in range(1, 7)]
-    finally:
-        os.kill(daemon.pid, signal.SIGCONT)
+    def read_back():
+        return [(decode_statusword(_sdo_read(stack, f"joint_{i}", od.STATUSWORD)),
+                 _sdo_read(stack, f"joint_{i}", od.BRAKE_STATUS)) for i in range(1, 7)]
+    states = _with_the_daemon_held(daemon, read_back)
     for i, (state, brake) in enumerate(states, 1):
         assert state is not State.OPERATION_ENABLED and brake, (i, state)
