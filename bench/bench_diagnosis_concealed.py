@@ -14,6 +14,9 @@ diagnosis, score) is printed beside the diagnosis time.
 et al.'s Fourier-series excitation, the real Panda recording's motions, slow ramps,
 point-to-point moves); report those figures on a held-out seed (9001 and up), never tune on it.
 
+The timing row diagnoses one 60 s 7-joint recording of every trajectory family (old and new)
+and is judged on the slowest; --no-timing leaves it out.
+
 Run it on a second seed (--seed 7002) to see that the figures hold beyond the one case set.
 Shares are printed with their 95 % Wilson interval [low-high].
 
@@ -62,7 +65,7 @@ _spec.loader.exec_module(base)
 
 from spacearm.offline.diagnosis.analysis import diagnose  # noqa: E402
 from spacearm.offline.diagnosis.direct_sim import SimulationDiverged, simulate  # noqa: E402
-from spacearm.offline.diagnosis.honesty import one_way  # noqa: E402
+from spacearm.offline.diagnosis.honesty import one_way, single_speed  # noqa: E402
 from spacearm.offline.diagnosis.physical import parameter_violations  # noqa: E402
 from spacearm.offline.diagnosis.record import record_direct  # noqa: E402
 from spacearm.offline.diagnosis.recording_io import read_table, write_csv  # noqa: E402
@@ -583,9 +586,13 @@ def run_case(k: int, kind: str, n: int, traj_kind: str, traj: Trajectory, truths
         kind != "sensor" or sensor_visibility(before[truths[0]["channel"]][:, truths[0]["index"]],
                                               getattr(table, truths[0]["channel"])[:, truths[0]["index"]]) >= 2.0
     # the commanded motion cannot separate the friction laws (or a load from them) on a joint
-    # that moves one way only: there, naming the truth beside the first as equally good is the answer
-    s["one_way"] = any(one_way(np.gradient(traj.q[:, t["index"]], DT)) for t in truths
-                       if t["effect"] not in base.FT_EFFECTS)
+    # that moves one way only, nor Coulomb from viscous friction on a joint that moves at one
+    # speed (both ways: c sign(v) and b v are the same drag at |v| = c / b): there, naming the
+    # truth beside the first as equally good is the answer
+    commanded = [np.gradient(traj.q[:, t["index"]], DT) for t in truths if t["effect"] not in base.FT_EFFECTS]
+    s["one_way"] = any(one_way(v) for v in commanded)
+    s["one_speed"] = any(single_speed(v) is not None for v in commanded)
+    s["inseparable"] = s["one_way"] or s["one_speed"]
     s["rail"] = n == 7 and any(t["index"] == 0 and t["effect"] not in base.FT_EFFECTS for t in truths)
     if kind == "ambiguous":
         s.update(settle(result, truths[0], truth_plant, arm_nominal, table))
@@ -632,6 +639,32 @@ def pct(xs: list[bool]) -> str:
     n, k, z = len(xs), sum(xs), 1.96
     mid, half = (k + z * z / 2) / (n + z * z), z * math.sqrt(k * (n - k) / n + z * z / 4) / (n + z * z)
     return f"{k}/{n} = {100 * k / n:.0f} % [{100 * (mid - half):.0f}-{100 * (mid + half):.0f}]"
+
+
+TIMED_FAMILIES = ("chirp", "walk", "two_speeds", "ramp") + NEW_FAMILIES
+
+
+def time_every_family(seed: int, nominal: PlantConfig, work: Path) -> float:
+    """The issue's 60 s, 50 Hz, 7-joint recording end to end (read, replay, fit, report), once per
+    trajectory family: how long the diagnosis takes depends on what the joints did (a slow ramp
+    and a Fourier excitation differ by up to 10x), so one draw is no figure. Judged on the slowest.
+    Process CPU beside the wall time: on a shared machine the wall follows the load."""
+    rows, nominal7 = [], nominal_for(nominal, 7)
+    for k, family in enumerate(TIMED_FAMILIES):
+        _, traj = trajectory(np.random.default_rng(seed + 1 + k), 7, 60.0, (family,))
+        table = record_direct(with_joints(nominal, 7, 5), traj, None, hold_cycles=0)
+        path = work / f"timing_{family}.csv"
+        write_csv(path, table)
+        wall, cpu = time.perf_counter(), time.process_time()
+        write_report(diagnose(read_table(path), nominal7), work / f"timing_{family}", path.name, nominal7)
+        rows.append((family, time.perf_counter() - wall, time.process_time() - cpu, os.getloadavg()[0]))
+    for family, wall, cpu, load in rows:
+        print(f"| 60 s, 50 Hz, 7-joint recording end to end (read, replay, fit, report), {family} | "
+              f"{wall:.1f} s (CPU {cpu:.1f} s, load {load:.1f}) | <= 10 s |")
+    walls = [r[1] for r in rows]
+    print(f"| ... every family: median / slowest ({max(rows, key=lambda r: r[1])[0]}) | "
+          f"{np.median(walls):.1f} / {max(walls):.1f} s | slowest <= 10 s |")
+    return float(max(walls))
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -724,9 +757,11 @@ def main(argv: list[str] | None = None) -> dict:
     print("| figure | measured | target |")
     print("| --- | --- | --- |")
     single = [s for s in one if s not in stribeck and s["visible"]]
-    print(f"| named and located first, single catalogue effects >= 2x noise (not Stribeck); on one-way motion "
-          f"named first or beside the first as equally good | "
-          f"{pct([s['named_or_equal'] if s['one_way'] else s['named'] for s in single])} | >= 95 % |")
+    print(f"| named and located first, single catalogue effects >= 2x noise (not Stribeck); on one-way or "
+          f"one-speed motion named first or beside the first as equally good | "
+          f"{pct([s['named_or_equal'] if s['inseparable'] else s['named'] for s in single])} | >= 95 % |")
+    print(f"| ... the same, beside the first on one-way motion only (the rule before 2026-11-30) | "
+          f"{pct([s['named_or_equal'] if s['one_way'] else s['named'] for s in single])} | - |")
     print(f"| ... the same, named first only (strict) | {pct([s['named'] for s in single])} | - |")
     seed_range = f"held-out (>= {HELD_OUT}): reported figures only, never tuned on" if args.seed >= HELD_OUT \
         else f"development (< {HELD_OUT})"
@@ -741,13 +776,16 @@ def main(argv: list[str] | None = None) -> dict:
     print(f"| physically impossible findings (negative friction, mass, stiffness) | {impossible} | 0 |")
     print(f"| trajectory families | {args.families}: "
           f"{', '.join(sorted(set(families)))} | - |")
-    print(f"| ... the same, on motion both ways only | {pct([s['named'] for s in single if not s['one_way']])} | - |")
+    print(f"| ... the same, on motion both ways at more than one speed only | "
+          f"{pct([s['named'] for s in single if not s['inseparable']])} | - |")
     print(f"| Stribeck named and located first, >= 2x noise | {pct([s['named'] for s in stribeck if s['visible']])} "
           "| >= 80 % |")
     print(f"| Stribeck named and located first, all drawn (3-8 N m, brief at starts) | "
           f"{pct([s['named'] for s in stribeck])} | - |")
-    print(f"| two effects both named first (one-way motion: or beside as equally good), >= 2x noise | "
-          f"{pct([s['named_or_equal'] if s['one_way'] else s['named'] for s in two if s['visible']])} | >= 85 % |")
+    print(f"| two effects both named first (one-way or one-speed motion: or beside as equally good), >= 2x noise | "
+          f"{pct([s['named_or_equal'] if s['inseparable'] else s['named'] for s in two if s['visible']])} | >= 85 % |")
+    print(f"| ... the same, beside the first on one-way motion only (the rule before 2026-11-30) | "
+          f"{pct([s['named_or_equal'] if s['one_way'] else s['named'] for s in two if s['visible']])} | - |")
     print(f"| effects below 2x noise (not scored above), named anyway | {pct([s['named'] for s in hidden])} | - |")
     print(f"| single effects not named first but named as equally good beside it (one speed / one way) | "
           f"{sum(s['ambiguous'] for s in one)} of {len(one)} | - |")
@@ -779,7 +817,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"| diagnosis time per {args.duration:.0f} s recording, median | {np.median(times):.1f} s | - |")
         print(f"| whole case (recording, reference replays, diagnosis, score), median / mean / max, {args.jobs} "
               f"worker(s) | {np.median(spent):.1f} / {np.mean(spent):.1f} / {np.max(spent):.1f} s | - |")
-    answered = lambda s: s["named_or_equal"] if s.get("one_way") and "named_or_equal" in s else s["named"]
+    answered = lambda s: s["named_or_equal"] if s.get("inseparable") and "named_or_equal" in s else s["named"]
     misses = [s for s in scores if (s["kind"] not in ("none", "ambiguous") and not answered(s) and s["visible"])
               or (s["kind"] == "ambiguous" and not s["settled"])
               or (s["kind"] == "none" and s["alarm"])]
@@ -836,18 +874,7 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"| false alarms on effect-free recordings made in real time (CAN, daemon realtime clock) | "
               f"{pct(alarms)} | <= 2 % |")
     if not args.no_timing:
-        _, traj = trajectory(np.random.default_rng(args.seed + 1), 7, 60.0)
-        table = record_direct(with_joints(nominal, 7, 5), traj, None, hold_cycles=0)
-        path = work / "timing.csv"
-        write_csv(path, table)
-        runs, nominal7 = [], nominal_for(nominal, 7)
-        for _ in range(3):
-            t1 = time.perf_counter()
-            write_report(diagnose(read_table(path), nominal7), work / "timing", path.name, nominal7)
-            runs.append(time.perf_counter() - t1)
-        print(f"| 60 s, 50 Hz, 7-joint recording end to end (read, replay, fit, report), median of 3 | "
-              f"{np.median(runs):.1f} s | <= 10 s |")
-        out["timing_s"] = float(np.median(runs))
+        out["timing_s"] = time_every_family(args.seed, nominal, work)
     return out
 
 
