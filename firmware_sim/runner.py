@@ -501,8 +501,9 @@ class Simulator:
     def _heartbeat_loop(self) -> None:
         """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
         and SDO server timeouts. It sleeps until the earliest heartbeat or event timer is due
-        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts) instead of
-        polling, so it takes the GIL a few times per heartbeat period, not 500 times a second.
+        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts;
+        TIMER_MAX_SLEEP_SYNC on the SYNC time base) instead of polling, so it takes the GIL a
+        few times per heartbeat period, not 500 times a second.
 
         Starvation: when this thread wakes more than STARVED_SLACK after it meant to (the host
         or this process's other threads held the CPU), the excess was time nobody here could
@@ -510,6 +511,11 @@ class Simulator:
         excuse_consumers, at most half the consumer timeout per silence), so a starved
         simulator does not fault its drives for a controller that was alive. A controller
         that really stopped is still caught: every unstarved scheduler pass counts in full."""
+        # On the SYNC time base consumers are judged at the SYNCs: what is left on this clock
+        # (SDO server timeouts of 1 s; heartbeats, event timers and reports wake it when due)
+        # needs no 10 ms resolution, and each pass beside lockstep cycles takes the GIL from
+        # the cycle thread (issue 35: ~100 passes a second, 0.3-0.5 ms of CPU each)
+        max_sleep = TIMER_MAX_SLEEP_SYNC if self.sync_time_base else TIMER_MAX_SLEEP
         due = time.monotonic()
         while not self._stop.is_set():
             now, cpu_at_start = time.monotonic(), time.thread_time()
@@ -522,7 +528,7 @@ class Simulator:
                     if node.consumer_last:
                         node.excuse_consumers(excess)
             # a starved pass sends what is due but judges no consumer: the next pass does, soon
-            wake = now + (TIMER_MIN_SLEEP * 6 if starved else TIMER_MAX_SLEEP)
+            wake = now + (TIMER_MIN_SLEEP * 6 if starved else max_sleep)
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
@@ -599,6 +605,7 @@ class Simulator:
 # The timer scheduler's sleep bounds: consumer and SDO timeouts are checked at least every
 # TIMER_MAX_SLEEP; a wake later than STARVED_SLACK past its due time counts as starvation.
 TIMER_MAX_SLEEP = 0.010   # s
+TIMER_MAX_SLEEP_SYNC = 0.050   # s: the same on the SYNC time base (SDO timeouts only: 5 % of 1 s)
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
 TIMER_DUTY_SLEEP = 2.0    # sleep >= 2x the pass's CPU: the timer takes at most a third of a core
