@@ -632,6 +632,14 @@ class Plant:
     def ft_reading(self) -> list[float]:
         """What the F/T sensor measures: the wrench plus (optional) bias and noise."""
         ft = self.config.ft
+        ideal = self.__dict__.get("_ideal_ft")
+        if ideal is None or ideal[0] is not ft:      # frozen: judged once per configuration
+            ideal = self._ideal_ft = (ft, _ideal_ft(ft))
+        if ideal[1] and self.time - self.time == 0.0:
+            # an ideal sensor (every SYNC of most plants): w * 1.0 + 0.0 + 0.0 * t + 0.0 * delta
+            # below is w + 0.0 to the bit while t (and with it the delta) is finite, and no
+            # noise draws from the random generator
+            return [w + 0.0 for w in self.wrench]
         rng = getattr(self, "_rng", random)
         reading = ft_sensor_error(self.wrench, self.time, self.config.temperature.delta(self.time), ft.bias,
                                   ft.drift, ft.scale_error, ft.temp_coefficient)
@@ -643,6 +651,13 @@ class Plant:
 
 
 GRAVITY = 9.81
+
+
+def _ideal_ft(ft: FtParams) -> bool:
+    """No noise, and every error term +0.0 (a -0.0 would keep a reading's -0.0 sign)."""
+    terms = ft.bias + ft.drift + ft.scale_error + ft.temp_coefficient
+    return not ft.noise_force > 0.0 and not ft.noise_torque > 0.0 \
+        and all(x == 0.0 and math.copysign(1.0, x) == 1.0 for x in terms)
 
 
 def _rigid_body_dynamics(config: PlantConfig, n_joints: int):
