@@ -33,6 +33,25 @@ from spacearm.firmware_sim.plant import Plant, PlantConfig, load_plant_config
 logger = logging.getLogger(__name__)
 
 
+_HEARTBEAT_KEY = (od.PRODUCER_HEARTBEAT, 0)      # param()'s cache key of 1017h
+
+
+def _consumers_quiet(node: SimNode, consumed: dict, now: float) -> bool:
+    """True when node.check_consumers(now) would do nothing: its consumer entries are cached
+    and current, and every consumed heartbeat is known and within its timeout. Asked for
+    every node at every SYNC on the SYNC time base, where nothing times out nearly always
+    (issue 35: a call, a copy of the dict and a loop per node and SYNC)."""
+    cached = node._consumer_entries
+    if cached is None or cached[2] != node._params.epoch:
+        return False
+    entries = cached[0]
+    for producer, last in consumed.items():
+        timeout = entries.get(producer)
+        if timeout is None or now - last > timeout:
+            return False
+    return True
+
+
 def _never_rpdo(cid: int) -> bool:
     """COB-IDs _rebuild_routes never routes to an RPDO (NMT, SDO requests, heartbeats): a frame
     of these needs no fresh routes."""
@@ -486,9 +505,12 @@ class Simulator:
         for node in nodes:
             if node.nmt_state == od.NMT_STATE_BOOTUP or node.faults.silent:
                 continue
-            if node.consumer_last:
+            consumed = node.consumer_last
+            if consumed and not _consumers_quiet(node, consumed, now):
                 node.check_consumers(now)
-            period = node.heartbeat_period()
+            # heartbeat_period() with param()'s cached value inline: every node, every SYNC
+            period = node._params.get(_HEARTBEAT_KEY)
+            period = (node.param(od.PRODUCER_HEARTBEAT) if period is None else period) / 1000.0
             if period <= 0.0:
                 continue
             due = self._next_sync_heartbeat.setdefault(node.node_id, now + period)
