@@ -357,7 +357,9 @@ class JointModel:
         servo = self.period_servo
         if simcore.core is not None and servo is not None and servo[0] is self.controller:
             law = servo[1]()
-            constants = self._core_constants()
+            key = self._core_key     # _core_constants' usual answer inline, as in _core_period
+            constants = self._core_values if key is not None and key[0] is self.params \
+                and key[1] == self.max_motor_torque and key[2] == self.load_amplitude else self._core_constants()
             if law is not None and law[0] == simcore.SERVO_OFF and constants[1] > 0.0 and constants[2] > 0.0 \
                     and self._core_period(fractions, h, law):
                 return
