@@ -177,7 +177,12 @@ class Simulator:
             logger.warning("simulator: node ID %d is a device of the bus config; no timing reports", diag_node_id)
             diag_node_id = None
         self.diag_node_id = diag_node_id
-        self.lateness = peer_timing.LatenessMeter()
+        # What a late wake waited for (the process's threads' /proc schedstat, the host's steal)
+        # explains a real-time simulator's lateness; beside a lockstep controller nothing waits
+        # for this timer, and each of those reads hands the GIL back and forth with the cycle
+        # thread (issue 35: half the timer's CPU beside lockstep cycles). Counts and the worst
+        # lateness are still reported.
+        self.lateness = peer_timing.LatenessMeter(measure_causes=not self.sync_time_base)
         self.cpu_samples: list[float] | None = None   # set to [] to record the CPU s of every SYNC (benchmarks)
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None

@@ -100,3 +100,10 @@ def test_on_the_sync_time_base_a_cheap_pass_sleeps_longer(monkeypatch):
     assert max(sleeps) <= runner.TIMER_MAX_SLEEP_SYNC + 1e-9, sleeps
     assert min(sleeps[1:]) > runner.TIMER_MAX_SLEEP, sleeps
     assert runner.TIMER_MAX_SLEEP_SYNC <= 0.1 * SERVER_TIMEOUT
+
+
+def test_only_a_wall_clock_simulator_measures_what_its_late_wakes_waited_for():
+    """The causes (every thread's /proc schedstat, the host's steal) explain a real-time
+    simulator's lateness; beside a lockstep controller the reads only take the GIL from the cycle."""
+    assert Simulator("virtual:timer-causes-wall").lateness.measure_causes
+    assert not Simulator("virtual:timer-causes-sync", time_base="sync").lateness.measure_causes
