@@ -6,10 +6,11 @@ from __future__ import annotations
 import math
 import struct
 
+import numpy as np
 from hypothesis import given, settings, strategies as st
 
 from spacearm.base.canopen import od
-from spacearm.firmware_sim.effects import ft_sensor_error
+from spacearm.firmware_sim.effects import TemperatureProfile, ft_sensor_error
 from spacearm.firmware_sim.plant import FtParams, Plant, PlantConfig
 from spacearm.firmware_sim.runner import Simulator
 
@@ -32,11 +33,16 @@ def _general_reading(plant: Plant) -> list[float]:
 
 @settings(max_examples=200, deadline=None)
 @given(st.lists(st.one_of(_FLOATS, st.just(math.inf), st.just(-math.inf)), min_size=6, max_size=6),
-       st.floats(0.0, 1e6), st.sampled_from([0.0, -0.0]))
-def test_an_ideal_sensor_reads_the_general_formula_to_the_bit(wrench, t, zero):
-    plant = Plant.create(6, PlantConfig(ft=FtParams(bias=(zero,) * 6, drift=(zero,) * 6)))
-    plant.wrench, plant.time = list(wrench), t
-    assert _bits(plant.ft_reading()) == _bits(_general_reading(plant))
+       st.floats(0.0, 1e6), st.sampled_from([0.0, -0.0]), st.booleans(), st.booleans())
+def test_an_ideal_sensor_reads_the_general_formula_to_the_bit(wrench, t, zero, numpy_wrench, warming):
+    """Bits and types (a contact world's wrench holds numpy scalars), with the temperature
+    constant or changing over the run."""
+    temperature = TemperatureProfile(points=((0.0, 20.0), (600.0, 35.0))) if warming else TemperatureProfile()
+    plant = Plant.create(6, PlantConfig(ft=FtParams(bias=(zero,) * 6, drift=(zero,) * 6), temperature=temperature))
+    plant.wrench, plant.time = [np.float64(w) for w in wrench] if numpy_wrench else list(wrench), t
+    reading, general = plant.ft_reading(), _general_reading(plant)
+    assert _bits(reading) == _bits(general)
+    assert [type(w) for w in reading] == [type(w) for w in general]
 
 
 def _loop_sample(raw, bias, kf, kt, flim, tlim) -> tuple[list[int], bool]:
