@@ -27,6 +27,18 @@ class FtSensorNode(SimNode):
         self.last_rpdo_tare = 0
         self._sample()
 
+    _scaling = (-1, (), ())
+
+    def _read_scaling(self) -> tuple:
+        """(param() cache epoch, counts per unit and overload limit of each axis): param()'s
+        values, read again whenever the cache dropped one."""
+        kf = self.param(od.FT_FORCE_COUNTS_PER_N)
+        kt = self.param(od.FT_TORQUE_COUNTS_PER_NM)
+        flim = self.param(od.FT_OVERLOAD_LIMIT, 1)
+        tlim = self.param(od.FT_OVERLOAD_LIMIT, 2)
+        self._scaling = (self._params.epoch, (kf,) * 3 + (kt,) * 3, (flim,) * 3 + (tlim,) * 3)
+        return self._scaling
+
     WRITE_REACTIONS = frozenset({od.FT_TARE})     # the only object on_write looks at
 
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
@@ -51,19 +63,20 @@ class FtSensorNode(SimNode):
         elif self.pending_tare == 2:
             self.bias, self.tared = [0.0] * 6, False
         self.pending_tare = None
-        kf = self.param(od.FT_FORCE_COUNTS_PER_N)
-        kt = self.param(od.FT_TORQUE_COUNTS_PER_NM)
-        flim = self.param(od.FT_OVERLOAD_LIMIT, 1)
-        tlim = self.param(od.FT_OVERLOAD_LIMIT, 2)
-        overload = False
-        values = []
-        for i, value in enumerate(raw):
-            value -= self.bias[i]
-            scale, limit = (kf, flim) if i < 3 else (kt, tlim)
-            counts = round(value * scale)
-            if abs(value) > limit or not -32768 <= counts <= 32767:
-                overload = True
-            values.append(max(-32768, min(32767, counts)))
+        scaling = self._scaling
+        if scaling[0] != self._params.epoch:
+            scaling = self._read_scaling()
+        _, scales, limits = scaling
+        # per axis as a loop over i would: value = raw - bias, its counts, overload when above
+        # the axis' limit or beyond INTEGER16 (saturated); the lists each in one pass
+        # (issue 35: the sample was a tenth of the simulator's SYNC)
+        errors = [value - bias for value, bias in zip(raw, self.bias)]
+        values = [round(value * scale) for value, scale in zip(errors, scales)]
+        overload = max(values) > 32767 or min(values) < -32768
+        if overload:
+            values = [max(-32768, min(32767, counts)) for counts in values]
+        elif any(abs(value) > limit for value, limit in zip(errors, limits)):
+            overload = True
         if overload and not self.overload:
             self.emcy(od.EMCY_FT_OVERLOAD, od.ERR_REG_MANUFACTURER)
         elif self.overload and not overload:

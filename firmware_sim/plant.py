@@ -357,7 +357,9 @@ class JointModel:
         servo = self.period_servo
         if simcore.core is not None and servo is not None and servo[0] is self.controller:
             law = servo[1]()
-            constants = self._core_constants()
+            key = self._core_key     # _core_constants' usual answer inline, as in _core_period
+            constants = self._core_values if key is not None and key[0] is self.params \
+                and key[1] == self.max_motor_torque and key[2] == self.load_amplitude else self._core_constants()
             if law is not None and law[0] == simcore.SERVO_OFF and constants[1] > 0.0 and constants[2] > 0.0 \
                     and self._core_period(fractions, h, law):
                 return
@@ -632,6 +634,14 @@ class Plant:
     def ft_reading(self) -> list[float]:
         """What the F/T sensor measures: the wrench plus (optional) bias and noise."""
         ft = self.config.ft
+        ideal = self.__dict__.get("_ideal_ft")
+        if ideal is None or ideal[0] is not ft:      # frozen: judged once per configuration
+            ideal = self._ideal_ft = (ft, _ideal_ft(ft))
+        if ideal[1] and self.time - self.time == 0.0:
+            # an ideal sensor (every SYNC of most plants): w * 1.0 + 0.0 + 0.0 * t + 0.0 * delta
+            # below is w + 0.0 to the bit while t (and with it the delta) is finite, and no
+            # noise draws from the random generator
+            return [w + 0.0 for w in self.wrench]
         rng = getattr(self, "_rng", random)
         reading = ft_sensor_error(self.wrench, self.time, self.config.temperature.delta(self.time), ft.bias,
                                   ft.drift, ft.scale_error, ft.temp_coefficient)
@@ -643,6 +653,13 @@ class Plant:
 
 
 GRAVITY = 9.81
+
+
+def _ideal_ft(ft: FtParams) -> bool:
+    """No noise, and every error term +0.0 (a -0.0 would keep a reading's -0.0 sign)."""
+    terms = ft.bias + ft.drift + ft.scale_error + ft.temp_coefficient
+    return not ft.noise_force > 0.0 and not ft.noise_torque > 0.0 \
+        and all(x == 0.0 and math.copysign(1.0, x) == 1.0 for x in terms)
 
 
 def _rigid_body_dynamics(config: PlantConfig, n_joints: int):

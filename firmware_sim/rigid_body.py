@@ -111,7 +111,8 @@ class ArmDynamics:
         False, nothing changed: a joint is free or elastic."""
         joints = plant.joints
         for joint in joints:
-            if not (joint.brake_engaged or joint.stalled) or joint.two_mass:
+            p = joint.params      # two_mass inline: every joint, every SYNC of a resting arm
+            if not (joint.brake_engaged or joint.stalled) or p.joint_stiffness > 0.0 or p.backlash > 0.0:
                 return False
         for joint in joints:
             joint.held_period(fractions, h)

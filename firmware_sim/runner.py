@@ -33,6 +33,25 @@ from spacearm.firmware_sim.plant import Plant, PlantConfig, load_plant_config
 logger = logging.getLogger(__name__)
 
 
+_HEARTBEAT_KEY = (od.PRODUCER_HEARTBEAT, 0)      # param()'s cache key of 1017h
+
+
+def _consumers_quiet(node: SimNode, consumed: dict, now: float) -> bool:
+    """True when node.check_consumers(now) would do nothing: its consumer entries are cached
+    and current, and every consumed heartbeat is known and within its timeout. Asked for
+    every node at every SYNC on the SYNC time base, where nothing times out nearly always
+    (issue 35: a call, a copy of the dict and a loop per node and SYNC)."""
+    cached = node._consumer_entries
+    if cached is None or cached[2] != node._params.epoch:
+        return False
+    entries = cached[0]
+    for producer, last in consumed.items():
+        timeout = entries.get(producer)
+        if timeout is None or now - last > timeout:
+            return False
+    return True
+
+
 def _never_rpdo(cid: int) -> bool:
     """COB-IDs _rebuild_routes never routes to an RPDO (NMT, SDO requests, heartbeats): a frame
     of these needs no fresh routes."""
@@ -158,7 +177,12 @@ class Simulator:
             logger.warning("simulator: node ID %d is a device of the bus config; no timing reports", diag_node_id)
             diag_node_id = None
         self.diag_node_id = diag_node_id
-        self.lateness = peer_timing.LatenessMeter()
+        # What a late wake waited for (the process's threads' /proc schedstat, the host's steal)
+        # explains a real-time simulator's lateness; beside a lockstep controller nothing waits
+        # for this timer, and each of those reads hands the GIL back and forth with the cycle
+        # thread (issue 35: half the timer's CPU beside lockstep cycles). Counts and the worst
+        # lateness are still reported.
+        self.lateness = peer_timing.LatenessMeter(measure_causes=not self.sync_time_base)
         self.cpu_samples: list[float] | None = None   # set to [] to record the CPU s of every SYNC (benchmarks)
         self.bus: can.BusABC | None = None
         self._notifier: can.Notifier | None = None
@@ -486,9 +510,12 @@ class Simulator:
         for node in nodes:
             if node.nmt_state == od.NMT_STATE_BOOTUP or node.faults.silent:
                 continue
-            if node.consumer_last:
+            consumed = node.consumer_last
+            if consumed and not _consumers_quiet(node, consumed, now):
                 node.check_consumers(now)
-            period = node.heartbeat_period()
+            # heartbeat_period() with param()'s cached value inline: every node, every SYNC
+            period = node._params.get(_HEARTBEAT_KEY)
+            period = (node.param(od.PRODUCER_HEARTBEAT) if period is None else period) / 1000.0
             if period <= 0.0:
                 continue
             due = self._next_sync_heartbeat.setdefault(node.node_id, now + period)
@@ -501,8 +528,9 @@ class Simulator:
     def _heartbeat_loop(self) -> None:
         """The nodes' one timer scheduler: heartbeats, event-timer TPDOs, heartbeat consumers
         and SDO server timeouts. It sleeps until the earliest heartbeat or event timer is due
-        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts) instead of
-        polling, so it takes the GIL a few times per heartbeat period, not 500 times a second.
+        (at most TIMER_MAX_SLEEP, the resolution of consumer and SDO timeouts;
+        TIMER_MAX_SLEEP_SYNC on the SYNC time base) instead of polling, so it takes the GIL a
+        few times per heartbeat period, not 500 times a second.
 
         Starvation: when this thread wakes more than STARVED_SLACK after it meant to (the host
         or this process's other threads held the CPU), the excess was time nobody here could
@@ -510,6 +538,11 @@ class Simulator:
         excuse_consumers, at most half the consumer timeout per silence), so a starved
         simulator does not fault its drives for a controller that was alive. A controller
         that really stopped is still caught: every unstarved scheduler pass counts in full."""
+        # On the SYNC time base consumers are judged at the SYNCs: what is left on this clock
+        # (SDO server timeouts of 1 s; heartbeats, event timers and reports wake it when due)
+        # needs no 10 ms resolution, and each pass beside lockstep cycles takes the GIL from
+        # the cycle thread (issue 35: ~100 passes a second, 0.3-0.5 ms of CPU each)
+        max_sleep = TIMER_MAX_SLEEP_SYNC if self.sync_time_base else TIMER_MAX_SLEEP
         due = time.monotonic()
         while not self._stop.is_set():
             now, cpu_at_start = time.monotonic(), time.thread_time()
@@ -522,7 +555,7 @@ class Simulator:
                     if node.consumer_last:
                         node.excuse_consumers(excess)
             # a starved pass sends what is due but judges no consumer: the next pass does, soon
-            wake = now + (TIMER_MIN_SLEEP * 6 if starved else TIMER_MAX_SLEEP)
+            wake = now + (TIMER_MIN_SLEEP * 6 if starved else max_sleep)
             for node in list(self.nodes.values()):
                 if not node.powered or node.nmt_state == od.NMT_STATE_BOOTUP:
                     continue
@@ -599,6 +632,7 @@ class Simulator:
 # The timer scheduler's sleep bounds: consumer and SDO timeouts are checked at least every
 # TIMER_MAX_SLEEP; a wake later than STARVED_SLACK past its due time counts as starvation.
 TIMER_MAX_SLEEP = 0.010   # s
+TIMER_MAX_SLEEP_SYNC = 0.050   # s: the same on the SYNC time base (SDO timeouts only: 5 % of 1 s)
 TIMER_MIN_SLEEP = 0.0005  # s
 STARVED_SLACK = 0.020     # s
 TIMER_DUTY_SLEEP = 2.0    # sleep >= 2x the pass's CPU: the timer takes at most a third of a core

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 
 from spacearm.firmware_sim import runner
 from spacearm.firmware_sim.runner import TIMER_DUTY_SLEEP, Simulator
+from spacearm.firmware_sim.sdo_session import SERVER_TIMEOUT
 
 
 class _Clock:
@@ -59,11 +60,12 @@ class _Stop:
         return self.is_set()
 
 
-def _sleeps(monkeypatch, pass_cost: float, busy: bool = True) -> list[float]:
+def _sleeps(monkeypatch, pass_cost: float, busy: bool = True, time_base: str = "wall") -> list[float]:
     clock = _Clock()
     # the runner's own view of time only (patching time.monotonic would fool every thread)
     monkeypatch.setattr(runner, "time", SimpleNamespace(monotonic=clock.monotonic, thread_time=clock.thread_time))
-    sim = Simulator("virtual:timer-duty", diag_node_id=runner.peer_timing.SIMULATOR_DIAG_NODE)   # not started
+    sim = Simulator("virtual:timer-duty", diag_node_id=runner.peer_timing.SIMULATOR_DIAG_NODE,
+                    time_base=time_base)   # not started
     sim.lateness = _SlowLateness(clock, pass_cost, busy)
     sim._stop = _Stop(clock, 20)
     sim._heartbeat_loop()
@@ -88,3 +90,20 @@ def test_a_pass_that_waited_without_the_cpu_catches_up_at_once(monkeypatch):
     that would only delay the heartbeats further."""
     sleeps = _sleeps(monkeypatch, 3 * runner.TIMER_MAX_SLEEP, busy=False)
     assert max(sleeps) <= runner.TIMER_MAX_SLEEP + 1e-9, sleeps
+
+
+def test_on_the_sync_time_base_a_cheap_pass_sleeps_longer(monkeypatch):
+    """Beside a lockstep controller consumers are judged at the SYNCs: the timer wakes for the
+    SDO server timeouts (1 s) at most every TIMER_MAX_SLEEP_SYNC, not every 10 ms (each pass
+    takes the GIL from the cycle thread)."""
+    sleeps = _sleeps(monkeypatch, 0.0002, time_base="sync")
+    assert max(sleeps) <= runner.TIMER_MAX_SLEEP_SYNC + 1e-9, sleeps
+    assert min(sleeps[1:]) > runner.TIMER_MAX_SLEEP, sleeps
+    assert runner.TIMER_MAX_SLEEP_SYNC <= 0.1 * SERVER_TIMEOUT
+
+
+def test_only_a_wall_clock_simulator_measures_what_its_late_wakes_waited_for():
+    """The causes (every thread's /proc schedstat, the host's steal) explain a real-time
+    simulator's lateness; beside a lockstep controller the reads only take the GIL from the cycle."""
+    assert Simulator("virtual:timer-causes-wall").lateness.measure_causes
+    assert not Simulator("virtual:timer-causes-sync", time_base="sync").lateness.measure_causes
