@@ -60,9 +60,15 @@ class CyclicIO:
             self._note_answers(expected)
             self._sync += 1
             if self.controller_period is not None:
+                # the set is worked out again only where the health check changed a node (it
+                # clears _expected whenever it declares one lost; under the lock nothing else
+                # runs meanwhile): the same set, one pass over the nodes a cycle less (issue 35)
+                self._expected = expected
                 self._lockstep_health(time.monotonic())
+                if self._expected is None:
+                    expected = self._expected_tpdos()
             self._received = set()
-            self._expected = self._expected_tpdos()
+            self._expected = expected
             self.stats.expected_tpdos += len(self._expected)
         if self.controller_period is not None:
             self._send_lockstep_heartbeat()
@@ -226,9 +232,11 @@ class CyclicIO:
         with self._lock:
             return self._expected_tpdos() <= self._received
 
-    def read(self, complete: bool | None = None) -> ArmState:
+    def read(self, complete: bool | None = None, nodes: bool = True) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
-        tpdos_complete(): whether they all belong to the last SYNC."""
+        tpdos_complete(): whether they all belong to the last SYNC. ``nodes=False`` leaves
+        ArmState.nodes empty, for a caller that reads the nodes' health only when data is
+        missing (the daemon's cycle: a snapshot per node every cycle it never looked at)."""
         with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
@@ -237,7 +245,7 @@ class CyclicIO:
                 joints=[j.state() for j in self.joints],
                 end_effector=self.end_effector.state() if self.end_effector else None,
                 ft=self.ft.state() if self.ft else None,
-                nodes={n: h.snapshot() for n, h in self.health.items()})
+                nodes={n: h.snapshot() for n, h in self.health.items()} if nodes else {})
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
               timeout: float | None = None) -> ArmState:

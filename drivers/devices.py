@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from operator import itemgetter
 
 import canopen
 
@@ -214,6 +215,11 @@ class JointDriver(DeviceDriver):
         s = self.settings
         self._temperature = _mapped_ref(s.temperature_object, mapped)
         self._brake = _mapped_ref(s.brake_object, mapped)
+        # state()'s objects read in one call once the drive reported them all (a lookup per
+        # object and joint was ~60 dict.get a cycle, issue 35), the optional ones last; None
+        # where the layout leaves one out (state() would fail over to the lookups every cycle)
+        self._reported = (itemgetter(*_STATE_KEYS, *(key for key in (self._temperature, self._brake) if key))
+                          if mapped.issuperset(_STATE_KEYS) else None)
 
     def set_mode(self, mode: int) -> None:
         """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
@@ -299,14 +305,43 @@ class JointDriver(DeviceDriver):
         rpdo[_TORQUE_OFFSET] = torque if -32768 <= torque <= 32767 else -32768 if torque < 0 else 32767
 
     def state(self) -> JointState:
+        if self._reported is None:
+            return self._state_of_defaults()
+        try:
+            reported = self._reported(self.values)
+        except KeyError:        # before the first TPDOs: one by one, at their defaults
+            return self._state_of_defaults()
+        statusword = reported[0]
+        state = _STATES.get(statusword)
+        if state is None:
+            state = _STATES[statusword] = decode_statusword(statusword)
+        k = self.k
+        # every joint every cycle: the fields in JointState's order, without its __init__'s
+        # keyword handling (issue 35: half the cost of a state); _STATE_KEYS' order, then the
+        # optional objects: the temperature, the brake
+        joint = _new(JointState)
+        joint.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
+            "state": state, "statusword": statusword,
+            "position": reported[1] / k,
+            "velocity": reported[2] / k,
+            "torque": reported[3] / 1000.0 * self.rated_joint_torque,
+            "following_error": reported[4] / k,
+            "temperature": reported[7] / 10.0 if self._temperature else float("nan"),
+            "brake_engaged": bool(reported[-1]) if self._brake else None,
+            "error_code": reported[5],
+            "mode": reported[6],
+        }
+        return joint
+
+    def _state_of_defaults(self) -> JointState:
+        """state() with every object the drive has not reported yet at its default."""
         get, k = self.values.get, self.k
         statusword = get(_STATUSWORD, 0)
         state = _STATES.get(statusword)
         if state is None:
             state = _STATES[statusword] = decode_statusword(statusword)
         temperature, brake = self._temperature, self._brake
-        # every joint every cycle: the fields in JointState's order, without its __init__'s
-        # keyword handling (issue 35: half the cost of a state)
         joint = _new(JointState)
         joint.__dict__ = {
             "name": self.name, "node_id": self.node_id,
@@ -328,6 +363,9 @@ _STATUSWORD, _POSITION_ACTUAL = (od.STATUSWORD, 0), (od.POSITION_ACTUAL, 0)
 _VELOCITY_ACTUAL, _TORQUE_ACTUAL = (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0)
 _FOLLOWING_ERROR_ACTUAL, _ERROR_CODE = (od.FOLLOWING_ERROR_ACTUAL, 0), (od.ERROR_CODE, 0)
 _MODE_DISPLAY = (od.MODES_OF_OPERATION_DISPLAY, 0)
+# what JointDriver.state() reads every cycle, in its unpacking's order
+_STATE_KEYS = (_STATUSWORD, _POSITION_ACTUAL, _VELOCITY_ACTUAL, _TORQUE_ACTUAL, _FOLLOWING_ERROR_ACTUAL,
+               _ERROR_CODE, _MODE_DISPLAY)
 _CONTROLWORD, _TARGET_POSITION = (od.CONTROLWORD, 0), (od.TARGET_POSITION, 0)
 _VELOCITY_OFFSET, _TORQUE_OFFSET = (od.VELOCITY_OFFSET, 0), (od.TORQUE_OFFSET, 0)
 _I32_MIN, _I32_MAX = -2**31, 2**31 - 1
