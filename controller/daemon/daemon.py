@@ -275,7 +275,7 @@ class Daemon:
         command = self.core.update(measurement)
         self.hardware.write(command, self.core.drive_request if self.core.state is MachineState.STOPPED else None)
         events = self.core.drain_events()
-        if any(e.kind == "reset" for e in events):
+        if events and any(e.kind == "reset" for e in events):     # most cycles: none, no generator
             self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
