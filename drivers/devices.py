@@ -269,7 +269,7 @@ class JointDriver(DeviceDriver):
         statusword = get(_STATUSWORD, 0)
         axis = self.axis
         cw = axis.step(statusword)
-        if axis.state != State.OPERATION_ENABLED:
+        if axis.state != _OPERATION_ENABLED:
             # not enabled: command the actual position so enabling never jumps
             self._hold = get(_POSITION_ACTUAL, 0) / self.k
             self.target = None
@@ -374,6 +374,8 @@ _EE_STATE, _EE_GRIP, _EE_FAULT_CODE = (od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0)
 _EE_SCREW_TORQUE, _EE_SCREW_TURNS = (od.EE_SCREW_TORQUE, 0), (od.EE_SCREW_TURNS, 0)
 _EE_STATES = dict(EeState._value2member_map_)   # raw value -> member, as EeState(raw)
 _STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
+# read by every joint's step: a module name costs a fraction of the enum class's member lookup
+_OPERATION_ENABLED = State.OPERATION_ENABLED
 _new = object.__new__
 
 
