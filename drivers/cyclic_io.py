@@ -19,6 +19,7 @@ from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
 _NO_PLAN_YET = object()     # a burst's COB-ID sequence not seen before (None: seen, no plan)
+_new = object.__new__
 
 
 @dataclass
@@ -240,12 +241,15 @@ class CyclicIO:
         with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
-            return ArmState(
-                sync=self._sync, complete=complete,
-                joints=[j.state() for j in self.joints],
-                end_effector=self.end_effector.state() if self.end_effector else None,
-                ft=self.ft.state() if self.ft else None,
-                nodes={n: h.snapshot() for n, h in self.health.items()} if nodes else {})
+            # every cycle: the fields in ArmState's order without its __init__'s keyword handling
+            state = _new(ArmState)
+            state.__dict__ = {
+                "sync": self._sync, "complete": complete,
+                "joints": [j.state() for j in self.joints],
+                "end_effector": self.end_effector.state() if self.end_effector else None,
+                "ft": self.ft.state() if self.ft else None,
+                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {}}
+            return state
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
               timeout: float | None = None) -> ArmState:

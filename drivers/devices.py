@@ -373,6 +373,7 @@ _FT_VALUES, _FT_STATUS = tuple((od.FT_VALUES, i) for i in range(1, 7)), (od.FT_S
 _EE_STATE, _EE_GRIP, _EE_FAULT_CODE = (od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0), (od.EE_FAULT_CODE, 0)
 _EE_SCREW_TORQUE, _EE_SCREW_TURNS = (od.EE_SCREW_TORQUE, 0), (od.EE_SCREW_TURNS, 0)
 _EE_STATES = dict(EeState._value2member_map_)   # raw value -> member, as EeState(raw)
+_EE_UNKNOWN = EeState.UNKNOWN
 _STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
 # read by every joint's step: a module name costs a fraction of the enum class's member lookup
 _OPERATION_ENABLED = State.OPERATION_ENABLED
@@ -393,14 +394,17 @@ class EndEffectorDriver(DeviceDriver):
 
     def state(self) -> EndEffectorState:
         get = self.values.get       # every cycle: the dict's get, not value()'s call per object
-        return EndEffectorState(
-            name=self.name, node_id=self.node_id,
+        # the fields in EndEffectorState's order, without its __init__'s keyword handling
+        state = _new(EndEffectorState)
+        state.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
             # the member EeState(raw) returns, looked up without the enum's call
-            state=_EE_STATES.get(get(_EE_STATE, 0), EeState.UNKNOWN),
-            grip=get(_EE_GRIP, 0) / 1000.0,
-            screw_torque=get(_EE_SCREW_TORQUE, 0) / 1000.0,
-            screw_turns=get(_EE_SCREW_TURNS, 0) / 1000.0,
-            fault_code=get(_EE_FAULT_CODE, 0))
+            "state": _EE_STATES.get(get(_EE_STATE, 0), _EE_UNKNOWN),
+            "grip": get(_EE_GRIP, 0) / 1000.0,
+            "screw_torque": get(_EE_SCREW_TORQUE, 0) / 1000.0,
+            "screw_turns": get(_EE_SCREW_TURNS, 0) / 1000.0,
+            "fault_code": get(_EE_FAULT_CODE, 0)}
+        return state
 
 
 class FtDriver(DeviceDriver):
@@ -418,11 +422,15 @@ class FtDriver(DeviceDriver):
         fx, fy, fz, tx, ty, tz = [get(key, 0) for key in _FT_VALUES]
         status = get(_FT_STATUS, 0)
         per_n, per_nm = s.force_counts_per_n, s.torque_counts_per_nm
-        return FtState(   # the tuples written out: two generators a cycle cost more than the divisions
-            name=self.name, node_id=self.node_id,
-            force=(fx / per_n, fy / per_n, fz / per_n),
-            torque=(tx / per_nm, ty / per_nm, tz / per_nm),
-            overload=bool(status & od.FT_STATUS_OVERLOAD), tared=bool(status & od.FT_STATUS_TARED))
+        # the tuples written out (two generators a cycle cost more than the divisions), the
+        # fields in FtState's order without its __init__'s keyword handling
+        state = _new(FtState)
+        state.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
+            "force": (fx / per_n, fy / per_n, fz / per_n),
+            "torque": (tx / per_nm, ty / per_nm, tz / per_nm),
+            "overload": bool(status & od.FT_STATUS_OVERLOAD), "tared": bool(status & od.FT_STATUS_TARED)}
+        return state
 
 
 DRIVERS = {"joint_drive": JointDriver, "end_effector": EndEffectorDriver, "ft_sensor": FtDriver}
