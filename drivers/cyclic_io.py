@@ -142,7 +142,7 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        append, bringup = frames.append, self.bringup
+        append, bringup, operational = frames.append, self.bringup, od.NMT_STATE_OPERATIONAL
         with self._lock:
             for d, joint, h in self._cycle_drivers:
                 if joint:
@@ -151,17 +151,18 @@ class CyclicIO:
                         self._check_following_error(d)
                 d.step()
                 if joint:
-                    if d.axis.fault_reset_failed:
-                        d.axis.fault_reset_failed = False
+                    axis = d.axis
+                    if axis.fault_reset_failed:
+                        axis.fault_reset_failed = False
                         self._event("fault_reset_failed", d,
                                     f"{d.label}: fault reset did not clear the fault "
                                     f"(error 0x{d.value(od.ERROR_CODE):04X} {emcy_text(d.value(od.ERROR_CODE))})",
                                     d.value(od.ERROR_CODE))
-                    if d.axis.fault_cleared:
+                    if axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
-                if h.nmt_state == od.NMT_STATE_OPERATIONAL:
+                if h.nmt_state == operational:
                     packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
                     if packs is None:
                         frames += d.rpdo_frames()
