@@ -19,6 +19,7 @@ from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
 _NO_PLAN_YET = object()     # a burst's COB-ID sequence not seen before (None: seen, no plan)
+_new = object.__new__
 
 
 @dataclass
@@ -60,9 +61,15 @@ class CyclicIO:
             self._note_answers(expected)
             self._sync += 1
             if self.controller_period is not None:
+                # the set is worked out again only where the health check changed a node (it
+                # clears _expected whenever it declares one lost; under the lock nothing else
+                # runs meanwhile): the same set, one pass over the nodes a cycle less (issue 35)
+                self._expected = expected
                 self._lockstep_health(time.monotonic())
+                if self._expected is None:
+                    expected = self._expected_tpdos()
             self._received = set()
-            self._expected = self._expected_tpdos()
+            self._expected = expected
             self.stats.expected_tpdos += len(self._expected)
         if self.controller_period is not None:
             self._send_lockstep_heartbeat()
@@ -135,7 +142,7 @@ class CyclicIO:
         if command is not None:
             self._apply(command)
         frames = []
-        append, bringup = frames.append, self.bringup
+        append, bringup, operational = frames.append, self.bringup, od.NMT_STATE_OPERATIONAL
         with self._lock:
             for d, joint, h in self._cycle_drivers:
                 if joint:
@@ -144,17 +151,18 @@ class CyclicIO:
                         self._check_following_error(d)
                 d.step()
                 if joint:
-                    if d.axis.fault_reset_failed:
-                        d.axis.fault_reset_failed = False
+                    axis = d.axis
+                    if axis.fault_reset_failed:
+                        axis.fault_reset_failed = False
                         self._event("fault_reset_failed", d,
                                     f"{d.label}: fault reset did not clear the fault "
                                     f"(error 0x{d.value(od.ERROR_CODE):04X} {emcy_text(d.value(od.ERROR_CODE))})",
                                     d.value(od.ERROR_CODE))
-                    if d.axis.fault_cleared:
+                    if axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
-                if h.nmt_state == od.NMT_STATE_OPERATIONAL:
+                if h.nmt_state == operational:
                     packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
                     if packs is None:
                         frames += d.rpdo_frames()
@@ -226,18 +234,23 @@ class CyclicIO:
         with self._lock:
             return self._expected_tpdos() <= self._received
 
-    def read(self, complete: bool | None = None) -> ArmState:
+    def read(self, complete: bool | None = None, nodes: bool = True) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
-        tpdos_complete(): whether they all belong to the last SYNC."""
+        tpdos_complete(): whether they all belong to the last SYNC. ``nodes=False`` leaves
+        ArmState.nodes empty, for a caller that reads the nodes' health only when data is
+        missing (the daemon's cycle: a snapshot per node every cycle it never looked at)."""
         with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
-            return ArmState(
-                sync=self._sync, complete=complete,
-                joints=[j.state() for j in self.joints],
-                end_effector=self.end_effector.state() if self.end_effector else None,
-                ft=self.ft.state() if self.ft else None,
-                nodes={n: h.snapshot() for n, h in self.health.items()})
+            # every cycle: the fields in ArmState's order without its __init__'s keyword handling
+            state = _new(ArmState)
+            state.__dict__ = {
+                "sync": self._sync, "complete": complete,
+                "joints": [j.state() for j in self.joints],
+                "end_effector": self.end_effector.state() if self.end_effector else None,
+                "ft": self.ft.state() if self.ft else None,
+                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {}}
+            return state
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
               timeout: float | None = None) -> ArmState:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
+from operator import itemgetter
 
 import canopen
 
@@ -214,6 +215,11 @@ class JointDriver(DeviceDriver):
         s = self.settings
         self._temperature = _mapped_ref(s.temperature_object, mapped)
         self._brake = _mapped_ref(s.brake_object, mapped)
+        # state()'s objects read in one call once the drive reported them all (a lookup per
+        # object and joint was ~60 dict.get a cycle, issue 35), the optional ones last; None
+        # where the layout leaves one out (state() would fail over to the lookups every cycle)
+        self._reported = (itemgetter(*_STATE_KEYS, *(key for key in (self._temperature, self._brake) if key))
+                          if mapped.issuperset(_STATE_KEYS) else None)
 
     def set_mode(self, mode: int) -> None:
         """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
@@ -263,7 +269,7 @@ class JointDriver(DeviceDriver):
         statusword = get(_STATUSWORD, 0)
         axis = self.axis
         cw = axis.step(statusword)
-        if axis.state != State.OPERATION_ENABLED:
+        if axis.state != _OPERATION_ENABLED:
             # not enabled: command the actual position so enabling never jumps
             self._hold = get(_POSITION_ACTUAL, 0) / self.k
             self.target = None
@@ -299,14 +305,43 @@ class JointDriver(DeviceDriver):
         rpdo[_TORQUE_OFFSET] = torque if -32768 <= torque <= 32767 else -32768 if torque < 0 else 32767
 
     def state(self) -> JointState:
+        if self._reported is None:
+            return self._state_of_defaults()
+        try:
+            reported = self._reported(self.values)
+        except KeyError:        # before the first TPDOs: one by one, at their defaults
+            return self._state_of_defaults()
+        statusword = reported[0]
+        state = _STATES.get(statusword)
+        if state is None:
+            state = _STATES[statusword] = decode_statusword(statusword)
+        k = self.k
+        # every joint every cycle: the fields in JointState's order, without its __init__'s
+        # keyword handling (issue 35: half the cost of a state); _STATE_KEYS' order, then the
+        # optional objects: the temperature, the brake
+        joint = _new(JointState)
+        joint.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
+            "state": state, "statusword": statusword,
+            "position": reported[1] / k,
+            "velocity": reported[2] / k,
+            "torque": reported[3] / 1000.0 * self.rated_joint_torque,
+            "following_error": reported[4] / k,
+            "temperature": reported[7] / 10.0 if self._temperature else float("nan"),
+            "brake_engaged": bool(reported[-1]) if self._brake else None,
+            "error_code": reported[5],
+            "mode": reported[6],
+        }
+        return joint
+
+    def _state_of_defaults(self) -> JointState:
+        """state() with every object the drive has not reported yet at its default."""
         get, k = self.values.get, self.k
         statusword = get(_STATUSWORD, 0)
         state = _STATES.get(statusword)
         if state is None:
             state = _STATES[statusword] = decode_statusword(statusword)
         temperature, brake = self._temperature, self._brake
-        # every joint every cycle: the fields in JointState's order, without its __init__'s
-        # keyword handling (issue 35: half the cost of a state)
         joint = _new(JointState)
         joint.__dict__ = {
             "name": self.name, "node_id": self.node_id,
@@ -328,6 +363,9 @@ _STATUSWORD, _POSITION_ACTUAL = (od.STATUSWORD, 0), (od.POSITION_ACTUAL, 0)
 _VELOCITY_ACTUAL, _TORQUE_ACTUAL = (od.VELOCITY_ACTUAL, 0), (od.TORQUE_ACTUAL, 0)
 _FOLLOWING_ERROR_ACTUAL, _ERROR_CODE = (od.FOLLOWING_ERROR_ACTUAL, 0), (od.ERROR_CODE, 0)
 _MODE_DISPLAY = (od.MODES_OF_OPERATION_DISPLAY, 0)
+# what JointDriver.state() reads every cycle, in its unpacking's order
+_STATE_KEYS = (_STATUSWORD, _POSITION_ACTUAL, _VELOCITY_ACTUAL, _TORQUE_ACTUAL, _FOLLOWING_ERROR_ACTUAL,
+               _ERROR_CODE, _MODE_DISPLAY)
 _CONTROLWORD, _TARGET_POSITION = (od.CONTROLWORD, 0), (od.TARGET_POSITION, 0)
 _VELOCITY_OFFSET, _TORQUE_OFFSET = (od.VELOCITY_OFFSET, 0), (od.TORQUE_OFFSET, 0)
 _I32_MIN, _I32_MAX = -2**31, 2**31 - 1
@@ -335,7 +373,10 @@ _FT_VALUES, _FT_STATUS = tuple((od.FT_VALUES, i) for i in range(1, 7)), (od.FT_S
 _EE_STATE, _EE_GRIP, _EE_FAULT_CODE = (od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0), (od.EE_FAULT_CODE, 0)
 _EE_SCREW_TORQUE, _EE_SCREW_TURNS = (od.EE_SCREW_TORQUE, 0), (od.EE_SCREW_TURNS, 0)
 _EE_STATES = dict(EeState._value2member_map_)   # raw value -> member, as EeState(raw)
+_EE_UNKNOWN = EeState.UNKNOWN
 _STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
+# read by every joint's step: a module name costs a fraction of the enum class's member lookup
+_OPERATION_ENABLED = State.OPERATION_ENABLED
 _new = object.__new__
 
 
@@ -353,14 +394,17 @@ class EndEffectorDriver(DeviceDriver):
 
     def state(self) -> EndEffectorState:
         get = self.values.get       # every cycle: the dict's get, not value()'s call per object
-        return EndEffectorState(
-            name=self.name, node_id=self.node_id,
+        # the fields in EndEffectorState's order, without its __init__'s keyword handling
+        state = _new(EndEffectorState)
+        state.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
             # the member EeState(raw) returns, looked up without the enum's call
-            state=_EE_STATES.get(get(_EE_STATE, 0), EeState.UNKNOWN),
-            grip=get(_EE_GRIP, 0) / 1000.0,
-            screw_torque=get(_EE_SCREW_TORQUE, 0) / 1000.0,
-            screw_turns=get(_EE_SCREW_TURNS, 0) / 1000.0,
-            fault_code=get(_EE_FAULT_CODE, 0))
+            "state": _EE_STATES.get(get(_EE_STATE, 0), _EE_UNKNOWN),
+            "grip": get(_EE_GRIP, 0) / 1000.0,
+            "screw_torque": get(_EE_SCREW_TORQUE, 0) / 1000.0,
+            "screw_turns": get(_EE_SCREW_TURNS, 0) / 1000.0,
+            "fault_code": get(_EE_FAULT_CODE, 0)}
+        return state
 
 
 class FtDriver(DeviceDriver):
@@ -378,11 +422,15 @@ class FtDriver(DeviceDriver):
         fx, fy, fz, tx, ty, tz = [get(key, 0) for key in _FT_VALUES]
         status = get(_FT_STATUS, 0)
         per_n, per_nm = s.force_counts_per_n, s.torque_counts_per_nm
-        return FtState(   # the tuples written out: two generators a cycle cost more than the divisions
-            name=self.name, node_id=self.node_id,
-            force=(fx / per_n, fy / per_n, fz / per_n),
-            torque=(tx / per_nm, ty / per_nm, tz / per_nm),
-            overload=bool(status & od.FT_STATUS_OVERLOAD), tared=bool(status & od.FT_STATUS_TARED))
+        # the tuples written out (two generators a cycle cost more than the divisions), the
+        # fields in FtState's order without its __init__'s keyword handling
+        state = _new(FtState)
+        state.__dict__ = {
+            "name": self.name, "node_id": self.node_id,
+            "force": (fx / per_n, fy / per_n, fz / per_n),
+            "torque": (tx / per_nm, ty / per_nm, tz / per_nm),
+            "overload": bool(status & od.FT_STATUS_OVERLOAD), "tared": bool(status & od.FT_STATUS_TARED)}
+        return state
 
 
 DRIVERS = {"joint_drive": JointDriver, "end_effector": EndEffectorDriver, "ft_sensor": FtDriver}

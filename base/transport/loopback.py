@@ -285,9 +285,8 @@ class LoopbackBus(can.BusABC):
         them as one slice and each receiver wakes once for all of them."""
         if self._closed:
             raise can.CanOperationError(f"{self.channel_info}: bus is shut down")
-        encode = wire.encode_data_frame
         try:
-            record = b"".join([encode(can_id, data) for can_id, data in frames])
+            record = wire.encode_data_frames(frames)
         except ValueError as exc:
             raise can.CanOperationError(f"cannot send: {exc}") from exc
         self._write(record, None)

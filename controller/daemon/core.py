@@ -20,7 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from spacearm.controller.cycle import (EVENT_ONLY, NODE_FINDINGS, Command, Finding, FindingCode, MachineState,
-                                       Measurement, Mode, ModeOutput)
+                                       Measurement, Mode, ModeOutput, built)
 from spacearm.controller.daemon.api_errors import CodedError, ErrorCode
 from spacearm.controller.daemon.stops import DriveRequest, StopMonitor, StopPolicy, stop_policy
 from spacearm.controller.daemon.supervision import Supervisor
@@ -30,6 +30,11 @@ from spacearm.controller.planning.joint_move import JointSetpoint
 from spacearm.controller.planning.stop_trajectory import StopTrajectory
 
 ENABLE_TIMEOUT = 2.0  # s for every drive to reach "operation enabled"
+# The states as the cycle tests them (update, _command): module names, not the enum class's
+# member lookup (~0.15 us each, a dozen a cycle; issue 35). The cycle's Commands are built
+# without the frozen dataclass's __init__ (controller/cycle.py built): the same fields.
+_ENABLING, _ENABLED, _STOPPED = MachineState.ENABLING, MachineState.ENABLED, MachineState.STOPPED
+_ENABLED_OR_ENABLING, _STOPPED_OR_ENABLED = (_ENABLED, _ENABLING), (_STOPPED, _ENABLED)
 
 
 def _zeros_as(q: np.ndarray) -> np.ndarray:
@@ -144,15 +149,15 @@ class ControllerCore:
             if event.kind in EVENT_ONLY:
                 self._event(m.time, event.kind.value, event.detail,
                             Finding(event.kind, event.detail, node=event.node or None))
-        moving = self.state is MachineState.ENABLED and self.mode is not None and self.mode.moving
-        if self.state in (MachineState.ENABLED, MachineState.ENABLING):
+        moving = self._state is _ENABLED and self.mode is not None and self.mode.moving
+        if self._state in _ENABLED_OR_ENABLING:
             findings = self.supervisor.check(m, self.last_target, moving)
         else:
             # Disabled or stopped: still watch the nodes (and, stopping, the drives' faults),
             # but not motion-related limits.
-            watched = NODE_FINDINGS | {FindingCode.FAULT} if self.state is MachineState.STOPPED else NODE_FINDINGS
+            watched = NODE_FINDINGS | {FindingCode.FAULT} if self._state is _STOPPED else NODE_FINDINGS
             findings = [f for f in self.supervisor.check(m, None, False) if f.code in watched]
-        if self.state is MachineState.STOPPED:
+        if self._state is _STOPPED:
             overrun = self.stop_monitor.check(m)
             findings += [overrun] if overrun is not None else []
             for finding in findings:      # a stronger stop replaces the one running
@@ -161,7 +166,7 @@ class ControllerCore:
             self.protective_stop(m.time, findings[0])
             for extra in findings[1:]:
                 self._event(m.time, "finding", extra.message, extra)
-        if self.state is MachineState.ENABLING:
+        if self._state is _ENABLING:
             if np.all(m.joints_enabled):
                 self.state = MachineState.ENABLED
                 self._set_mode(HoldMode(m.q.copy()))
@@ -193,14 +198,14 @@ class ControllerCore:
         return 1.0 / ramp if ramp > self.period else float("inf")
 
     def _command(self, m: Measurement) -> Command:
-        if self.stopping is not None and self.state in (MachineState.STOPPED, MachineState.ENABLED):
+        if self.stopping is not None and self._state in _STOPPED_OR_ENABLED:
             command = self._stopping_command()
             if command is not None:
                 return command
-            if self.state is MachineState.ENABLED:       # a `disable` that waited for rest
+            if self._state is _ENABLED:       # a `disable` that waited for rest
                 self.state = MachineState.DISABLED
                 self._event(m.time, "state", "disabled at rest, brakes on")
-        if self.state is MachineState.ENABLED and self.mode is not None:
+        if self._state is _ENABLED and self.mode is not None:
             if m.bridged and self.last_setpoint is not None:
                 # the drives hold the last target they got; resuming from it avoids a catch-up
                 # faster than the joints' limits once the switch completes
@@ -224,12 +229,13 @@ class ControllerCore:
                 self.motions_finished = self.motions_started
                 self._set_mode(HoldMode(setpoint.q.copy()))
             self.last_target = setpoint.q.copy()
-            return Command(setpoint.q.copy(), setpoint.dq * self.resume_rate, enable=True,
-                           end_effector=out.end_effector)
+            return built(Command, {"q": setpoint.q.copy(), "dq": setpoint.dq * self.resume_rate, "enable": True,
+                                   "end_effector": out.end_effector})
         # Not enabled: targets follow the measurement so enabling never causes a jump.
         self.last_target = None
         self.last_setpoint = None
-        return Command(m.q.copy(), _zeros_as(m.q), enable=self.state is MachineState.ENABLING)
+        return built(Command, {"q": m.q.copy(), "dq": _zeros_as(m.q), "enable": self._state is _ENABLING,
+                               "end_effector": None})
 
     def _stopping_command(self) -> Command | None:
         """The planner's stop this cycle: its setpoint with the drives enabled; None once the
@@ -329,10 +335,11 @@ class ControllerCore:
         self.events.append(Event(t, kind, message, finding))
 
     def _apply_pending(self, m: Measurement) -> None:
-        # Nearly every cycle takes no request: one look at the queue (empty(), ~0.4 us) instead of
-        # get_nowait's raised and caught Empty (~2 us, issue 35). A request put after the look
-        # is taken next cycle, as one put after get_nowait's look always was.
-        while not self._pending.empty():
+        # Nearly every cycle takes no request: one look at the queue's deque (empty() took its
+        # lock, ~0.4 us) instead of get_nowait's raised and caught Empty (~2 us, issue 35). A
+        # request put after the look is taken next cycle, as one put after get_nowait's look
+        # always was.
+        while self._pending.queue:      # the queue's deque: its length is read whole under the GIL
             try:
                 pending = self._pending.get_nowait()
             except queue.Empty:
@@ -354,6 +361,8 @@ class ControllerCore:
 
     def answer_commands(self) -> None:
         """Hand the commands this cycle took their answers (the daemon: after its snapshot)."""
+        if not self._answers:       # twice a cycle, nearly always nothing to answer
+            return
         answers, self._answers = self._answers, []
         for future, result, error in answers:
             if error is None:

@@ -31,7 +31,7 @@ from spacearm.controller.daemon.overrun_cause import Overrun, OverrunMeter
 from spacearm.controller.cycle import Mode
 from spacearm.controller.daemon.recorder_process import RecorderProcess
 from spacearm.controller.recording.can_trace import TraceLimit
-from spacearm.controller.cycle import Command, Finding, FindingCode, MachineState, Measurement
+from spacearm.controller.cycle import Command, Finding, FindingCode, MachineState, Measurement, built
 from spacearm.controller.daemon.supervision import SupervisionLimits, Supervisor
 from spacearm.base.kinematics import KinematicData, fk, matrix_to_rpy
 from spacearm.base.kinematics.model import KinematicModel
@@ -67,6 +67,9 @@ class DaemonOptions:
     # SCHED_FIFO priority of the daemon's threads with the real-time clock (base/runtime/priority.py);
     # 0: normal scheduling. `spacearm daemon` asks for 50.
     rt_priority: int = 0
+
+
+_STOPPED = MachineState.STOPPED    # tested every cycle: a module name, not the enum's member lookup
 
 
 @dataclass(frozen=True)
@@ -273,18 +276,20 @@ class Daemon:
 
     def _cycle(self, tick, measurement: Measurement) -> Snapshot:
         command = self.core.update(measurement)
-        self.hardware.write(command, self.core.drive_request if self.core.state is MachineState.STOPPED else None)
+        self.hardware.write(command, self.core.drive_request if self.core.state is _STOPPED else None)
         events = self.core.drain_events()
-        if any(e.kind == "reset" for e in events):
+        if events and any(e.kind == "reset" for e in events):     # most cycles: none, no generator
             self.hardware.fault_reset()
         execution = time.monotonic() - tick.woke_at
         self.stats.add(tick.period_error, execution, tick.skipped, self.hardware.last_io_wait)
         self._watch_nodes(measurement, tick.skipped > 0)
-        mode = self.core.mode
-        snapshot = Snapshot(tick, measurement, command, self.core.state,
-                            mode.name if mode is not None else None,
-                            self.core.mode_progress(),
-                            self.core.stop_reason, self.core.motions_finished)
+        core = self.core
+        mode = core.mode
+        # every cycle: the fields in Snapshot's order without the frozen dataclass's __init__
+        snapshot = built(Snapshot, {"tick": tick, "measurement": measurement, "command": command,
+                                    "state": core.state, "mode": mode.name if mode is not None else None,
+                                    "progress": core.mode_progress(), "stop": core.stop_reason,
+                                    "motions_finished": core.motions_finished})
         self.snapshot = snapshot
         self.core.answer_commands()
         self._record(snapshot, execution, events)

@@ -34,6 +34,8 @@ DRIVE_LIMIT_MARGIN = 0.05  # rad
 LATE_CYCLE_SLACK = 0.5
 
 POWERED = (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+# JointState.enabled and .fault as the cycle tests them, without a property call per joint
+_ENABLED, _FAULTS = State.OPERATION_ENABLED, (State.FAULT, State.FAULT_REACTION_ACTIVE)
 
 # 605Ah: quick-stop ramp (6085h), then switch on disabled: the drive's own stop is category 1
 QUICK_STOP_OPTION = 2
@@ -173,7 +175,8 @@ class CanopenHardware:
         # of the nodes missing at the last read, those whose data came before this SYNC went out
         answered_late = tuple(self.network.answered_last_sync(self._missing_at_read)) if self._missing_at_read else ()
         self.late_answers += len(answered_late)
-        state = self.network.read(complete)
+        # the nodes' health only where _measurement looks at it: a cycle with data missing
+        state = self.network.read(complete, nodes=not complete)
         events = []
         for event in self.network.poll_events():
             kind = FAULT_EVENTS.get(event.kind) or RECORDED_EVENTS.get(event.kind)
@@ -218,8 +221,8 @@ class CanopenHardware:
             "q": np.array([j.position for j in joints]),
             "dq": np.array([j.velocity for j in joints]),
             "tau": np.array([j.torque for j in joints]),
-            "joints_enabled": np.array([j.enabled for j in joints]),
-            "joints_faulted": np.array([j.fault for j in joints]),
+            "joints_enabled": np.array([j.state == _ENABLED for j in joints]),
+            "joints_faulted": np.array([j.state in _FAULTS for j in joints]),
             "wrench": wrench, "wrench_overload": bool(ft.overload) if ft else False,
             "end_effector": _end_effector_state(state.end_effector),
             "events": events, "missing": missing, "late": late > 0.0 and bool(missing), "bridged": False,

@@ -112,6 +112,28 @@ class Supervisor:
         if np.count_nonzero(m.joints_faulted):
             for i in np.flatnonzero(m.joints_faulted):
                 findings.append(Finding(FindingCode.FAULT, f"{self.names[i]}: drive in fault", joint=self.names[i]))
+        if bounds.outside(m.q, m.dq):     # numpy and the indices only where a joint is beyond one
+            findings.extend(self._limit_findings(m, lim, bounds))
+        if moving and last_target is not None and not m.bridged:    # bridged: the positions are stale
+            error = np.abs(last_target - m.q)
+            behind = error > lim.following_error
+            if np.count_nonzero(behind):
+                window = np.broadcast_to(lim.following_error, error.shape)
+                for i in np.flatnonzero(behind):
+                    findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
+                                            f"{error[i]:.4f} rad above {window[i]:.4f} rad", joint=self.names[i]))
+        force, torque = _norms(m.wrench)
+        if m.wrench_overload:
+            findings.append(Finding(FindingCode.FT_OVERLOAD, "force/torque sensor: overload flag set"))
+        elif force > bounds.wrench_force_limit or torque > bounds.wrench_torque_limit:
+            findings.append(Finding(FindingCode.FT_LIMIT, f"force/torque {force:.1f} N / {torque:.2f} N m above "
+                                    f"limits {bounds.wrench_force_limit:.0f} N / {bounds.wrench_torque_limit:.0f} N m"))
+        findings.extend(self._check_ft_signal(m, bounds))
+        return findings
+
+    def _limit_findings(self, m: Measurement, lim: SupervisionLimits, bounds: "_Bounds") -> list[Finding]:
+        """The position and velocity findings, joint by joint."""
+        findings = []
         low = m.q < bounds.q_low
         high = m.q > bounds.q_high
         if np.count_nonzero(low) or np.count_nonzero(high):
@@ -124,22 +146,6 @@ class Supervisor:
             for i in np.flatnonzero(fast):
                 findings.append(Finding(FindingCode.VELOCITY_LIMIT, f"{self.names[i]}: velocity {m.dq[i]:.4f} "
                                         f"rad/s above limit {lim.v_max[i]:.4f} rad/s", joint=self.names[i]))
-        if moving and last_target is not None and not m.bridged:    # bridged: the positions are stale
-            error = np.abs(last_target - m.q)
-            behind = error > lim.following_error
-            if np.count_nonzero(behind):
-                window = np.broadcast_to(lim.following_error, error.shape)
-                for i in np.flatnonzero(behind):
-                    findings.append(Finding(FindingCode.FOLLOWING_ERROR, f"{self.names[i]}: following error "
-                                            f"{error[i]:.4f} rad above {window[i]:.4f} rad", joint=self.names[i]))
-        force = _norm(m.wrench[:3])
-        torque = _norm(m.wrench[3:])
-        if m.wrench_overload:
-            findings.append(Finding(FindingCode.FT_OVERLOAD, "force/torque sensor: overload flag set"))
-        elif force > bounds.wrench_force_limit or torque > bounds.wrench_torque_limit:
-            findings.append(Finding(FindingCode.FT_LIMIT, f"force/torque {force:.1f} N / {torque:.2f} N m above "
-                                    f"limits {bounds.wrench_force_limit:.0f} N / {bounds.wrench_torque_limit:.0f} N m"))
-        findings.extend(self._check_ft_signal(m, bounds))
         return findings
 
     def _check_ft_signal(self, m: Measurement, lim: "_Bounds") -> list[Finding]:
@@ -154,7 +160,7 @@ class Supervisor:
             return []
         findings = []
         step = m.wrench - last
-        df, dt = _norm(step[:3]), _norm(step[3:])
+        df, dt = _norms(step)
         if df > lim.ft_jump_force or dt > lim.ft_jump_torque:
             findings.append(Finding(FindingCode.FT_JUMP, f"force/torque sensor: reading jumped by {df:.1f} N / "
                                     f"{dt:.2f} N m in one cycle (limits {lim.ft_jump_force:.0f} N / "
@@ -185,10 +191,35 @@ class _Bounds:
         for name in ("missing_pdo_cycles", "wrench_force_limit", "wrench_torque_limit", "ft_jump_force",
                      "ft_jump_torque", "ft_live_changes", "ft_frozen_cycles"):
             setattr(self, name, getattr(limits, name))
+        # the same thresholds as Python floats, for outside(); None where they are no plain
+        # vector of joints (numpy's broadcasting then decides, every cycle)
+        vectors = (self.q_low, self.q_high, self.v_high)
+        plain = all(type(v) is np.ndarray and v.ndim == 1 and v.dtype is _F64 and len(v) == len(self.q_low)
+                    for v in vectors)
+        self._plain = tuple(zip(*(v.tolist() for v in vectors))) if plain else None
+
+    def outside(self, q, dq) -> bool:
+        """Is a joint beyond its position or velocity bound (True also where that takes numpy
+        to tell)? The comparisons of the findings' arrays as Python floats, joint by joint: the
+        same float64 values and the same answers (NaN beyond nothing), without the four numpy
+        calls a cycle on a handful of joints (issue 35)."""
+        plain = self._plain
+        if (plain is None or type(q) is not np.ndarray or type(dq) is not np.ndarray or q.dtype is not _F64
+                or dq.dtype is not _F64 or q.shape != dq.shape or q.shape != (len(plain),)):
+            return True
+        for x, v, (low, high, top) in zip(q.tolist(), dq.tolist(), plain):
+            if x < low or x > high or abs(v) > top:
+                return True
+        return False
 
 
-def _norm(v: np.ndarray) -> float:
-    """np.linalg.norm of a vector without its Python-level dispatch: the same square root of
-    the same dot product (numpy computes it so for a 1-D float array), so the same float."""
-    v = np.asarray(v, dtype=float)
-    return math.sqrt(v.dot(v))
+_F64 = np.dtype(float)
+
+
+def _norms(wrench) -> tuple[float, float]:
+    """np.linalg.norm of a wrench's force and of its torque without its Python-level dispatch:
+    the same square root of the same dot product (numpy computes it so for a 1-D float array),
+    so the same floats; the wrench converted once for both."""
+    w = np.asarray(wrench, dtype=float)
+    force, torque = w[:3], w[3:]
+    return math.sqrt(force.dot(force)), math.sqrt(torque.dot(torque))

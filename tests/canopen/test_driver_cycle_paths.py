@@ -133,3 +133,25 @@ def test_the_cycles_array_shortcuts_are_what_numpy_gives():
     assert _end_effector_state(None) is EndEffectorState.NONE
     for raw in EeState:
         assert _end_effector_state(DriverEeState("ee", 9, raw)) is EndEffectorState(raw.name.lower())
+
+
+def test_joint_state_read_in_one_call_is_the_state_of_the_lookups():
+    """JointDriver.state() once every object is reported (one itemgetter call) against the
+    lookups it replaces (_state_of_defaults), field for field and in the same order; before
+    the first TPDO, and with an object missing, the lookups themselves."""
+    net = ArmNetwork("virtual:unused", load_bus_config())
+    rng = random.Random(43)
+    for driver in net.joints:
+        assert driver._reported is not None       # the default layout maps every object it reads
+        assert vars(driver.state()) == vars(driver._state_of_defaults())    # nothing reported yet
+        mapped = [(e.index, e.sub, e) for spec in driver.tpdos for e in spec.entries]
+        for _ in range(50):
+            for index, sub, e in mapped:
+                bits = e.size * 8
+                driver.values[(index, sub)] = rng.randrange(2 ** bits) - (2 ** (bits - 1) if rng.random() < 0.5 else 0)
+            driver.values[(od.STATUSWORD, 0)] = rng.choice([0x0237, 0x0250, 0x0208, 0x0231, 0x0233, 0x0217])
+            fast, looked_up = driver.state(), driver._state_of_defaults()
+            assert list(vars(fast).items()) == list(vars(looked_up).items())
+        del driver.values[(od.POSITION_ACTUAL, 0)]
+        assert vars(driver.state()) == vars(driver._state_of_defaults())
+        assert driver.state().position == 0.0
