@@ -34,6 +34,7 @@ from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSetting
 from spacearm.base.config.errors import ConfigError
 from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
+from spacearm.firmware_sim.simcore import SERVO_CSP
 from spacearm.firmware_sim.plant import JointModel, JointParams, Plant, PlantConfig
 
 FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
@@ -166,7 +167,11 @@ class _CspDrive:
         self.v_ff = 0.0
         joint.brake_engaged = False
         joint.max_motor_torque = settings.max_torque * settings.rated_torque
-        joint.controller = self._servo
+        servo = joint.controller = self._servo      # one bound method: the core checks it `is` the controller
+        # the same servo law for the whole period, as the compiled core runs a rigid gear's
+        # period in one call (plant.JointModel._core_period; the same bits as _servo sub-step by
+        # sub-step): the per-sub-step Python calls were most of a diagnosis's replay time
+        joint.period_servo = (servo, self._period_law)
 
     def latch(self, target: float, velocity_offset: float) -> None:
         k, dt = self.k, self.dt
@@ -182,6 +187,12 @@ class _CspDrive:
     def _servo(self, s: float, q_meas: float, qd: float) -> float:
         self.q_ref = self.q_start + s * (self.q_end - self.q_start)
         return servo_torque(self.joint, self.q_ref, self.v_ff, q_meas, qd)
+
+    def _period_law(self) -> tuple:
+        return SERVO_CSP, self.q_start, self.q_end, self.v_ff, 0.0, self._end_period
+
+    def _end_period(self, q_ref: float, v_ref: float) -> None:
+        self.q_ref = q_ref
 
     def report(self) -> tuple[float, float, float]:
         j, k = self.joint, self.k
@@ -218,10 +229,6 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     plant.time = t0
     drives = [_CspDrive(joint, settings[i], limits[i] if limits else (-math.inf, math.inf), dt)
               for joint, i in zip(plant.joints, index)]
-    q = np.empty((rows, len(index)))
-    dq = np.empty_like(q)
-    tau = np.empty_like(q)
-    ft = np.zeros((rows, 6))
     fe = 0.0
     cols = q_cmd[:, index]
     if dq_cmd is not None:
@@ -230,24 +237,34 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         vel = planned_velocity(cols, dt)
     else:
         vel = np.zeros_like(cols)
-    previous = cols[0]
-    previous_v = np.zeros(len(index))
+    # Python floats and lists, not numpy scalars and element writes, on the per-row path (the
+    # same values): after the plant's own step, those were most of a replay's cost
+    commands, velocities = cols.tolist(), vel.tolist()
+    previous, previous_v = commands[0], [0.0] * len(index)
+    reported, readings = [], []
     for r in range(rows):
-        for c, drive in enumerate(drives):
-            drive.latch(previous[c], previous_v[c])
+        for drive, target, offset in zip(drives, previous, previous_v):
+            drive.latch(target, offset)
         try:
             plant.step(dt)
-            for c, drive in enumerate(drives):
-                q[r, c], dq[r, c], tau[r, c] = drive.report()
+            reported.append([drive.report() for drive in drives])
         except (OverflowError, ValueError) as exc:     # round() of an infinite or NaN state
             raise SimulationDiverged(f"the simulated plant diverges at t = {t0 + dt * (r + 1):.3g} s "
                                      f"({type(exc).__name__})") from None
-        fe = max([fe] + [abs(drive.q_ref - drive.joint.q_measured) for drive in drives])
+        for drive in drives:      # max(): the largest, the first of equals, never a NaN
+            error = abs(drive.q_ref - drive.joint.q_measured)
+            if error > fe:
+                fe = error
         if wrench:
-            w = plant.ft_reading()
-            ft[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
-            ft[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
-        previous, previous_v = cols[r], vel[r]
+            readings.append(plant.ft_reading())
+        previous, previous_v = commands[r], velocities[r]
+    traces = np.array(reported, float).reshape(rows, len(index), 3)
+    q, dq, tau = (np.ascontiguousarray(traces[:, :, i]) for i in range(3))
+    ft = np.zeros((rows, 6))
+    if wrench:
+        w = np.array(readings, float).reshape(rows, 6)
+        ft[:, :3] = np.round(w[:, :3] / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
+        ft[:, 3:] = np.round(w[:, 3:] / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
     t = t0 + dt * np.arange(1, rows + 1)
     window = min((config.following_error[i] for i in index if i < len(config.following_error)), default=math.inf) \
         if isinstance(config, ArmPlant) else math.inf
