@@ -36,6 +36,7 @@ from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
 from spacearm.firmware_sim.simcore import SERVO_CSP
 from spacearm.firmware_sim.plant import JointModel, JointParams, Plant, PlantConfig
+from spacearm.offline.diagnosis.two_mass_period import two_mass_period
 
 FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
 FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
@@ -229,6 +230,10 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     plant.time = t0
     drives = [_CspDrive(joint, settings[i], limits[i] if limits else (-math.inf, math.inf), dt)
               for joint, i in zip(plant.joints, index)]
+    if plant.environment is None and plant.dynamics is None:
+        for joint, drive in zip(plant.joints, drives):
+            if joint.two_mass:      # the compiled core takes rigid gears only (_CspDrive)
+                joint.substeps = two_mass_period(joint, drive)
     fe = 0.0
     cols = q_cmd[:, index]
     if dq_cmd is not None:
