@@ -21,6 +21,7 @@ the feed constant 6092h.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -63,9 +64,22 @@ class SimTraces:
 def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = None) -> list[JointSettings]:
     """Drive settings per joint from the bus configuration; for an arm with more joints than
     the configuration has drives, the last drive's settings stand in for the extra ones."""
-    config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config or DEFAULT_BUS_CONFIG)
+    config = bus_config if isinstance(bus_config, BusConfig) else _bus_file(bus_config or DEFAULT_BUS_CONFIG)
     settings = [node.joint or JointSettings() for node in config.joints] or [JointSettings()]
     return settings + [settings[-1]] * max(0, (n or 0) - len(settings))
+
+
+def _bus_file(path: str | Path) -> BusConfig:
+    """load_bus_config once per version of the file (its configs are frozen): every replay asks
+    for the drives' settings, a few ms of TOML each, and a diagnosis replays a hundred times."""
+    path = Path(path).resolve()
+    stat = path.stat()
+    return _loaded_bus_file(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _loaded_bus_file(path: Path, mtime_ns: int, size: int) -> BusConfig:
+    return load_bus_config(path)
 
 
 class ArmPlant(PlantConfig):
@@ -231,6 +245,9 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     drives = [_CspDrive(joint, settings[i], limits[i] if limits else (-math.inf, math.inf), dt)
               for joint, i in zip(plant.joints, index)]
     if plant.environment is None and plant.dynamics is None:
+        # nothing reads the end effector's grip and screw here (no contact world): stepping them,
+        # ten sub-steps a row, cost a sixth of a gear fit's replays
+        plant.ee = None
         for joint, drive in zip(plant.joints, drives):
             if joint.two_mass:      # the compiled core takes rigid gears only (_CspDrive)
                 joint.substeps = two_mass_period(joint, drive)
