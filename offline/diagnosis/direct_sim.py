@@ -21,6 +21,7 @@ the feed constant 6092h.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -34,7 +35,9 @@ from spacearm.base.config.bus import DEFAULT_BUS_CONFIG, BusConfig, JointSetting
 from spacearm.base.config.errors import ConfigError
 from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
+from spacearm.firmware_sim.simcore import SERVO_CSP
 from spacearm.firmware_sim.plant import JointModel, JointParams, Plant, PlantConfig
+from spacearm.offline.diagnosis.two_mass_period import two_mass_period
 
 FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
 FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
@@ -61,9 +64,22 @@ class SimTraces:
 def joint_settings(bus_config: BusConfig | str | None = None, n: int | None = None) -> list[JointSettings]:
     """Drive settings per joint from the bus configuration; for an arm with more joints than
     the configuration has drives, the last drive's settings stand in for the extra ones."""
-    config = bus_config if isinstance(bus_config, BusConfig) else load_bus_config(bus_config or DEFAULT_BUS_CONFIG)
+    config = bus_config if isinstance(bus_config, BusConfig) else _bus_file(bus_config or DEFAULT_BUS_CONFIG)
     settings = [node.joint or JointSettings() for node in config.joints] or [JointSettings()]
     return settings + [settings[-1]] * max(0, (n or 0) - len(settings))
+
+
+def _bus_file(path: str | Path) -> BusConfig:
+    """load_bus_config once per version of the file (its configs are frozen): every replay asks
+    for the drives' settings, a few ms of TOML each, and a diagnosis replays a hundred times."""
+    path = Path(path).resolve()
+    stat = path.stat()
+    return _loaded_bus_file(path, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=8)
+def _loaded_bus_file(path: Path, mtime_ns: int, size: int) -> BusConfig:
+    return load_bus_config(path)
 
 
 class ArmPlant(PlantConfig):
@@ -166,7 +182,11 @@ class _CspDrive:
         self.v_ff = 0.0
         joint.brake_engaged = False
         joint.max_motor_torque = settings.max_torque * settings.rated_torque
-        joint.controller = self._servo
+        servo = joint.controller = self._servo      # one bound method: the core checks it `is` the controller
+        # the same servo law for the whole period, as the compiled core runs a rigid gear's
+        # period in one call (plant.JointModel._core_period; the same bits as _servo sub-step by
+        # sub-step): the per-sub-step Python calls were most of a diagnosis's replay time
+        joint.period_servo = (servo, self._period_law)
 
     def latch(self, target: float, velocity_offset: float) -> None:
         k, dt = self.k, self.dt
@@ -182,6 +202,12 @@ class _CspDrive:
     def _servo(self, s: float, q_meas: float, qd: float) -> float:
         self.q_ref = self.q_start + s * (self.q_end - self.q_start)
         return servo_torque(self.joint, self.q_ref, self.v_ff, q_meas, qd)
+
+    def _period_law(self) -> tuple:
+        return SERVO_CSP, self.q_start, self.q_end, self.v_ff, 0.0, self._end_period
+
+    def _end_period(self, q_ref: float, v_ref: float) -> None:
+        self.q_ref = q_ref
 
     def report(self) -> tuple[float, float, float]:
         j, k = self.joint, self.k
@@ -218,10 +244,13 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
     plant.time = t0
     drives = [_CspDrive(joint, settings[i], limits[i] if limits else (-math.inf, math.inf), dt)
               for joint, i in zip(plant.joints, index)]
-    q = np.empty((rows, len(index)))
-    dq = np.empty_like(q)
-    tau = np.empty_like(q)
-    ft = np.zeros((rows, 6))
+    if plant.environment is None and plant.dynamics is None:
+        # nothing reads the end effector's grip and screw here (no contact world): stepping them,
+        # ten sub-steps a row, cost a sixth of a gear fit's replays
+        plant.ee = None
+        for joint, drive in zip(plant.joints, drives):
+            if joint.two_mass:      # the compiled core takes rigid gears only (_CspDrive)
+                joint.substeps = two_mass_period(joint, drive)
     fe = 0.0
     cols = q_cmd[:, index]
     if dq_cmd is not None:
@@ -230,24 +259,34 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         vel = planned_velocity(cols, dt)
     else:
         vel = np.zeros_like(cols)
-    previous = cols[0]
-    previous_v = np.zeros(len(index))
+    # Python floats and lists, not numpy scalars and element writes, on the per-row path (the
+    # same values): after the plant's own step, those were most of a replay's cost
+    commands, velocities = cols.tolist(), vel.tolist()
+    previous, previous_v = commands[0], [0.0] * len(index)
+    reported, readings = [], []
     for r in range(rows):
-        for c, drive in enumerate(drives):
-            drive.latch(previous[c], previous_v[c])
+        for drive, target, offset in zip(drives, previous, previous_v):
+            drive.latch(target, offset)
         try:
             plant.step(dt)
-            for c, drive in enumerate(drives):
-                q[r, c], dq[r, c], tau[r, c] = drive.report()
+            reported.append([drive.report() for drive in drives])
         except (OverflowError, ValueError) as exc:     # round() of an infinite or NaN state
             raise SimulationDiverged(f"the simulated plant diverges at t = {t0 + dt * (r + 1):.3g} s "
                                      f"({type(exc).__name__})") from None
-        fe = max([fe] + [abs(drive.q_ref - drive.joint.q_measured) for drive in drives])
+        for drive in drives:      # max(): the largest, the first of equals, never a NaN
+            error = abs(drive.q_ref - drive.joint.q_measured)
+            if error > fe:
+                fe = error
         if wrench:
-            w = plant.ft_reading()
-            ft[r, :3] = np.round(np.asarray(w[:3]) / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
-            ft[r, 3:] = np.round(np.asarray(w[3:]) / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
-        previous, previous_v = cols[r], vel[r]
+            readings.append(plant.ft_reading())
+        previous, previous_v = commands[r], velocities[r]
+    traces = np.array(reported, float).reshape(rows, len(index), 3)
+    q, dq, tau = (np.ascontiguousarray(traces[:, :, i]) for i in range(3))
+    ft = np.zeros((rows, 6))
+    if wrench:
+        w = np.array(readings, float).reshape(rows, 6)
+        ft[:, :3] = np.round(w[:, :3] / FT_FORCE_QUANTUM) * FT_FORCE_QUANTUM
+        ft[:, 3:] = np.round(w[:, 3:] / FT_TORQUE_QUANTUM) * FT_TORQUE_QUANTUM
     t = t0 + dt * np.arange(1, rows + 1)
     window = min((config.following_error[i] for i in index if i < len(config.following_error)), default=math.inf) \
         if isinstance(config, ArmPlant) else math.inf

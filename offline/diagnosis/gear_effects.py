@@ -61,7 +61,7 @@ def fit_gear_effect(effect: str, nominal: PlantConfig, q_cmd: np.ndarray, dt: fl
                 # a light joint with a stiff gear or wide play can make the explicit step diverge
                 with np.errstate(all="raise"):
                     sims[log_value] = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j],
-                                                 dq_cmd=dq_cmd)
+                                                 dq_cmd=dq_cmd, wrench=False)
             except (OverflowError, FloatingPointError, ValueError):
                 sims[log_value] = None
         return sims[log_value]

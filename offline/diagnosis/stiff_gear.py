@@ -65,7 +65,7 @@ def fit_stiff_gear(nominal: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.nd
             try:
                 with np.errstate(all="raise"):
                     sim = simulate(nominal.model_copy(update={"joints": js}), q_cmd, dt, q0=q0, joints=[j],
-                                   dq_cmd=dq_cmd)
+                                   dq_cmd=dq_cmd, wrench=False)
                 out = sim.tau[:, 0] - base_tau
                 sims[log_k] = out if np.all(np.isfinite(out)) else None
             except (OverflowError, FloatingPointError, ValueError):

@@ -54,3 +54,32 @@ def test_the_refit_replays_only_the_fitted_joints_and_matches_a_full_replay(monk
     assert simulated == [[2]]
     for name in ("q", "dq", "tau", "wrench"):
         assert np.array_equal(getattr(refit, name), getattr(full, name)), name
+
+
+def _own_paths(monkeypatch) -> None:
+    """The plant's own sub-step-by-sub-step Python paths: no compiled core, no local two-mass period."""
+    from spacearm.firmware_sim import simcore
+    from spacearm.offline.diagnosis import direct_sim
+    monkeypatch.setattr(simcore, "core", None)
+    monkeypatch.setattr(direct_sim, "two_mass_period", lambda joint, drive: type(joint).substeps.__get__(joint))
+
+
+def test_the_fast_replay_paths_give_the_plants_own_bits(monkeypatch) -> None:
+    """The compiled core's rigid-gear period and the local two-mass period (a loose, elastic,
+    rubbing gear with transmission error, torque noise and feedback latency) replay exactly
+    what the plant's own Python path replays."""
+    commands = _commands(400) + 0.002 * (np.arange(400) % 37 == 0)[:, None]
+    joints = list(NOMINAL.joints)
+    joints[2] = joints[2].model_copy(update={"backlash": 1e-3, "joint_stiffness": 4e4, "coulomb_friction": 3.0,
+                                             "stribeck_friction": 2.0, "stribeck_velocity": 0.01,
+                                             "te_amplitude": 1e-4, "te_harmonic": 2.0, "torque_noise": 0.5,
+                                             "feedback_latency_cycles": 2})
+    joints[4] = joints[4].model_copy(update={"joint_stiffness": 2e5, "gravity_torque": 5.0})
+    plant = NOMINAL.model_copy(update={"joints": joints, "seed": 4})
+    fast = [simulate(plant, commands, 0.02), simulate(plant, commands, 0.02, joints=[2], wrench=False)]
+    _own_paths(monkeypatch)
+    own = [simulate(plant, commands, 0.02), simulate(plant, commands, 0.02, joints=[2], wrench=False)]
+    for a, b in zip(fast, own):
+        for name in ("q", "dq", "tau", "wrench"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        assert a.following_error_max == b.following_error_max
