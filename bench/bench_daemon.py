@@ -22,6 +22,24 @@ Lockstep cycle costs are judged in reference units (bench/reference_work.py, tim
 run): process CPU per cycle as a share of a pure-Python loop's CPU, and as a multiple of the
 PDO floor (the cycle's own frames packed and unpacked with precompiled struct).
 
+The cycle's objects and the threads beside it (issue 35, 2026-11-30; the master's and the
+simulator's halves measured each against main, alternating, medians, load 4.9-9.2, steal
+<= 0.3 %). Master: a JointState's reported objects in one itemgetter call, no node health
+snapshots the daemon never reads, one expected-TPDO set per SYNC, supervision's limits compared
+as Python floats (numpy only past a limit), the cycle's states (Command, Snapshot, ArmState,
+end-effector and F/T states, the lockstep Tick) built without their dataclass __init__, the
+loopback burst encoded in one call: daemon CPU per cycle 0.150 -> 0.126 ms, Python calls per
+cycle 799 -> 703; 8 nodes virtual recording on 0.348 -> 0.327 %, loopback 0.385 -> 0.337 %,
+Panda 0.387 -> 0.348 % (4 rounds). Simulator: its timer beside a lockstep controller wakes at
+most every 50 ms (93 -> 25 passes a second) and reports lateness without the per-thread /proc
+reads (each a GIL hand-over with the cycle thread): 0.013-0.033 -> 0.002-0.005 ms per cycle;
+the F/T sample without a per-axis loop (6.3 -> 3.7 us), the SYNC-time heartbeat checks without
+a call where they would do nothing, the resting Panda two calls per joint less: simulator part
+0.103 -> 0.097 ms, 8 nodes virtual recording on 0.359 -> 0.327 %, Panda 0.402 -> 0.369 % (6
+rounds). lockstep_fingerprint identical with the core and without, each and merged. Tried and
+left: the trace tap and send_frames' length check as one operation (slower at these burst
+sizes), the wrench norms in Python floats (numpy's dot differs in the last bit: FMA).
+
 Where one lockstep cycle's thread CPU goes (8 nodes, virtual bus, recording on; cProfile own
 time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-29, load
 6.4, with bursts on the bus (below): profiled 2.85 ms per cycle and 1218 Python calls per
