@@ -469,8 +469,12 @@ static int count_malformed(PyObject *stats) {
 }
 
 /* rpdo_store's loop: 0, or -1 with an exception set */
+/* accepted (NULL: none): {key: chunk} of the application objects whose on_write is a pure check
+ * (the same chunk always passes: JointDriveNode.PURE_WRITE_CHECK) that it let pass; a chunk
+ * equal to the one it passed skips the call (issue 35: six calls a cycle for a mode of
+ * operation that does not change). */
 static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject *params, PyObject *on_write,
-                      PyObject *write_rules, PyObject *aborted, PyObject *stats) {
+                      PyObject *write_rules, PyObject *aborted, PyObject *stats, PyObject *accepted) {
     if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
         PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
         return -1;
@@ -502,9 +506,20 @@ static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject
             Py_DECREF(chunk);
             return -1;
         }
+        int passed = 0;                          /* on_write let this very chunk pass before */
+        if (index_value >= 0x2000 && reacts && accepted != NULL) {
+            PyObject *known = PyDict_GetItemWithError(accepted, key);
+            if (known == NULL && PyErr_Occurred()) {
+                Py_DECREF(chunk);
+                return -1;
+            }
+            passed = known != NULL && PyBytes_CheckExact(known) && PyBytes_CheckExact(chunk) &&
+                     PyBytes_GET_SIZE(known) == PyBytes_GET_SIZE(chunk) &&
+                     memcmp(PyBytes_AS_STRING(known), PyBytes_AS_STRING(chunk), PyBytes_GET_SIZE(chunk)) == 0;
+        }
         PyObject *result = index_value < 0x2000
             ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
-            : reacts ? PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL) : Py_NewRef(Py_None);
+            : reacts && !passed ? PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL) : Py_NewRef(Py_None);
         if (result == NULL) {
             if (!PyErr_ExceptionMatches(aborted)) {
                 Py_DECREF(chunk);
@@ -517,6 +532,11 @@ static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject
             continue;
         }
         Py_DECREF(result);
+        if (index_value >= 0x2000 && reacts && accepted != NULL && !passed && PyBytes_CheckExact(chunk) &&
+            PyDict_SetItem(accepted, key, chunk) < 0) {
+            Py_DECREF(chunk);
+            return -1;
+        }
         PyObject *entry = PyDict_GetItemWithError(store, index);
         if (entry == NULL) {
             if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
@@ -549,7 +569,7 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
         return NULL;
     }
-    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7]) < 0)
+    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], NULL) < 0)
         return NULL;
     Py_RETURN_NONE;
 }
@@ -587,9 +607,10 @@ static int attr_true(PyObject *obj, PyObject *name) {
 /* A route (runner._direct_route): the node, its PDO engine, its write rules (the bound method in
  * its write callbacks), SimNode.on_rpdo, and what the node sets once in __init__: its write
  * callbacks list, data store, param() cache, statistics, fault switches, and its lock's acquire
- * and release. */
+ * and release; then its class's on_write function when that is a pure check (else None) and
+ * the node's dict of the chunks it let pass (store_rpdo's `accepted`). */
 enum { R_NODE, R_ENGINE, R_WRITE_RULES, R_ON_RPDO, R_CALLBACKS, R_STORE, R_PARAMS, R_STATS, R_FAULTS, R_ACQUIRE,
-       R_RELEASE, R_SIZE };
+       R_RELEASE, R_PURE_ON_WRITE, R_ACCEPTED, R_SIZE };
 
 /* The frame's RPDO codec when it takes runner.Simulator._route_frames's direct path (a live
  * node, OPERATIONAL, its RPDO compiled, the frame long enough, the node's write rules its only
@@ -662,8 +683,13 @@ static int route_rpdo(PyObject **route, PyObject *data, PyObject *codec, PyObjec
     }
     Py_DECREF(got);
     int rc = -1;
+    /* the memo only while node.on_write is the class's pure check (not one patched in or overridden) */
+    PyObject *accepted = route[R_PURE_ON_WRITE] != Py_None && PyDict_Check(route[R_ACCEPTED]) &&
+                         PyMethod_Check(on_write) && PyMethod_GET_FUNCTION(on_write) == route[R_PURE_ON_WRITE] &&
+                         PyMethod_GET_SELF(on_write) == node ? route[R_ACCEPTED] : NULL;
     if (PyObject_SetAttr(node, s_in_rpdo, Py_True) == 0)
-        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats);
+        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats,
+                        accepted);
     Py_DECREF(on_write);
     PyObject *type, *value, *tb;                      /* the finally: keep the exception aside */
     PyErr_Fetch(&type, &value, &tb);

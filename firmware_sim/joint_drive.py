@@ -96,6 +96,7 @@ class JointDriveNode(SimNode):
         self._update_od()
 
     WRITE_REACTIONS = frozenset({od.MODES_OF_OPERATION})     # the only object on_write looks at
+    PURE_WRITE_CHECK = True      # on_write only checks its arguments (SimNode.pure_write_check)
 
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.MODES_OF_OPERATION and int.from_bytes(data, "little", signed=True) not in (
