@@ -353,36 +353,10 @@ static PyObject *steady_begin(PyObject *self, PyObject *const *args, Py_ssize_t 
                          q_end, v_ff);
 }
 
-/* cyclic_write(specs, values, entries, last_values, last_stored, params, start) -> stop
- * CyclicObjects.write's loop from object `start`: per object (specs: (sub, size, signed, key)),
- * skipped while its value equals the last one written and its stored bytes are still those;
- * else packed little-endian into entries[i][sub], its param() cache entry dropped (del, so the
- * cache's epoch moves) and remembered. Stops at the first value that is not an exact int or
- * does not fit, returning its position for the Python loop (which names the object in its
- * error); returns len(values) when done. */
-static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    (void)self;
-    if (nargs != 7) {
-        PyErr_Format(PyExc_TypeError, "cyclic_write takes 7 arguments (%zd given)", nargs);
-        return NULL;
-    }
-    PyObject *specs = args[0], *entries = args[2], *last_values = args[3], *last_stored = args[4],
-             *params = args[5];
-    Py_ssize_t start = PyLong_AsSsize_t(args[6]);
-    if (start == -1 && PyErr_Occurred())
-        return NULL;
-    PyObject *values = PySequence_Fast(args[1], "values must be a sequence");
-    if (values == NULL)
-        return NULL;
-    Py_ssize_t n = PySequence_Fast_GET_SIZE(values);
-    if (!PyTuple_Check(specs) || !PyList_Check(entries) || !PyList_Check(last_values) || !PyList_Check(last_stored) ||
-        !PyDict_Check(params) || PyTuple_GET_SIZE(specs) < n || PyList_GET_SIZE(entries) < n ||
-        PyList_GET_SIZE(last_values) < n || PyList_GET_SIZE(last_stored) < n || start < 0) {
-        Py_DECREF(values);
-        PyErr_SetString(PyExc_TypeError, "cyclic_write: layout, entries and last values do not match");
-        return NULL;
-    }
-    PyObject **items = PySequence_Fast_ITEMS(values);
+/* cyclic_write's loop over values[start:n]: the index it stopped at (n: done), or -1 with an
+ * exception set. The caller checked the containers' types and sizes. */
+static Py_ssize_t cyclic_store(PyObject *specs, PyObject **items, Py_ssize_t n, PyObject *entries,
+                               PyObject *last_values, PyObject *last_stored, PyObject *params, Py_ssize_t start) {
     Py_ssize_t i = start;
     for (; i < n; i++) {
         PyObject *value = items[i], *spec = PyTuple_GET_ITEM(specs, i), *entry = PyList_GET_ITEM(entries, i);
@@ -391,11 +365,11 @@ static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t 
         PyObject *sub = PyTuple_GET_ITEM(spec, 0), *key = PyTuple_GET_ITEM(spec, 3);
         int same = PyObject_RichCompareBool(value, PyList_GET_ITEM(last_values, i), Py_EQ);
         if (same < 0)
-            goto error;
+            return -1;
         if (same) {
             PyObject *stored = PyDict_GetItemWithError(entry, sub);
             if (stored == NULL && PyErr_Occurred())
-                goto error;
+                return -1;
             if ((stored == NULL ? Py_None : stored) == PyList_GET_ITEM(last_stored, i))
                 continue;
         }
@@ -421,27 +395,61 @@ static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t 
             buf[b] = (unsigned char)(u >> (8 * b));
         PyObject *data = PyBytes_FromStringAndSize((const char *)buf, size);
         if (data == NULL)
-            goto error;
+            return -1;
         if (PyDict_SetItem(entry, sub, data) < 0) {
             Py_DECREF(data);
-            goto error;
+            return -1;
         }
         if (PyDict_GET_SIZE(params) > 0) {
             int cached = PyDict_Contains(params, key);
             if (cached < 0 || (cached && PyObject_DelItem(params, key) < 0)) {
                 Py_DECREF(data);
-                goto error;
+                return -1;
             }
         }
         Py_INCREF(value);
         PyList_SetItem(last_values, i, value);    /* steals the references */
         PyList_SetItem(last_stored, i, data);
     }
+    return i;
+}
+
+/* 1: cyclic_write's containers fit n values */
+static int cyclic_layout_ok(PyObject *specs, Py_ssize_t n, PyObject *entries, PyObject *last_values,
+                            PyObject *last_stored, PyObject *params) {
+    return PyTuple_Check(specs) && PyList_Check(entries) && PyList_Check(last_values) && PyList_Check(last_stored) &&
+           PyDict_Check(params) && PyTuple_GET_SIZE(specs) >= n && PyList_GET_SIZE(entries) >= n &&
+           PyList_GET_SIZE(last_values) >= n && PyList_GET_SIZE(last_stored) >= n;
+}
+
+/* cyclic_write(specs, values, entries, last_values, last_stored, params, start) -> stop
+ * CyclicObjects.write's loop from object `start`: per object (specs: (sub, size, signed, key)),
+ * skipped while its value equals the last one written and its stored bytes are still those;
+ * else packed little-endian into entries[i][sub], its param() cache entry dropped (del, so the
+ * cache's epoch moves) and remembered. Stops at the first value that is not an exact int or
+ * does not fit, returning its position for the Python loop (which names the object in its
+ * error); returns len(values) when done. */
+static PyObject *cyclic_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 7) {
+        PyErr_Format(PyExc_TypeError, "cyclic_write takes 7 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    Py_ssize_t start = PyLong_AsSsize_t(args[6]);
+    if (start == -1 && PyErr_Occurred())
+        return NULL;
+    PyObject *values = PySequence_Fast(args[1], "values must be a sequence");
+    if (values == NULL)
+        return NULL;
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(values);
+    if (!cyclic_layout_ok(args[0], n, args[2], args[3], args[4], args[5]) || start < 0) {
+        Py_DECREF(values);
+        PyErr_SetString(PyExc_TypeError, "cyclic_write: layout, entries and last values do not match");
+        return NULL;
+    }
+    Py_ssize_t i = cyclic_store(args[0], PySequence_Fast_ITEMS(values), n, args[2], args[3], args[4], args[5], start);
     Py_DECREF(values);
-    return PyLong_FromSsize_t(i);
-error:
-    Py_DECREF(values);
-    return NULL;
+    return i < 0 ? NULL : PyLong_FromSsize_t(i);
 }
 
 /* rpdo_store(codec, data, store, params, on_write, write_rules, aborted, stats) -> None
@@ -469,8 +477,12 @@ static int count_malformed(PyObject *stats) {
 }
 
 /* rpdo_store's loop: 0, or -1 with an exception set */
+/* accepted (NULL: none): {key: chunk} of the application objects whose on_write is a pure check
+ * (the same chunk always passes: JointDriveNode.PURE_WRITE_CHECK) that it let pass; a chunk
+ * equal to the one it passed skips the call (issue 35: six calls a cycle for a mode of
+ * operation that does not change). */
 static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject *params, PyObject *on_write,
-                      PyObject *write_rules, PyObject *aborted, PyObject *stats) {
+                      PyObject *write_rules, PyObject *aborted, PyObject *stats, PyObject *accepted) {
     if (!PyTuple_Check(codec) || !PyDict_Check(store) || !PyDict_Check(params)) {
         PyErr_SetString(PyExc_TypeError, "rpdo_store: a codec tuple, a store dict and a cache dict");
         return -1;
@@ -502,9 +514,20 @@ static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject
             Py_DECREF(chunk);
             return -1;
         }
+        int passed = 0;                          /* on_write let this very chunk pass before */
+        if (index_value >= 0x2000 && reacts && accepted != NULL) {
+            PyObject *known = PyDict_GetItemWithError(accepted, key);
+            if (known == NULL && PyErr_Occurred()) {
+                Py_DECREF(chunk);
+                return -1;
+            }
+            passed = known != NULL && PyBytes_CheckExact(known) && PyBytes_CheckExact(chunk) &&
+                     PyBytes_GET_SIZE(known) == PyBytes_GET_SIZE(chunk) &&
+                     memcmp(PyBytes_AS_STRING(known), PyBytes_AS_STRING(chunk), PyBytes_GET_SIZE(chunk)) == 0;
+        }
         PyObject *result = index_value < 0x2000
             ? PyObject_CallFunctionObjArgs(write_rules, index, sub, obj, chunk, NULL)
-            : reacts ? PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL) : Py_NewRef(Py_None);
+            : reacts && !passed ? PyObject_CallFunctionObjArgs(on_write, index, sub, chunk, NULL) : Py_NewRef(Py_None);
         if (result == NULL) {
             if (!PyErr_ExceptionMatches(aborted)) {
                 Py_DECREF(chunk);
@@ -517,6 +540,11 @@ static int store_rpdo(PyObject *codec, PyObject *data, PyObject *store, PyObject
             continue;
         }
         Py_DECREF(result);
+        if (index_value >= 0x2000 && reacts && accepted != NULL && !passed && PyBytes_CheckExact(chunk) &&
+            PyDict_SetItem(accepted, key, chunk) < 0) {
+            Py_DECREF(chunk);
+            return -1;
+        }
         PyObject *entry = PyDict_GetItemWithError(store, index);
         if (entry == NULL) {
             if (PyErr_Occurred() || (entry = PyDict_New()) == NULL) {
@@ -549,7 +577,7 @@ static PyObject *rpdo_store(PyObject *self, PyObject *const *args, Py_ssize_t na
         PyErr_Format(PyExc_TypeError, "rpdo_store takes 8 arguments (%zd given)", nargs);
         return NULL;
     }
-    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7]) < 0)
+    if (store_rpdo(args[0], args[1], args[2], args[3], args[4], args[5], args[6], args[7], NULL) < 0)
         return NULL;
     Py_RETURN_NONE;
 }
@@ -587,9 +615,10 @@ static int attr_true(PyObject *obj, PyObject *name) {
 /* A route (runner._direct_route): the node, its PDO engine, its write rules (the bound method in
  * its write callbacks), SimNode.on_rpdo, and what the node sets once in __init__: its write
  * callbacks list, data store, param() cache, statistics, fault switches, and its lock's acquire
- * and release. */
+ * and release; then its class's on_write function when that is a pure check (else None) and
+ * the node's dict of the chunks it let pass (store_rpdo's `accepted`). */
 enum { R_NODE, R_ENGINE, R_WRITE_RULES, R_ON_RPDO, R_CALLBACKS, R_STORE, R_PARAMS, R_STATS, R_FAULTS, R_ACQUIRE,
-       R_RELEASE, R_SIZE };
+       R_RELEASE, R_PURE_ON_WRITE, R_ACCEPTED, R_SIZE };
 
 /* The frame's RPDO codec when it takes runner.Simulator._route_frames's direct path (a live
  * node, OPERATIONAL, its RPDO compiled, the frame long enough, the node's write rules its only
@@ -662,8 +691,13 @@ static int route_rpdo(PyObject **route, PyObject *data, PyObject *codec, PyObjec
     }
     Py_DECREF(got);
     int rc = -1;
+    /* the memo only while node.on_write is the class's pure check (not one patched in or overridden) */
+    PyObject *accepted = route[R_PURE_ON_WRITE] != Py_None && PyDict_Check(route[R_ACCEPTED]) &&
+                         PyMethod_Check(on_write) && PyMethod_GET_FUNCTION(on_write) == route[R_PURE_ON_WRITE] &&
+                         PyMethod_GET_SELF(on_write) == node ? route[R_ACCEPTED] : NULL;
     if (PyObject_SetAttr(node, s_in_rpdo, Py_True) == 0)
-        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats);
+        rc = store_rpdo(codec, data, route[R_STORE], route[R_PARAMS], on_write, route[R_WRITE_RULES], aborted, stats,
+                        accepted);
     Py_DECREF(on_write);
     PyObject *type, *value, *tb;                      /* the finally: keep the exception aside */
     PyErr_Fetch(&type, &value, &tb);
@@ -1020,18 +1054,22 @@ error:
  * velocity, torque, following error count, temperature count), or None when the drive leaves
  * its state (a stop ends, a following-error timeout, over temperature) or a value is not finite:
  * the Python path runs the SYNC end. */
-static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    (void)self;
-    if (nargs != 20) {
-        PyErr_Format(PyExc_TypeError, "drive_end takes 20 arguments (%zd given)", nargs);
-        return NULL;
-    }
+/* drive_end's work on its 20 arguments: 1 with the results in *o, 0 for None (the Python path's
+ * SYNC end), -1 with an exception set */
+struct end_out {
+    double brake_closing, fe_time;
+    int engaged, following_error;
+    long sw;
+    long long v[6];
+};
+
+static int end_compute(PyObject *const *args, struct end_out *o) {
     long flags = PyLong_AsLong(args[1]), option = PyLong_AsLong(args[2]), state_bits = PyLong_AsLong(args[14]);
     double a[20];
     for (int i = 0; i < 20; i++)
         a[i] = (i == 1 || i == 2 || i == 14) ? 0.0 : PyFloat_AsDouble(args[i]);
     if (PyErr_Occurred())
-        return NULL;
+        return -1;
     const double dt = a[0], v_ref = a[3], brake_engage = a[5], q_ref = a[6], q_measured = a[7], fe_window = a[8];
     const double fe_timeout_ms = a[10], temperature = a[11], over_temperature = a[12], warn_temperature = a[13];
     const double k = a[15], rated = a[16];
@@ -1047,7 +1085,7 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
         brake_closing = 0.0;
     int engaged = brake_closing >= brake_engage;
     if (letting_go && engaged)
-        Py_RETURN_NONE;                     /* the stop ends: the drive leaves operation */
+        return 0;                           /* the stop ends: the drive leaves operation */
     /* following error */
     double err = q_ref - q_measured;
     int following_error;
@@ -1055,13 +1093,13 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
         fe_time += dt;
         following_error = 1;
         if (fe_time * 1000.0 > fe_timeout_ms)
-            Py_RETURN_NONE;                 /* the drive faults */
+            return 0;                       /* the drive faults */
     } else {
         fe_time = 0.0;
         following_error = 0;
     }
     if (temperature > over_temperature)
-        Py_RETURN_NONE;
+        return 0;
     /* _update_od's statusword (CSP) */
     long sw = state_bits | SW_REMOTE;
     if (flags & END_LIMIT_ACTIVE)
@@ -1074,14 +1112,75 @@ static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nar
         sw |= SW_OP_MODE_12;
     if (!following_error && !enabled)
         sw |= SW_TARGET_REACHED;
-    long long v[6];
-    if (!actual_counts(k, rated, a[17], q_ref, a[18], a[19], q_measured, temperature, v))
+    if (!actual_counts(k, rated, a[17], q_ref, a[18], a[19], q_measured, temperature, o->v))
+        return 0;
+    o->brake_closing = brake_closing;
+    o->fe_time = fe_time;
+    o->engaged = engaged;
+    o->following_error = following_error;
+    o->sw = sw;
+    return 1;
+}
+
+static PyObject *drive_end(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 20) {
+        PyErr_Format(PyExc_TypeError, "drive_end takes 20 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    struct end_out o;
+    int rc = end_compute(args, &o);
+    if (rc < 0)
+        return NULL;
+    if (rc == 0)
         Py_RETURN_NONE;
-    return Py_BuildValue("(dOdOlLLLLLL)", brake_closing, engaged ? Py_True : Py_False, fe_time,
-                         following_error ? Py_True : Py_False, sw, v[0], v[1], v[2], v[3], v[4], v[5]);
+    return Py_BuildValue("(dOdOlLLLLLL)", o.brake_closing, o.engaged ? Py_True : Py_False, o.fe_time,
+                         o.following_error ? Py_True : Py_False, o.sw, o.v[0], o.v[1], o.v[2], o.v[3], o.v[4], o.v[5]);
+}
+
+/* drive_end_write(<drive_end's 20 arguments>, mode, error_code, specs, entries, last_values,
+ *                 last_stored, params)
+ * drive_end and the drive's CyclicObjects.write of (statusword, mode, the six counts, brake
+ * 1/0, error_code) in one call (issue 35: a Python write and two tuples per drive and SYNC);
+ * specs .. params: the CyclicObjects' layout and state (cyclic_write's), its store generation
+ * current (the caller checks). -> (brake_closing, brake engaged, fe_time, following_error,
+ * stop, values): stop is where the write stopped (len(values): done; else the Python loop
+ * goes on from there, which raises for a value that does not fit); or None, nothing written
+ * (drive_end's None). */
+static PyObject *drive_end_write(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    if (nargs != 27) {
+        PyErr_Format(PyExc_TypeError, "drive_end_write takes 27 arguments (%zd given)", nargs);
+        return NULL;
+    }
+    PyObject *specs = args[22], *entries = args[23], *last_values = args[24], *last_stored = args[25],
+             *params = args[26];
+    if (!cyclic_layout_ok(specs, 10, entries, last_values, last_stored, params)) {
+        PyErr_SetString(PyExc_TypeError, "drive_end_write: layout, entries and last values do not match");
+        return NULL;
+    }
+    struct end_out o;
+    int rc = end_compute(args, &o);
+    if (rc < 0)
+        return NULL;
+    if (rc == 0)
+        Py_RETURN_NONE;
+    PyObject *values = Py_BuildValue("(lOLLLLLLiO)", o.sw, args[20], o.v[0], o.v[1], o.v[2], o.v[3], o.v[4], o.v[5],
+                                     o.engaged ? 1 : 0, args[21]);
+    if (values == NULL)
+        return NULL;
+    Py_ssize_t stop = cyclic_store(specs, &PyTuple_GET_ITEM(values, 0), 10, entries, last_values, last_stored, params, 0);
+    if (stop < 0) {
+        Py_DECREF(values);
+        return NULL;
+    }
+    return Py_BuildValue("(dOdOnN)", o.brake_closing, o.engaged ? Py_True : Py_False, o.fe_time,
+                         o.following_error ? Py_True : Py_False, stop, values);
 }
 
 static PyMethodDef methods[] = {
+    {"drive_end_write", (PyCFunction)(void (*)(void))drive_end_write, METH_FASTCALL,
+     "drive_end and the drive's actual values written, in one call (see the module source)."},
     {"drive_end", (PyCFunction)(void (*)(void))drive_end, METH_FASTCALL,
      "A CSP drive's SYNC end that changes no state (see the module source)."},
     {"tpdo_burst", (PyCFunction)(void (*)(void))tpdo_burst, METH_FASTCALL,

@@ -28,6 +28,8 @@ class FtSensorNode(SimNode):
         self._sample()
 
     _scaling = (-1, (), ())
+    # (reading, its types, bias, scaling, counts, overload, the bias' values): _sample's last
+    _last_sample = (None,) * 7
 
     def _read_scaling(self) -> tuple:
         """(param() cache epoch, counts per unit and overload limit of each axis): param()'s
@@ -66,6 +68,17 @@ class FtSensorNode(SimNode):
         scaling = self._scaling
         if scaling[0] != self._params.epoch:
             scaling = self._read_scaling()
+        # The same reading (equal values of the same types), bias and scaling as the last sample
+        # (a wrench at rest, nearly every SYNC) give the same counts and overload flag: those are
+        # kept rather than worked out again (issue 35); the status and the write are as below.
+        types = [value.__class__ for value in raw]
+        last = self._last_sample
+        if last[0] == raw and last[1] == types and last[2] is self.bias and last[6] == self.bias \
+                and last[3] is scaling and last[5] == self.overload:
+            values = last[4] + [(od.FT_STATUS_OVERLOAD if self.overload else 0) |
+                                (od.FT_STATUS_TARED if self.tared else 0)]
+            self._readings.write(values)
+            return
         _, scales, limits = scaling
         # per axis as a loop over i would: value = raw - bias, its counts, overload when above
         # the axis' limit or beyond INTEGER16 (saturated); the lists each in one pass
@@ -82,5 +95,6 @@ class FtSensorNode(SimNode):
         elif self.overload and not overload:
             self.emcy(od.EMCY_NO_ERROR)
         self.overload = overload
+        self._last_sample = (raw, types, self.bias, scaling, values[:], overload, list(self.bias))
         values.append((od.FT_STATUS_OVERLOAD if overload else 0) | (od.FT_STATUS_TARED if self.tared else 0))
         self._readings.write(values)

@@ -96,6 +96,7 @@ class JointDriveNode(SimNode):
         self._update_od()
 
     WRITE_REACTIONS = frozenset({od.MODES_OF_OPERATION})     # the only object on_write looks at
+    PURE_WRITE_CHECK = True      # on_write only checks its arguments (SimNode.pure_write_check)
 
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         if index == od.MODES_OF_OPERATION and int.from_bytes(data, "little", signed=True) not in (
@@ -351,6 +352,22 @@ class JointDriveNode(SimNode):
         q_measured, q_reported, qd_reported = j.readings()
         settings = self._settings_values
         timeout = settings[7] if settings[7] is not None else self.param(od.FOLLOWING_ERROR_TIMEOUT)
+        actual = self._actual_values
+        if actual._generation == self.store_generation:
+            # the actual values written in the same call (a reset emptied the store: write() below)
+            out = core.drive_end_write(dt, flags, self._qs_option, self.v_ref, self.brake_closing,
+                                       BRAKE_ENGAGE_TIME - 1e-9, self.q_ref, q_measured, self._fe_window, self.fe_time,
+                                       timeout, j.temperature, OVER_TEMPERATURE, WARN_TEMPERATURE, STATE_BITS[state],
+                                       self._k, settings[1], q_reported, qd_reported, j.torque_reported, self.mode,
+                                       self.error_code, actual._specs, actual._entries, actual._values,
+                                       actual._stored, self._params)
+            if out is None:
+                return False
+            self.brake_closing, engaged, self.fe_time, self.following_error, stop, values = out
+            j.brake_engaged = engaged
+            if stop < len(values):       # a value the core does not write: Python's loop (and error)
+                actual.write_from(values, stop)
+            return True
         out = core.drive_end(dt, flags, self._qs_option, self.v_ref, self.brake_closing, BRAKE_ENGAGE_TIME - 1e-9,
                              self.q_ref, q_measured, self._fe_window, self.fe_time, timeout, j.temperature,
                              OVER_TEMPERATURE, WARN_TEMPERATURE, STATE_BITS[state], self._k, settings[1], q_reported,

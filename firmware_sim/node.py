@@ -440,5 +440,14 @@ class SimNode:
                 return cls.__dict__.get("WRITE_REACTIONS")
         return None
 
+    def pure_write_check(self):
+        """The on_write function in use when its class declares it a pure check (PURE_WRITE_CHECK:
+        it changes nothing and the same arguments always pass or always raise), else None: the
+        compiled core then skips the call for a chunk it let pass before (_simcore.c store_rpdo)."""
+        for cls in type(self).__mro__:
+            if "on_write" in cls.__dict__:
+                return cls.__dict__["on_write"] if cls.__dict__.get("PURE_WRITE_CHECK") else None
+        return None
+
     def on_write(self, index: int, subindex: int, data: bytes) -> None:
         """Device specific reaction to an SDO/RPDO write (called before the value is stored)."""

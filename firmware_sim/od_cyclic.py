@@ -44,13 +44,19 @@ class CyclicObjects:
             self._generation = node.store_generation
             self._entries = [store.setdefault(index, {}) for index, _, _ in self._layout]
             self._values[:] = [_UNSET] * len(self._layout)
-        entries, last_values, last_stored = self._entries, self._values, self._stored
         start = 0
         core = simcore.core
         if core is not None:
-            start = core.cyclic_write(self._specs, values, entries, last_values, last_stored, params, 0)
+            start = core.cyclic_write(self._specs, values, self._entries, self._values, self._stored, params, 0)
             if start == len(values):
                 return
+        self.write_from(values, start)
+
+    def write_from(self, values, start: int) -> None:
+        """write()'s loop in Python from object `start` (where the core stopped), the store
+        generation current."""
+        params = self._node._params
+        entries, last_values, last_stored = self._entries, self._values, self._stored
         for i in range(start, len(values)):      # where the core stopped, or all of them
             value = values[i]
             index, sub, pack = self._layout[i]

@@ -536,6 +536,10 @@ class EndEffectorModel:
         if self.jammed:
             return
         grip, turns, grip_speed, screw_speed = self.grip, self.turns, self.grip_speed, self.screw_speed
+        if n > 1 and grip_speed * h == 0.0 and screw_speed * h == 0.0:
+            # at rest (nearly every SYNC): the first sub-step puts grip and turns in their ranges
+            # as floats, where adding a zero and clamping again gives the very same floats
+            n = 1
         for _ in range(n):
             grip = min(1.0, max(0.0, grip + grip_speed * h))
             turns = max(0.0, turns + screw_speed * h)

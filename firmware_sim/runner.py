@@ -65,13 +65,16 @@ def _direct_route(node: SimNode) -> tuple | None:
     checks per frame that it is the node's: no line gate, no subclass's own), and what a node
     sets once in __init__ (its write callbacks list, data store, param() cache, statistics,
     fault switches, its lock's acquire and release), so the core stores an RPDO as
-    PdoEngine.on_rpdo does without looking them up per frame; None while the node has other
-    write callbacks."""
+    PdoEngine.on_rpdo does without looking them up per frame; then its on_write function if a
+    pure check (SimNode.pure_write_check) and the node's memo of the chunks that passed it, which
+    lives as long as the node (a pure check's answer never changes); None while the node has
+    other write callbacks."""
     callbacks = node.local._write_callbacks
     if len(callbacks) != 1 or callbacks[0] != node._on_od_write:
         return None
+    accepted = node.__dict__.setdefault("_accepted_writes", {})
     return (node, node.pdo_engine, callbacks[0], SimNode.on_rpdo, callbacks, node.local.data_store, node._params,
-            node.stats, node.faults, node._lock.acquire, node._lock.release)
+            node.stats, node.faults, node._lock.acquire, node._lock.release, node.pure_write_check(), accepted)
 
 
 def _tpdo_route(node: SimNode, send_many) -> tuple:

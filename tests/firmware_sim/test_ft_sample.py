@@ -104,3 +104,43 @@ def test_the_sample_counts_saturates_and_flags_overload_as_the_loop(wrenches, bi
         assert node.get(od.FT_STATUS) & od.FT_STATUS_OVERLOAD == (od.FT_STATUS_OVERLOAD if overload else 0)
         assert len(node.emcys) - emcys == (overload != expected_overload)
         expected_overload = overload
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(st.lists(_FLOATS, min_size=6, max_size=6), st.integers(1, 3), st.booleans(),
+                          st.sampled_from([None, 1, 2]), st.booleans(), st.booleans()), min_size=1, max_size=5),
+       st.lists(_FLOATS, min_size=6, max_size=6), st.integers(1, 2000), st.integers(0, 65535))
+def test_a_repeated_reading_samples_as_a_fresh_one(steps, bias, kf, flim):
+    """A reading equal to the last (the sensor at rest) reuses the last counts: the stored
+    values, status, overload flag and EMCYs are those of a sample worked out afresh, whatever
+    happens between (a tare, the bias changed in place, numpy scalars, the overload flag or the
+    scaling changed from outside)."""
+    sim, node = _sensor()
+    traces = []
+    for fresh in (False, True):
+        node.put(od.FT_FORCE_COUNTS_PER_N, 0, kf)
+        node.put(od.FT_OVERLOAD_LIMIT, 1, flim)
+        node.bias, node.overload, node.tared, node.pending_tare = list(bias), False, False, None
+        node._last_sample = (None,) * 7
+        node.emcys = []
+        trace = []
+        for wrench, repeats, numpy_wrench, tare, poke_bias, flip in steps:
+            for _ in range(repeats):
+                if fresh:
+                    node._last_sample = (None,) * 7
+                sim.plant.wrench = [np.float64(w) for w in wrench] if numpy_wrench else list(wrench)
+                try:
+                    with np.errstate(over="ignore"):      # a numpy reading times its scale may overflow
+                        node._sample()
+                except (OverflowError, ValueError) as exc:
+                    trace.append(type(exc).__name__)
+                    continue
+                trace.append(([node.get(od.FT_VALUES, i) for i in range(1, 7)], node.get(od.FT_STATUS),
+                              node.overload, list(node.emcys)))
+            node.pending_tare = tare
+            if poke_bias:
+                node.bias[0] = node.bias[0] + 1.0
+            if flip:
+                node.overload = not node.overload
+        traces.append(repr(trace))
+    assert traces[0] == traces[1]

@@ -114,3 +114,88 @@ def test_the_direct_path_takes_the_cycle_rpdos_and_leaves_the_rest():
         assert seen == [cobs[0]]
     finally:
         node.__dict__.pop("on_rpdo", None)
+
+
+def _mode_offsets(sim: Simulator) -> dict:
+    """{cob: byte offset of the mode of operation} of the RPDOs that map it."""
+    out = {}
+    for node in sim.nodes.values():
+        for cob, pdo in (node.pdo_engine.rpdos or {}).items():
+            offset = 0
+            for index, _, size in pdo.entries:
+                if index == od.MODES_OF_OPERATION:
+                    out[cob] = offset
+                offset += size
+    return out
+
+
+@needs_core
+@settings(max_examples=100, deadline=None)
+@given(bursts=st.lists(st.lists(st.sampled_from([8, 1, 3, 0, -1]), min_size=1, max_size=6), min_size=1, max_size=5))
+def test_modes_of_operation_routed_in_the_core_are_stored_as_python_stores_them(bursts):
+    """Bursts carrying modes of operation the drives take or refuse, again and again: the core
+    skips the drive's check for a chunk it passed before (SimNode.pure_write_check), and stores,
+    refuses and counts as the pure-Python path does."""
+    traces = []
+    for use_core in (True, False):
+        sent: list = []
+        sim = _simulator(sent)
+        cobs = sorted(cob for node in sim.nodes.values() for cob in node.rpdo_cob_ids())
+        with core_switched(use_core):
+            sim._route_frames([(cob, bytes(8)) for cob in cobs])
+            offsets = _mode_offsets(sim)
+            assert offsets
+            trace = []
+            for modes in bursts:
+                burst = []
+                for n, (cob, at) in enumerate(sorted(offsets.items())):
+                    data = bytearray(8)
+                    data[at] = modes[n % len(modes)] & 0xFF
+                    burst.append((cob, bytes(data)))
+                sim._route_frames(burst)
+                trace.append(_state(sim))
+        traces.append((trace, sent))
+    assert traces[0] == traces[1]
+
+
+@needs_core
+def test_an_unchanged_mode_of_operation_is_checked_once():
+    """The drive's on_write runs for a mode of operation it has not let pass yet, not again for
+    the same bytes; a refused mode is checked every time; a patched on_write is always called."""
+    import sys
+    from spacearm.firmware_sim.joint_drive import JointDriveNode
+    sent: list = []
+    sim = _simulator(sent)
+    cobs = sorted(cob for node in sim.nodes.values() for cob in node.rpdo_cob_ids())
+    sim._route_frames([(cob, bytes(8)) for cob in cobs])
+    offsets = _mode_offsets(sim)
+    for node in sim.nodes.values():
+        node.__dict__.get("_accepted_writes", {}).clear()
+    calls = []
+    code = JointDriveNode.on_write.__code__
+
+    def profile(frame, event, arg):
+        if event == "call" and frame.f_code is code:
+            calls.append(frame.f_locals["data"])
+
+    def burst(mode):
+        frames = []
+        for cob, at in sorted(offsets.items()):
+            data = bytearray(8)
+            data[at] = mode & 0xFF
+            frames.append((cob, bytes(data)))
+        return frames
+
+    sys.setprofile(profile)
+    try:
+        sim._route_frames(burst(8))
+        first = len(calls)
+        sim._route_frames(burst(8))
+        second = len(calls) - first
+        sim._route_frames(burst(3))
+        sim._route_frames(burst(3))
+        refused = len(calls) - first - second
+    finally:
+        sys.setprofile(None)
+    assert first == len(offsets) and second == 0 and refused == 2 * len(offsets)
+    assert sim.stats.internal_errors == 0

@@ -380,3 +380,44 @@ def test_a_sync_end_in_the_core_is_the_python_end(state, v_ref, ramp, brake_clos
                            j.brake_engaged, sorted((i, sorted(v.items())) for i, v in drive.local.data_store.items()),
                            drive.stats.emcy_sent - emcy)))
     assert after[0] == after[1]
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(error_code=st.sampled_from([0, 0x8611, 0xFFFF, 0x10000, -1]), mode=st.sampled_from([8, 1, 127, 128]),
+       stale=st.booleans(), cached=st.booleans(), again=st.booleans(), q=st.floats(-3.0, 3.0),
+       temperature=st.sampled_from([25.0, 76.0]), sw_bits=st.sampled_from(["OPERATION_ENABLED", "SWITCH_ON_DISABLED"]))
+def test_a_sync_end_writing_its_values_in_the_core_is_the_python_end(error_code, mode, stale, cached, again, q,
+                                                                     temperature, sw_bits):
+    """drive_end_write (the SYNC end and the actual values' write in one core call) against the
+    pure-Python SYNC end: the same stored bytes, param() cache and drive state, whether the
+    store was just emptied (the core's write is then left to CyclicObjects.write), a value is
+    cached by param(), the values repeat (nothing rewritten), or one does not fit its object
+    (an error code or mode out of range: the same ValueError, the objects before it written)."""
+    from spacearm.base.canopen import od
+    from spacearm.base.canopen.cia402_defs import State
+    after = []
+    for use_core in (True, False):
+        drive = _drive()
+        drive.on_sync_begin(0.02)
+        j = drive.joint
+        j.q, j.temperature = q, temperature
+        drive.state, drive.error_code, drive.mode = State[sw_bits], error_code, mode
+        drive.q_ref = q
+        if stale:
+            drive.store_generation += 1
+        if cached:
+            drive.param(od.POSITION_ACTUAL)
+        outcome = []
+        with core_switched(use_core):
+            for _ in range(2 if again else 1):
+                try:
+                    drive.on_sync_end(0.02)
+                    outcome.append(None)
+                except ValueError as exc:
+                    outcome.append(str(exc))
+        after.append(repr(({name: getattr(drive, name) for name in DRIVE_FIELDS + ("brake_closing", "following_error")},
+                           j.brake_engaged, sorted((i, sorted(v.items())) for i, v in drive.local.data_store.items()),
+                           sorted(drive._params.items()), outcome)))
+        drive.error_code, drive.mode = 0, 8
+    assert after[0] == after[1]
