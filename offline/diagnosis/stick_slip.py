@@ -59,6 +59,10 @@ STRIBECK_VELOCITY_RANGE = (0.002, 0.1)     # rad/s (m/s), where the decay speed 
 # the control windows' peaks as high as the events').
 BREAK_MARGIN = 10           # rows (0.2 s at 50 Hz)
 RUNNING_SWING = 3.0         # noise levels: a control window's residual swinging more is no running (see below)
+# ... a null taken from such windows only where the starts' median peak excess stands this many noise
+# levels out (the stiction large enough to disturb the runs): one window swinging 3 N m beside 0.5
+# N m peaks at the starts named 3 N m of Coulomb friction on a sine "stiction" (test_diagnosis_honesty.py)
+LARGE_STICTION = 5.0
 STUCK_SPEED = 1e-3          # rad/s (m/s): a recorded joint slower than this has not broken free
 # A Stribeck law whose running friction at the joint's typical speed is within a tenth of its
 # static level is Coulomb friction to the precision a size is stated with (15 %)
@@ -165,9 +169,10 @@ def stiction_by_breakaway(chosen: ChannelFit | None, j: int, nominal, apply_fits
         # development seed 8101), so they measure the effect, not the noise on a maximum. The
         # null is then taken from the windows where the recording runs with the chosen law's replay
         # (its swing about the replay within RUNNING_SWING noise levels), where there are any: a single
-        # such window's maximum scatters by about the channel's noise (_scatter)
+        # such window's maximum scatters by about the channel's noise (_scatter); and only where the
+        # starts' peaks stand LARGE_STICTION noise levels out
         clean = running_windows(tau_real - tau_chosen, controls, control_ends, noise)[control_train]
-        if 0 < clean.sum() < len(clean):
+        if 0 < clean.sum() < len(clean) and float(np.median(seen)) > LARGE_STICTION * noise:
             # each side's own scatter (Welch): the starts' peaks differ by the move that follows them
             # (12.9-97.8 N m over five starts, 110 N m of stiction, test_stiction_disturbing_the_runs.py),
             # the running windows' by the noise on a maximum, taken as at least the channel's noise
