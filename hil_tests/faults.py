@@ -133,8 +133,11 @@ class Stack:
             from spacearm.base.config.bus import load_bus_config, DEFAULT_BUS_CONFIG
             config = load_bus_config(DEFAULT_BUS_CONFIG)
             # No controller heartbeat from the test: the drives must notice a killed daemon.
+            # Its SDO reads are the test's look at the drives, not a device's timing: a daemon
+            # cycling flat out beside them on a loaded machine (CI at load 9) kept three reads
+            # of 0.5 s each unanswered, so they wait as long as the fault-injection unit does.
             config = config.model_copy(update={"bus": config.bus.model_copy(
-                update={"master_heartbeat_period": 0.0})})
+                update={"master_heartbeat_period": 0.0, "sdo_timeout": 10.0})})
             self._net = ArmNetwork(self.bus, config).connect()
             self._rig = SimControl(self._net)
         return self._rig
