@@ -257,8 +257,14 @@ class JointModel:
 
     def readings(self) -> tuple[float, float, float]:
         """(q_measured, q_reported, qd_reported) in one call: a drive's SYNC end reads all three
-        (issue 35), the encoder's reading worked out once."""
-        q_measured = self.q_measured
+        (issue 35), the encoder's reading worked out once (q_measured's body inline: a property call less a SYNC)."""
+        p = self.params
+        if p is not self._quantum_of:
+            self._quantum_of, self._quantum = p, p.position_quantum
+        q_measured = self.q + p.encoder_bias
+        quantum = self._quantum
+        if not quantum <= 0.0:       # q_measured's test as it is written there (a NaN step rounds and raises)
+            q_measured = round(q_measured / quantum) * quantum
         if self.feedback is None:
             return q_measured, q_measured, self.qd
         return q_measured, self.feedback.output, self.feedback_velocity.output
