@@ -149,8 +149,8 @@ class CyclicIO:
                     report = bringup.get(d.name)
                     if report is not None and report.master_following_error:
                         self._check_following_error(d)
-                d.step()
-                if joint:
+                    # the RPDOs packed from the values the step computed (drivers/joint_rpdos.py)
+                    packed = d.step_frames()
                     axis = d.axis
                     if axis.fault_reset_failed:
                         axis.fault_reset_failed = False
@@ -158,13 +158,20 @@ class CyclicIO:
                                     f"{d.label}: fault reset did not clear the fault "
                                     f"(error 0x{d.value(od.ERROR_CODE):04X} {emcy_text(d.value(od.ERROR_CODE))})",
                                     d.value(od.ERROR_CODE))
+                        packed = None    # packed again below: an event's callback may change a value
                     if axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
+                        packed = None
+                else:
+                    d.step()
+                    packed = None
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == operational:
                     packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
-                    if packs is None:
+                    if packed is not None:
+                        frames += packed
+                    elif packs is None:
                         frames += d.rpdo_frames()
                     else:
                         get = d.rpdo_values.get
@@ -339,7 +346,11 @@ class CyclicIO:
         with self._lock:
             sync = self._sync
             for node in plan.nodes:
-                node.driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
+                driver = node.driver
+                if node.keys is driver.tpdo_keys:    # every TPDO of the node: kept as one tuple
+                    driver.latest = node.unpack(joined, node.offset)
+                else:
+                    driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
                 node.health.life_sync = sync
             self._received.update(plan.cobs)
             stats.rx_frames += count
