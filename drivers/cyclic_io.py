@@ -15,6 +15,7 @@ from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState,
                                       PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+from spacearm.base.canopen.cia402_defs import State
 from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
@@ -30,6 +31,8 @@ class ArmState:
     end_effector: EndEffectorState | None
     ft: FtState | None
     nodes: dict[str, NodeHealth]
+    # read(joints=False): per joint (position, velocity, torque, state) instead of `joints`
+    readings: list[tuple[float, float, float, State]] | None = None
 
     @property
     def joint_positions(self) -> list[float]:
@@ -241,11 +244,13 @@ class CyclicIO:
         with self._lock:
             return self._expected_tpdos() <= self._received
 
-    def read(self, complete: bool | None = None, nodes: bool = True) -> ArmState:
+    def read(self, complete: bool | None = None, nodes: bool = True, joints: bool = True) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
         tpdos_complete(): whether they all belong to the last SYNC. ``nodes=False`` leaves
         ArmState.nodes empty, for a caller that reads the nodes' health only when data is
-        missing (the daemon's cycle: a snapshot per node every cycle it never looked at)."""
+        missing (the daemon's cycle: a snapshot per node every cycle it never looked at).
+        ``joints=False`` leaves ArmState.joints empty and gives ArmState.readings instead:
+        the four values per joint the daemon's Measurement takes, without a JointState each."""
         with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
@@ -253,10 +258,11 @@ class CyclicIO:
             state = _new(ArmState)
             state.__dict__ = {
                 "sync": self._sync, "complete": complete,
-                "joints": [j.state() for j in self.joints],
+                "joints": [j.state() for j in self.joints] if joints else [],
                 "end_effector": self.end_effector.state() if self.end_effector else None,
                 "ft": self.ft.state() if self.ft else None,
-                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {}}
+                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {},
+                "readings": None if joints else [j.reading() for j in self.joints]}
             return state
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,

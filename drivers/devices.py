@@ -230,6 +230,7 @@ class JointDriver(DeviceDriver):
         # the same objects read by position from a burst's tuple (drivers/reported_values.py)
         self._state_at = self.tuple_reader(self._state_keys) if self._reported is not None else None
         self._step_at = self.tuple_reader((_STATUSWORD, _POSITION_ACTUAL))
+        self._reading_at = self.tuple_reader(_STATE_KEYS[:4]) if self._state_at is not None else None
 
     def set_mode(self, mode: int) -> None:
         """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
@@ -373,6 +374,20 @@ class JointDriver(DeviceDriver):
             "mode": reported[6],
         }
         return joint
+
+    def reading(self) -> tuple[float, float, float, State]:
+        """(position, velocity, torque, state) as state() gives them, without the JointState
+        around them (the daemon's Measurement takes these four; issue 35)."""
+        latest = self.latest
+        if latest is None or self._reading_at is None:
+            joint = self.state()
+            return joint.position, joint.velocity, joint.torque, joint.state
+        statusword, position, velocity, torque = self._reading_at(latest)
+        state = _STATES.get(statusword)
+        if state is None:
+            state = _STATES[statusword] = decode_statusword(statusword)
+        k = self.k
+        return position / k, velocity / k, torque / 1000.0 * self.rated_joint_torque, state
 
     def _state_of_defaults(self) -> JointState:
         """state() with every object the drive has not reported yet at its default."""

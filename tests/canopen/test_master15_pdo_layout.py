@@ -108,3 +108,20 @@ def test_a_new_layout_merges_the_tuple_of_the_old_one_first():
     assert joint._values == expected.joints[0].values
     net.network.listeners[0].on_frames(frames, 0.0)         # the old plan: its keys are no longer the layout's
     assert joint.latest is None
+
+
+def test_a_joints_reading_is_its_states_four_values_and_read_gives_them_instead():
+    net, = _nets(1)
+    rng = random.Random(1505)
+    for round_ in range(40):
+        frames = _tpdo_frames(net, rng)
+        if round_ % 4 == 1:
+            rng.shuffle(frames)      # the dicts' path
+        net.network.listeners[0].on_frames(frames, 0.0)
+        for joint in net.joints:
+            state = joint.state()
+            assert joint.reading() == (state.position, state.velocity, state.torque, state.state)
+        arm = net.read(True, nodes=False, joints=False)
+        assert arm.joints == [] and arm.readings == [j.reading() for j in net.joints]
+        assert net.read(True, nodes=False).readings is None
+
