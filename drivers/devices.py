@@ -273,6 +273,11 @@ class JointDriver(DeviceDriver):
 
     @property
     def position(self) -> float:
+        # from a burst's tuple, not merged into the dict for this (the master's following-error
+        # check reads it every cycle on a drive without 6065h)
+        latest = self.latest
+        if latest is not None and self._step_at is not None:
+            return self._step_at(latest)[1] / self.k
         return self.values.get(_POSITION_ACTUAL, 0) / self.k
 
     def set_layout(self, rpdos, tpdos) -> None:

@@ -66,6 +66,7 @@ def test_a_burst_kept_as_tuples_reads_as_the_frames_decoded_one_by_one():
             frame_net.network.listeners[0].on_frame(can_id, data, 0.0)
         assert _states(burst_net) == _states(frame_net)
         for a, b in zip(burst_net.joints, frame_net.joints):
+            assert a.position == b.position
             assert a.step_frames() == b.step_frames()
         if round_ % 3 == 0:      # the dicts compared (which merges the tuples) only now and then
             assert ({n: dict(d.values) for n, d in burst_net.drivers.items()}
