@@ -51,6 +51,23 @@ fifth of the daemon's half. What a swap of each part for a replay of its last re
 and RPDO packing ~25 us, the joints' states ~12 us per cycle; the lever there is the data layout
 (RPDOs packed from the values just computed, TPDO values as per-PDO tuples, not (index, sub) dict
 keys at ~36 ns a lookup and round() at ~65 ns).
+The master's PDOs by data layout (issue 35, 2026-11-30): a joint's RPDOs are packed straight
+from the values its step computed (drivers/joint_rpdos.py: the layout compiled once into one
+generated call per driver, no (index, sub) lookup per object, no round() of a zero
+feed-forward); a SYNC burst that brings all of a node's TPDOs in its layout's order is kept as
+the node's tuple (drivers/reported_values.py), read by position by the joints' step and state
+and the end effector's and F/T's state, and merged into the values dict only when the dict is
+read; the daemon's read takes each joint's position, velocity, torque and state without a
+JointState (ArmState.readings), the Measurement's columns by one zip. Same-process A/B (old and
+new path every 25 cycles, 6000 cycles, medians of blocks, load 20): cycle thread CPU 253.5 ->
+226.3 us recording on, 232.4 -> 200.8 us off, Panda 285.8 -> 266.3 us (the read alone 3.7-6.7
+us of it at load 11). This bench, 5 rounds alternating with main (load 13.7-19.4, steal <= 0.4
+%), medians: 8 nodes virtual recording on 0.355 -> 0.344 % (daemon CPU 0.123 -> 0.116 ms),
+loopback 0.407 -> 0.349 % (daemon process 0.358 -> 0.305 ms), Panda 0.364 -> 0.372 % (daemon
+0.131 -> 0.126 ms): at that load a run's share varies by 1.5x, the rows do not resolve ~10 %.
+lockstep_fingerprint identical to main with the core and without. Tried and left: the trace
+tap taking a burst as one list laid out by slices (3x faster in a loop, nothing in situ: -1 and
+-2 us in two same-process A/Bs).
 
 Where one lockstep cycle's thread CPU goes (8 nodes, virtual bus, recording on; cProfile own
 time grouped by part, `bench/profile_lockstep.py --record --cycles 1000`; 2026-11-29, load

@@ -15,6 +15,7 @@ from spacearm.drivers.devices import (DeviceDriver, EeCommand, EndEffectorState,
                                       PdoCodec)
 from spacearm.drivers.errors import DriverError, emcy_text
 from spacearm.drivers.health import NodeHealth
+from spacearm.base.canopen.cia402_defs import State
 from spacearm.drivers.tpdo_burst import MAX_PLANS, build_plan, first, second
 
 logger = logging.getLogger(__name__)
@@ -30,6 +31,8 @@ class ArmState:
     end_effector: EndEffectorState | None
     ft: FtState | None
     nodes: dict[str, NodeHealth]
+    # read(joints=False): per joint (position, velocity, torque, state) instead of `joints`
+    readings: list[tuple[float, float, float, State]] | None = None
 
     @property
     def joint_positions(self) -> list[float]:
@@ -149,8 +152,8 @@ class CyclicIO:
                     report = bringup.get(d.name)
                     if report is not None and report.master_following_error:
                         self._check_following_error(d)
-                d.step()
-                if joint:
+                    # the RPDOs packed from the values the step computed (drivers/joint_rpdos.py)
+                    packed = d.step_frames()
                     axis = d.axis
                     if axis.fault_reset_failed:
                         axis.fault_reset_failed = False
@@ -158,13 +161,20 @@ class CyclicIO:
                                     f"{d.label}: fault reset did not clear the fault "
                                     f"(error 0x{d.value(od.ERROR_CODE):04X} {emcy_text(d.value(od.ERROR_CODE))})",
                                     d.value(od.ERROR_CODE))
+                        packed = None    # packed again below: an event's callback may change a value
                     if axis.fault_cleared:
                         self._event("fault_cleared", d, f"{d.label}: fault cleared")
+                        packed = None
+                else:
+                    d.step()
+                    packed = None
                 # Also to a node whose heartbeat was lost: it may still listen (only its
                 # heartbeat producer failed), and the protective stop must reach it.
                 if h.nmt_state == operational:
                     packs = d.rpdo_packs     # rpdo_frames' common case, without a call per driver
-                    if packs is None:
+                    if packed is not None:
+                        frames += packed
+                    elif packs is None:
                         frames += d.rpdo_frames()
                     else:
                         get = d.rpdo_values.get
@@ -234,11 +244,13 @@ class CyclicIO:
         with self._lock:
             return self._expected_tpdos() <= self._received
 
-    def read(self, complete: bool | None = None, nodes: bool = True) -> ArmState:
+    def read(self, complete: bool | None = None, nodes: bool = True, joints: bool = True) -> ArmState:
         """The latest values in SI units (non-blocking). ``complete`` defaults to
         tpdos_complete(): whether they all belong to the last SYNC. ``nodes=False`` leaves
         ArmState.nodes empty, for a caller that reads the nodes' health only when data is
-        missing (the daemon's cycle: a snapshot per node every cycle it never looked at)."""
+        missing (the daemon's cycle: a snapshot per node every cycle it never looked at).
+        ``joints=False`` leaves ArmState.joints empty and gives ArmState.readings instead:
+        the four values per joint the daemon's Measurement takes, without a JointState each."""
         with self._lock:
             if complete is None:
                 complete = self._expected_tpdos() <= self._received
@@ -246,10 +258,11 @@ class CyclicIO:
             state = _new(ArmState)
             state.__dict__ = {
                 "sync": self._sync, "complete": complete,
-                "joints": [j.state() for j in self.joints],
+                "joints": [j.state() for j in self.joints] if joints else [],
                 "end_effector": self.end_effector.state() if self.end_effector else None,
                 "ft": self.ft.state() if self.ft else None,
-                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {}}
+                "nodes": {n: h.snapshot() for n, h in self.health.items()} if nodes else {},
+                "readings": None if joints else [j.reading() for j in self.joints]}
             return state
 
     def cycle(self, command: ArmCommand | None = None, wait: bool = True,
@@ -339,7 +352,11 @@ class CyclicIO:
         with self._lock:
             sync = self._sync
             for node in plan.nodes:
-                node.driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
+                driver = node.driver
+                if node.keys is driver.tpdo_keys:    # every TPDO of the node: kept as one tuple
+                    driver.latest = node.unpack(joined, node.offset)
+                else:
+                    driver.values.update(zip(node.keys, node.unpack(joined, node.offset)))
                 node.health.life_sync = sync
             self._received.update(plan.cobs)
             stats.rx_frames += count

@@ -15,10 +15,12 @@ from spacearm.base.canopen import od
 from spacearm.base.canopen.od import EeCommand, EeState  # noqa: F401  (re-exported for callers)
 from spacearm.base.config.bus import BusSettings, NodeConfig, parse_object_ref
 from spacearm.drivers.cia402 import Cia402Axis
+from spacearm.drivers.joint_rpdos import compile_rpdo_packer
 from spacearm.base.canopen.cia402_defs import (CW_CHANGE_IMMEDIATELY, CW_HALT, CW_NEW_SETPOINT, SW_INTERNAL_LIMIT, SW_OP_MODE_12,
                                  SW_TARGET_REACHED, State,
                                  decode_statusword)
 from spacearm.drivers.pdo_config import PdoSpec, resolve_layout
+from spacearm.drivers.reported_values import ReportedValues
 
 
 def compile_pdo(spec: PdoSpec) -> tuple[struct.Struct, tuple[tuple[int, int], ...]] | None:
@@ -89,7 +91,7 @@ class FtState:
     tared: bool = False
 
 
-class DeviceDriver:
+class DeviceDriver(ReportedValues):
     device = ""
 
     def __init__(self, cfg: NodeConfig, bus: BusSettings, object_dictionary: canopen.ObjectDictionary):
@@ -97,7 +99,8 @@ class DeviceDriver:
         self.bus = bus
         self.od = object_dictionary
         self.name, self.node_id, self.label = cfg.name, cfg.node_id, cfg.label
-        self.values: dict[tuple[int, int], int] = {}
+        self._values: dict[tuple[int, int], int] = {}     # `values` (drivers/reported_values.py)
+        self.latest = None
         self.rpdo_values: dict[tuple[int, int], int] = {}
         # the configured layout, checked against the EDS (MappingError names node, PDO, object)
         self.set_layout(*resolve_layout(cfg, object_dictionary))
@@ -106,6 +109,7 @@ class DeviceDriver:
         """The PDO layout, and its codecs compiled once from it: a frame then costs one
         unpack/pack and no lookup by object or by spec. The layout is replaced whole (tuples),
         so the codecs cannot silently describe another mapping than the one in use."""
+        self._use_tpdo_keys(tpdos)
         self._rpdos, self._tpdos = tuple(rpdos), tuple(tpdos)
         self.tpdo_codecs = {spec.cob_id: PdoCodec(spec) for spec in self._tpdos}
         self._rpdo_codecs = tuple(PdoCodec(spec) for spec in self._rpdos)
@@ -218,8 +222,15 @@ class JointDriver(DeviceDriver):
         # state()'s objects read in one call once the drive reported them all (a lookup per
         # object and joint was ~60 dict.get a cycle, issue 35), the optional ones last; None
         # where the layout leaves one out (state() would fail over to the lookups every cycle)
-        self._reported = (itemgetter(*_STATE_KEYS, *(key for key in (self._temperature, self._brake) if key))
-                          if mapped.issuperset(_STATE_KEYS) else None)
+        self._state_keys = (*_STATE_KEYS, *(key for key in (self._temperature, self._brake) if key))
+        self._reported = itemgetter(*self._state_keys) if mapped.issuperset(_STATE_KEYS) else None
+        self._compile_readers()
+
+    def _compile_readers(self) -> None:
+        # the same objects read by position from a burst's tuple (drivers/reported_values.py)
+        self._state_at = self.tuple_reader(self._state_keys) if self._reported is not None else None
+        self._step_at = self.tuple_reader((_STATUSWORD, _POSITION_ACTUAL))
+        self._reading_at = self.tuple_reader(_STATE_KEYS[:4]) if self._state_at is not None else None
 
     def set_mode(self, mode: int) -> None:
         """od.MODE_CSP (cyclic synchronous position) or od.MODE_PROFILE_POSITION."""
@@ -262,21 +273,41 @@ class JointDriver(DeviceDriver):
 
     @property
     def position(self) -> float:
+        # from a burst's tuple, not merged into the dict for this (the master's following-error
+        # check reads it every cycle on a drive without 6065h)
+        latest = self.latest
+        if latest is not None and self._step_at is not None:
+            return self._step_at(latest)[1] / self.k
         return self.values.get(_POSITION_ACTUAL, 0) / self.k
 
+    def set_layout(self, rpdos, tpdos) -> None:
+        super().set_layout(rpdos, tpdos)
+        self._pack_rpdos = compile_rpdo_packer(self._rpdo_codecs)    # step_frames' packing
+        if hasattr(self, "_state_keys"):      # a new layout after __init__
+            self._compile_readers()
+
     def step(self) -> None:
-        get = self.values.get
-        statusword = get(_STATUSWORD, 0)
+        self.step_frames()
+
+    def step_frames(self) -> list[tuple[int, bytes]]:
+        """step(), and the RPDO frames of what it computed, packed from its values (the frames
+        rpdo_frames() would give after it; drivers/joint_rpdos.py)."""
+        latest = self.latest
+        if latest is not None and self._step_at is not None:
+            statusword, actual = self._step_at(latest)
+        else:
+            get = self.values.get
+            statusword, actual = get(_STATUSWORD, 0), get(_POSITION_ACTUAL, 0)
         axis = self.axis
         cw = axis.step(statusword)
         if axis.state != _OPERATION_ENABLED:
             # not enabled: command the actual position so enabling never jumps
-            self._hold = get(_POSITION_ACTUAL, 0) / self.k
+            self._hold = actual / self.k
             self.target = None
             target = self._hold
         else:
             if self._hold is None:
-                self._hold = get(_POSITION_ACTUAL, 0) / self.k
+                self._hold = actual / self.k
             target = self.target if self.target is not None else self._hold
         if self.mode == od.MODE_PROFILE_POSITION:
             # set-point handshake: bit 4 high until the drive acknowledges (statusword bit 12)
@@ -292,25 +323,40 @@ class JointDriver(DeviceDriver):
                 target = self._pp_sent
         if self.halt:
             cw |= CW_HALT
-        rpdo, k = self.rpdo_values, self.k
-        rpdo[_CONTROLWORD] = cw
+        k = self.k
         # clamped to the objects' ranges by comparisons, not min/max calls (issue 35: 12 of
-        # the cycle's built-in calls per joint); the same ints either way
-        position, velocity = round(target * k), round(self.velocity_ff * k)
-        torque = round(self.torque_ff / self.rated_joint_torque * 1000)
-        rpdo[_TARGET_POSITION] = (position if _I32_MIN <= position <= _I32_MAX
-                                  else _I32_MIN if position < 0 else _I32_MAX)
-        rpdo[_VELOCITY_OFFSET] = (velocity if _I32_MIN <= velocity <= _I32_MAX
-                                  else _I32_MIN if velocity < 0 else _I32_MAX)
-        rpdo[_TORQUE_OFFSET] = torque if -32768 <= torque <= 32767 else -32768 if torque < 0 else 32767
+        # the cycle's built-in calls per joint); the same ints either way. A zero feed-forward
+        # (the daemon never sends a torque) is 0 without round(): round(+-0.0) is 0.
+        position = round(target * k)
+        velocity = round(self.velocity_ff * k) if self.velocity_ff else 0
+        torque = round(self.torque_ff / self.rated_joint_torque * 1000) if self.torque_ff else 0
+        if not _I32_MIN <= position <= _I32_MAX:
+            position = _I32_MIN if position < 0 else _I32_MAX
+        if not _I32_MIN <= velocity <= _I32_MAX:
+            velocity = _I32_MIN if velocity < 0 else _I32_MAX
+        if not -32768 <= torque <= 32767:
+            torque = -32768 if torque < 0 else 32767
+        rpdo = self.rpdo_values
+        rpdo[_CONTROLWORD] = cw
+        rpdo[_TARGET_POSITION] = position
+        rpdo[_VELOCITY_OFFSET] = velocity
+        rpdo[_TORQUE_OFFSET] = torque
+        pack = self._pack_rpdos
+        if pack is None:
+            return self.rpdo_frames()
+        return pack(cw, position, velocity, torque, rpdo.get)
 
     def state(self) -> JointState:
-        if self._reported is None:
+        latest = self.latest
+        if latest is not None and self._state_at is not None:
+            reported = self._state_at(latest)      # a burst's tuple by position
+        elif self._reported is None:
             return self._state_of_defaults()
-        try:
-            reported = self._reported(self.values)
-        except KeyError:        # before the first TPDOs: one by one, at their defaults
-            return self._state_of_defaults()
+        else:
+            try:
+                reported = self._reported(self.values)
+            except KeyError:        # before the first TPDOs: one by one, at their defaults
+                return self._state_of_defaults()
         statusword = reported[0]
         state = _STATES.get(statusword)
         if state is None:
@@ -333,6 +379,20 @@ class JointDriver(DeviceDriver):
             "mode": reported[6],
         }
         return joint
+
+    def reading(self) -> tuple[float, float, float, State]:
+        """(position, velocity, torque, state) as state() gives them, without the JointState
+        around them (the daemon's Measurement takes these four; issue 35)."""
+        latest = self.latest
+        if latest is None or self._reading_at is None:
+            joint = self.state()
+            return joint.position, joint.velocity, joint.torque, joint.state
+        statusword, position, velocity, torque = self._reading_at(latest)
+        state = _STATES.get(statusword)
+        if state is None:
+            state = _STATES[statusword] = decode_statusword(statusword)
+        k = self.k
+        return position / k, velocity / k, torque / 1000.0 * self.rated_joint_torque, state
 
     def _state_of_defaults(self) -> JointState:
         """state() with every object the drive has not reported yet at its default."""
@@ -372,6 +432,7 @@ _I32_MIN, _I32_MAX = -2**31, 2**31 - 1
 _FT_VALUES, _FT_STATUS = tuple((od.FT_VALUES, i) for i in range(1, 7)), (od.FT_STATUS, 0)
 _EE_STATE, _EE_GRIP, _EE_FAULT_CODE = (od.EE_STATE, 0), (od.EE_GRIP_POSITION, 0), (od.EE_FAULT_CODE, 0)
 _EE_SCREW_TORQUE, _EE_SCREW_TURNS = (od.EE_SCREW_TORQUE, 0), (od.EE_SCREW_TURNS, 0)
+_EE_KEYS = (_EE_STATE, _EE_GRIP, _EE_SCREW_TORQUE, _EE_SCREW_TURNS, _EE_FAULT_CODE)     # state()'s order
 _EE_STATES = dict(EeState._value2member_map_)   # raw value -> member, as EeState(raw)
 _EE_UNKNOWN = EeState.UNKNOWN
 _STATES: dict[int, State] = {}     # statusword -> its CiA 402 state: a handful of words ever seen
@@ -392,18 +453,27 @@ class EndEffectorDriver(DeviceDriver):
         """Held in the cyclic RPDO; the device acts when the value changes."""
         self.rpdo_values[(od.EE_COMMAND, 0)] = int(command)
 
+    def set_layout(self, rpdos, tpdos) -> None:
+        super().set_layout(rpdos, tpdos)
+        self._state_at = self.tuple_reader(_EE_KEYS)      # state() from a burst's tuple
+
     def state(self) -> EndEffectorState:
-        get = self.values.get       # every cycle: the dict's get, not value()'s call per object
+        latest = self.latest
+        if latest is not None and self._state_at is not None:
+            raw, grip, torque, turns, fault = self._state_at(latest)
+        else:
+            get = self.values.get   # every cycle: the dict's get, not value()'s call per object
+            raw, grip, torque, turns, fault = [get(key, 0) for key in _EE_KEYS]
         # the fields in EndEffectorState's order, without its __init__'s keyword handling
         state = _new(EndEffectorState)
         state.__dict__ = {
             "name": self.name, "node_id": self.node_id,
             # the member EeState(raw) returns, looked up without the enum's call
-            "state": _EE_STATES.get(get(_EE_STATE, 0), _EE_UNKNOWN),
-            "grip": get(_EE_GRIP, 0) / 1000.0,
-            "screw_torque": get(_EE_SCREW_TORQUE, 0) / 1000.0,
-            "screw_turns": get(_EE_SCREW_TURNS, 0) / 1000.0,
-            "fault_code": get(_EE_FAULT_CODE, 0)}
+            "state": _EE_STATES.get(raw, _EE_UNKNOWN),
+            "grip": grip / 1000.0,
+            "screw_torque": torque / 1000.0,
+            "screw_turns": turns / 1000.0,
+            "fault_code": fault}
         return state
 
 
@@ -417,10 +487,18 @@ class FtDriver(DeviceDriver):
                 (od.FT_OVERLOAD_LIMIT, 1, s.force_limit),
                 (od.FT_OVERLOAD_LIMIT, 2, s.torque_limit)]
 
+    def set_layout(self, rpdos, tpdos) -> None:
+        super().set_layout(rpdos, tpdos)
+        self._state_at = self.tuple_reader((*_FT_VALUES, _FT_STATUS))      # state() from a burst's tuple
+
     def state(self) -> FtState:
-        s, get = self.cfg.ft, self.values.get
-        fx, fy, fz, tx, ty, tz = [get(key, 0) for key in _FT_VALUES]
-        status = get(_FT_STATUS, 0)
+        s, latest = self.cfg.ft, self.latest
+        if latest is not None and self._state_at is not None:
+            fx, fy, fz, tx, ty, tz, status = self._state_at(latest)
+        else:
+            get = self.values.get
+            fx, fy, fz, tx, ty, tz = [get(key, 0) for key in _FT_VALUES]
+            status = get(_FT_STATUS, 0)
         per_n, per_nm = s.force_counts_per_n, s.torque_counts_per_nm
         # the tuples written out (two generators a cycle cost more than the divisions), the
         # fields in FtState's order without its __init__'s keyword handling

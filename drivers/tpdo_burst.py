@@ -72,4 +72,8 @@ def build_plan(ids: tuple[int, ...], routes: dict) -> BurstPlan | None:
         lengths.append(route.length)
     for node, piece in nodes.items():
         piece.unpack = struct.Struct("<" + "".join(formats[node])).unpack_from
+        if piece.keys == getattr(piece.driver, "tpdo_keys", None):
+            # the node's whole layout in its order: the decode keeps the tuple (the driver's
+            # `latest`, drivers/reported_values.py) while these are the driver's very keys
+            piece.keys = piece.driver.tpdo_keys
     return BurstPlan(tuple(lengths), tuple(nodes.values()), frozenset(ids))

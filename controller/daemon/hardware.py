@@ -176,7 +176,7 @@ class CanopenHardware:
         answered_late = tuple(self.network.answered_last_sync(self._missing_at_read)) if self._missing_at_read else ()
         self.late_answers += len(answered_late)
         # the nodes' health only where _measurement looks at it: a cycle with data missing
-        state = self.network.read(complete, nodes=not complete)
+        state = self.network.read(complete, nodes=not complete, joints=False)
         events = []
         for event in self.network.poll_events():
             kind = FAULT_EVENTS.get(event.kind) or RECORDED_EVENTS.get(event.kind)
@@ -199,7 +199,11 @@ class CanopenHardware:
     def _measurement(self, time: float, sync: int, state: ArmState,
                      events: tuple[DeviceEvent, ...], late: float = 0.0,
                      host_stalled: bool = False) -> Measurement:
-        joints = state.joints
+        readings = state.readings
+        if readings is None:        # an ArmState of JointStates (read() by default)
+            readings = [(j.position, j.velocity, j.torque, j.state) for j in state.joints]
+        # one column per field (zip), not a pass over the joints' states per field (issue 35)
+        q, dq, tau, states = zip(*readings) if readings else ((), (), (), ())
         missing: tuple[str, ...] = ()
         if not state.complete:
             dead = [name for name, health in state.nodes.items() if not health.alive]
@@ -218,16 +222,16 @@ class CanopenHardware:
         wrench = np.zeros(6) if ft is None else np.array([*ft.force, *ft.torque], dtype=float)
         return built(Measurement, {
             "time": time, "sync_counter": sync,
-            "q": np.array([j.position for j in joints]),
-            "dq": np.array([j.velocity for j in joints]),
-            "tau": np.array([j.torque for j in joints]),
-            "joints_enabled": np.array([j.state == _ENABLED for j in joints]),
-            "joints_faulted": np.array([j.state in _FAULTS for j in joints]),
+            "q": np.array(q),
+            "dq": np.array(dq),
+            "tau": np.array(tau),
+            "joints_enabled": np.array([s == _ENABLED for s in states]),
+            "joints_faulted": np.array([s in _FAULTS for s in states]),
             "wrench": wrench, "wrench_overload": bool(ft.overload) if ft else False,
             "end_effector": _end_effector_state(state.end_effector),
             "events": events, "missing": missing, "late": late > 0.0 and bool(missing), "bridged": False,
             "host_stalled": host_stalled and late <= 0.0, "answered_late": (),
-            "joints_powered": np.array([j.state in POWERED for j in joints])})
+            "joints_powered": np.array([s in POWERED for s in states])})
 
     def write(self, command: Command, stop: DriveRequest | None = None) -> None:
         """`stop`: what a protective stop asks of drives the command no longer enables (None:

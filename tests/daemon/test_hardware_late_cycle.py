@@ -30,7 +30,7 @@ def _hardware(monkeypatch, clock: _Clock, wait: float) -> CanopenHardware:
 
     monkeypatch.setattr(net, "send_sync", lambda: 1)
     monkeypatch.setattr(net, "wait_all_tpdos", wait_all)
-    monkeypatch.setattr(net, "read", lambda complete, nodes=True: ArmState(1, complete, [j.state() for j in net.joints],
+    monkeypatch.setattr(net, "read", lambda complete, nodes=True, joints=True: ArmState(1, complete, [j.state() for j in net.joints],
                                                                 None, None, health))
     monkeypatch.setattr(net, "poll_events", lambda: [])
     monkeypatch.setattr(net, "nodes_missing_tpdos", lambda: ["ft_sensor"])
@@ -95,7 +95,7 @@ def test_a_stall_that_ends_before_it_shows_is_seen_in_the_first_complete_cycle(m
         clock.t += 0.005
         return next(complete)
     monkeypatch.setattr(net, "wait_all_tpdos", wait_all)
-    monkeypatch.setattr(net, "read", lambda c, nodes=True: ArmState(1, c, [j.state() for j in net.joints], None, None,
+    monkeypatch.setattr(net, "read", lambda c, nodes=True, joints=True: ArmState(1, c, [j.state() for j in net.joints], None, None,
                                                         {name: NodeHealth(name, d.node_id, alive=True)
                                                          for name, d in net.drivers.items()}))
     reads = []
