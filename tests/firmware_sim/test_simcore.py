@@ -91,7 +91,7 @@ def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff
         joint.period_servo = (law.servo, law.law)
         results.append((joint, law))
     core_joint, core_law = results[0]
-    assert core_joint._core_period(fractions, h, core_law.law())
+    assert core_joint._core_period(fractions, h, core_law.law(), core_joint._core_constants())
     py_joint, py_law = results[1]
     py_joint.period_servo = None
     py_joint.substeps(fractions, h)
@@ -104,7 +104,7 @@ def test_a_period_python_raises_on_is_left_to_python():
     joint = _joint(JointParams(), math.nan, 0.0, 0.0, False, 0.0, math.inf)
     law = _Law(SERVO_CSP, 0.0, 0.1, 5.0, 0.0, joint)
     joint.controller, joint.period_servo = law.servo, (law.servo, law.law)
-    assert not joint._core_period([0.5, 1.0], 0.01, law.law())
+    assert not joint._core_period([0.5, 1.0], 0.01, law.law(), joint._core_constants())
     assert math.isnan(joint.q) and joint.motor_torque == 0.0 and law.q_ref is None
     with pytest.raises(ValueError):
         joint.substeps([0.5, 1.0], 0.01)
