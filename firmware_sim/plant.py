@@ -318,8 +318,8 @@ class JointModel:
         arithmetic in the same order as one substep() at a time (issue 35: 60 method calls
         and 80 property reads a cycle were a tenth of the simulator's CPU). Under a servo law
         the drive hands over for the whole period, a loose or elastic gear's period is
-        two_mass.two_mass_period() and, with the compiled core (simcore.py), a rigid gear's
-        period is one call."""
+        one call (two_mass.py, or the compiled core's copy of it), and so, with the compiled core
+        (simcore.py), is a rigid gear's."""
         servo = self.period_servo
         if servo is not None and servo[0] is self.controller and fractions:
             p = self.params          # two_mass inlined: every joint, every SYNC
@@ -336,11 +336,17 @@ class JointModel:
             pass
 
     def _two_mass_period(self, fractions, h: float, law: tuple, constants: tuple) -> None:
-        """stepper()'s two-mass period under the servo law `law` (as _core_period takes it)."""
-        q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = two_mass_period(
-            fractions, law[0], h, self.brake_engaged or self.stalled, self.external_torque, self.q, self.qd,
-            self.theta, self.thetad, self.motor_torque, law[1], law[2], law[3], law[4], constants)
-        self.q, self.theta = q, theta      # held, the very objects given (as stepper() leaves them)
+        """stepper()'s two-mass period under the servo law `law` (as _core_period takes it): in
+        the compiled core, or in Python where there is none or it leaves the period to Python."""
+        held = self.brake_engaged or self.stalled
+        args = (fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta, self.thetad,
+                self.motor_torque, law[1], law[2], law[3], law[4], constants)
+        # getattr: a core built before it had this period (an extension not rebuilt) leaves it to Python
+        fast = None if simcore.core is None else getattr(simcore.core, "two_mass_period", None)
+        out = None if fast is None else fast(*args)
+        q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = out or two_mass_period(*args)
+        if not held:      # held, they stand still: the very objects kept (as stepper() leaves them)
+            self.q, self.theta = q, theta
         law[5](q_ref, v_ref)
 
     def _core_period(self, fractions, h: float, law: tuple, constants: tuple) -> bool:
@@ -395,8 +401,8 @@ class JointModel:
         worked out again only when the parameters, the drive's torque limit or the load
         amplitude changed (the same expressions as stepper() and advance_motor(), so the same
         floats). A loose or elastic gear's has advance_motor()'s constants after them (j_link,
-        stiffness, j_motor, gear damping, half the play): two_mass_period() takes them, the
-        core's rigid_period() refuses them."""
+        stiffness, j_motor, gear damping, half the play): two_mass_period() takes them (the
+        core's and two_mass.py's), the core's rigid_period() refuses them."""
         key = (self.params, self.max_motor_torque, self.load_amplitude)
         if self._core_key != key:
             p = self.params

@@ -1,6 +1,7 @@
-"""A loose or elastic gear's period in one call (firmware_sim/two_mass.py) computes what the
-plant's sub-step path (drive_torque(), the servo, _substep_two_mass(), advance_motor())
-computes, bit for bit, on random plants and servo laws, held or free."""
+"""A loose or elastic gear's period in one call (firmware_sim/two_mass.py, and its copy in the
+compiled core) computes what the plant's sub-step path (drive_torque(), the servo,
+_substep_two_mass(), advance_motor()) computes, bit for bit, on random plants and servo laws,
+held or free."""
 from __future__ import annotations
 
 import math
@@ -9,32 +10,23 @@ import random
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from spacearm.firmware_sim import simcore
 from spacearm.firmware_sim.joint_drive import SERVO_CSP, SERVO_OFF
 from spacearm.firmware_sim.plant import JointParams
-from tests.firmware_sim.test_simcore import _Law, _joint, _state
+from spacearm.firmware_sim.two_mass import two_mass_period
+from tests.firmware_sim.core_switch import needs_core
+from tests.firmware_sim.test_simcore import _Law, _joint, _state, random_fields
 
 finite = st.floats(-3.0, 3.0, allow_nan=False)
 
 
 def _params(rng: random.Random, prismatic: bool, friction: bool, te: bool, play: bool, elastic: bool) -> JointParams:
-    fields = dict(servo_bandwidth_hz=rng.uniform(1.0, 50.0), servo_damping=rng.uniform(0.3, 2.0),
-                  gear_ratio=rng.uniform(1.0, 200.0), gear_efficiency=rng.uniform(0.5, 1.0),
-                  link_inertia=rng.choice([0.0, rng.uniform(0.0, 20.0)]),
-                  torque_limit=rng.choice([0.0, rng.uniform(0.01, 5.0)]),
-                  encoder_bias=rng.uniform(-1e-3, 1e-3), gravity_angle=rng.uniform(-3.0, 3.0),
+    """A random joint with a loose gear (play), an elastic one, or both; a light link at times."""
+    fields = random_fields(rng, prismatic, friction, te)
+    fields.update(link_inertia=rng.choice([0.0, fields["link_inertia"]]),
                   backlash=rng.uniform(1e-5, 1e-2) if play or not elastic else 0.0,
                   joint_stiffness=rng.uniform(1e2, 1e6) if elastic else 0.0,
                   joint_damping=rng.choice([0.0, rng.uniform(0.0, 500.0)]))
-    if prismatic:
-        fields.update(kind="prismatic", encoder_quantum=rng.choice([0.0, 1e-6]))
-    else:
-        fields.update(resolver_arcsec=rng.choice([0.0, 25.0]))
-    if friction:
-        fields.update(coulomb_friction=rng.uniform(0.0, 5.0), viscous_friction=rng.uniform(0.0, 5.0),
-                      stribeck_friction=rng.uniform(0.0, 3.0), stribeck_velocity=rng.uniform(0.001, 0.1))
-    if te:
-        fields.update(te_amplitude=rng.uniform(1e-5, 1e-3), te_harmonic=rng.uniform(1.0, 3.0),
-                      te_phase=rng.uniform(-3.0, 3.0))
     return JointParams(**fields)
 
 
@@ -73,6 +65,7 @@ def test_a_two_mass_period_in_one_call_is_the_sub_step_path(seed, q, qd, q_end, 
 def test_the_whole_period_is_taken_only_under_a_law_for_it(monkeypatch):
     """No period law (a drive ramping, halted, in profile position): the sub-step path runs."""
     from spacearm.firmware_sim import plant
+    monkeypatch.setattr(simcore, "core", None)       # the Python period, to be counted
     calls = []
     real = plant.two_mass_period
     monkeypatch.setattr(plant, "two_mass_period", lambda *a: calls.append(a) or real(*a))
@@ -85,3 +78,31 @@ def test_the_whole_period_is_taken_only_under_a_law_for_it(monkeypatch):
     joint.period_servo = (servo, law.law)
     joint.substeps([0.5, 1.0], 0.01)
     assert len(calls) == 1
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), q=finite, qd=finite, q_end=finite,
+       torque_ff=st.sampled_from([0.0, -0.0, 0.7, -1.3]), kind=st.sampled_from([SERVO_OFF, SERVO_CSP]),
+       brake=st.booleans(), friction=st.booleans(), te=st.booleans(), prismatic=st.booleans(),
+       play=st.booleans(), elastic=st.booleans(), substeps=st.integers(1, 20))
+def test_the_cores_two_mass_period_is_the_python_one(seed, q, qd, q_end, torque_ff, kind, brake, friction, te,
+                                                     prismatic, play, elastic, substeps):
+    """Including where the core leaves the period to Python (None): Python then raises or
+    gives non-finite numbers, which repr() compares as they are."""
+    rng = random.Random(seed)
+    joint = _joint(_params(rng, prismatic, friction, te, play, elastic), q, qd, 0.3, brake,
+                   rng.choice([0.0, rng.uniform(-50.0, 50.0)]), rng.choice([math.inf, rng.uniform(0.1, 10.0)]))
+    fractions = [(k + 1) / substeps for k in range(substeps)]
+    args = (fractions, kind, 0.02 / substeps, brake, rng.uniform(-1.0, 1.0), q, qd, q + rng.uniform(-1e-3, 1e-3),
+            qd, 0.3, q, q_end, (q_end - q) / 0.02, torque_ff, joint._core_constants())
+    out = simcore.core.two_mass_period(*args)
+    try:
+        expected = two_mass_period(*args)
+    except (OverflowError, ValueError):
+        assert out is None
+        return
+    if out is not None:
+        assert repr(out) == repr(expected)
+    else:       # left to Python only where a value is not finite
+        assert not all(math.isfinite(x) for x in expected)
