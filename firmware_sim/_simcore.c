@@ -1,11 +1,12 @@
 /* Compiled core of the simulator's SYNC hot path (issue 35): a drive's SYNC begin that changes no state
- * (its RPDO objects read straight from the data store), a rigid-gear joint's whole SYNC period
- * of sub-steps with its drive's servo law, and the drive's actual values as integers; and the
+ * (its RPDO objects read straight from the data store), a joint's whole SYNC period of sub-steps
+ * with its drive's servo law (a rigid gear, or a loose or elastic one: firmware_sim/two_mass.py),
+ * and the drive's actual values as integers; and the
  * frames: a burst's RPDOs stored (rpdo_burst) and a SYNC's TPDOs sampled into its burst
  * (tpdo_burst), for the nodes whose frames the Python path would handle plainly, each checked
  * per frame or SYNC and any other handed back to Python (runner.Simulator).
  *
- * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper,
+ * Bit for bit the pure-Python path (firmware_sim/plant.py JointModel.stepper, two_mass.py,
  * joint_drive.JointDriveNode._servo / servo_torque / _update_od): the same IEEE double
  * operations in the same order, built with -ffp-contract=off (no fused multiply-add), the
  * same libm calls Python's math module makes (cos, sin, exp, pow), and Python's round()
@@ -69,48 +70,90 @@ static int measured(double x, double quantum, double *out) {
     return 1;
 }
 
-static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
-    (void)self;
+#define N_CONSTANTS_TWO_MASS 24
+
+/* A period's arguments by name (rigid_period's and two_mass_period's): the joint's state, its
+ * drive's servo law, the constants (plant.JointModel._core_constants) and the fractions. */
+struct period {
+    long kind;
+    int held, constant_load;
+    double h, external, q, qd, theta, thetad, tau_m, q_start, q_end, v_ff, torque_ff;
+    double bias, quantum, limit, gear_ratio, efficiency, amplitude, angle, load, coulomb, viscous, stribeck,
+        stribeck_velocity, inertia, te_amplitude, te_harmonic, te_phase, bandwidth_hz, damping;
+    double j_link, stiffness, j_motor, gear_damping, half;      /* a two-mass gear's only */
+    PyObject *fractions;                                          /* a fast sequence, a new reference */
+};
+
+/* 0 with the error set, or the period with n_constants constants read into p. */
+static int period_args(const char *name, PyObject *const *args, Py_ssize_t nargs, int n_constants,
+                       struct period *p) {
     if (nargs != N_DYNAMIC + 2) {
-        PyErr_Format(PyExc_TypeError, "rigid_period takes %d arguments (%zd given)", N_DYNAMIC + 2, nargs);
-        return NULL;
+        PyErr_Format(PyExc_TypeError, "%s takes %d arguments (%zd given)", name, N_DYNAMIC + 2, nargs);
+        return 0;
     }
     PyObject *constants = args[nargs - 1];
-    if (!PyTuple_Check(constants) || PyTuple_GET_SIZE(constants) != N_CONSTANTS) {
-        PyErr_Format(PyExc_TypeError, "rigid_period: %d constants", N_CONSTANTS);
-        return NULL;
+    if (!PyTuple_Check(constants) || PyTuple_GET_SIZE(constants) != n_constants) {
+        PyErr_Format(PyExc_TypeError, "%s: %d constants", name, n_constants);
+        return 0;
     }
-    long kind = PyLong_AsLong(args[1]);
-    double a[N_DYNAMIC - 1], c[N_CONSTANTS];
+    double a[N_DYNAMIC - 1], c[N_CONSTANTS_TWO_MASS];
+    p->kind = PyLong_AsLong(args[1]);
     for (int i = 0; i < N_DYNAMIC - 1; i++)
         a[i] = PyFloat_AsDouble(args[i + 2]);
-    for (int i = 0; i < N_CONSTANTS; i++)
+    for (int i = 0; i < n_constants; i++)
         c[i] = PyFloat_AsDouble(PyTuple_GET_ITEM(constants, i));
     if (PyErr_Occurred())
-        return NULL;
-    if (kind != SERVO_OFF && kind != SERVO_CSP) {
+        return 0;
+    if (p->kind != SERVO_OFF && p->kind != SERVO_CSP) {
         PyErr_SetString(PyExc_ValueError, "unknown servo kind");
-        return NULL;
+        return 0;
     }
-    PyObject *fractions = PySequence_Fast(args[0], "fractions must be a sequence");
-    if (fractions == NULL)
+    p->h = a[0], p->held = a[1] != 0.0, p->external = a[2];
+    p->q = a[3], p->qd = a[4], p->theta = a[5], p->thetad = a[6], p->tau_m = a[7];
+    p->q_start = a[8], p->q_end = a[9], p->v_ff = a[10], p->torque_ff = a[11];
+    p->bias = c[0], p->quantum = c[1], p->limit = c[2], p->gear_ratio = c[3], p->efficiency = c[4];
+    p->amplitude = c[5], p->angle = c[6], p->constant_load = c[7] != 0.0, p->load = c[8];
+    p->coulomb = c[9], p->viscous = c[10], p->stribeck = c[11], p->stribeck_velocity = c[12];
+    p->inertia = c[13], p->te_amplitude = c[14], p->te_harmonic = c[15], p->te_phase = c[16];
+    p->bandwidth_hz = c[17], p->damping = c[18];
+    if (n_constants == N_CONSTANTS_TWO_MASS)
+        p->j_link = c[19], p->stiffness = c[20], p->j_motor = c[21], p->gear_damping = c[22], p->half = c[23];
+    p->fractions = PySequence_Fast(args[0], "fractions must be a sequence");
+    return p->fractions != NULL;
+}
+
+/* The drive's servo (JointDriveNode._servo + servo_torque) at s of the period, on the encoder's
+ * reading q_meas and the speed fed back: the motor torque, saturated as min(limit, .) then
+ * max(-limit, .) pick (NaN and signed zeros alike); the reference into q_ref and v_ref. */
+static double servo(const struct period *p, double s, double q_meas, double speed, double *q_ref, double *v_ref) {
+    double tau_m;
+    if (p->kind == SERVO_OFF) {
+        *q_ref = q_meas;
+        *v_ref = 0.0;
+        tau_m = 0.0;
+    } else {
+        const double w = 2.0 * M_PI * p->bandwidth_hz;      /* servo_torque's, in its order */
+        *q_ref = p->q_start + s * (p->q_end - p->q_start);
+        *v_ref = p->v_ff;
+        double tau_joint = p->inertia * (w * w * (*q_ref - q_meas) + 2.0 * p->damping * w * (*v_ref - speed));
+        tau_m = tau_joint / p->gear_ratio + p->torque_ff;
+    }
+    tau_m = tau_m < p->limit ? tau_m : p->limit;
+    return tau_m > -p->limit ? tau_m : -p->limit;
+}
+
+static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    struct period p;
+    if (!period_args("rigid_period", args, nargs, N_CONSTANTS, &p))
         return NULL;
-    const double h = a[0];
-    const int held = a[1] != 0.0;
-    const double external = a[2];
-    double q = a[3], qd = a[4], theta = a[5], thetad = a[6], tau_m = a[7];
-    const double q_start = a[8], q_end = a[9], v_ff = a[10], torque_ff = a[11];
-    const double bias = c[0], quantum = c[1], limit = c[2], gear_ratio = c[3], efficiency = c[4];
-    const double amplitude = c[5], angle = c[6];
-    const int constant_load = c[7] != 0.0;
-    double load = c[8];
-    const double coulomb = c[9], viscous = c[10], stribeck = c[11], stribeck_velocity = c[12];
-    const double inertia = c[13], te_amplitude = c[14], te_harmonic = c[15], te_phase = c[16];
-    const double bandwidth_hz = c[17], damping = c[18];
-    if (!constant_load && isinf(q + angle))
+    PyObject *fractions = p.fractions;
+    const double h = p.h, external = p.external, bias = p.bias, quantum = p.quantum;
+    const int held = p.held;
+    double q = p.q, qd = p.qd, theta = p.theta, thetad = p.thetad, tau_m = p.tau_m, load = p.load;
+    if (!p.constant_load && isinf(q + p.angle))
         goto python;                /* stepper()'s first load, math.cos(q + angle), raises */
-    const double static_ = coulomb + stribeck;       /* effects.static_friction */
-    const double w = 2.0 * M_PI * bandwidth_hz;      /* servo_torque's, in its order */
+    const double static_ = p.coulomb + p.stribeck;       /* effects.static_friction */
     double q_ref = NAN, v_ref = NAN;
 
     Py_ssize_t n = PySequence_Fast_GET_SIZE(fractions);
@@ -129,53 +172,116 @@ static PyObject *rigid_period(PyObject *self, PyObject *const *args, Py_ssize_t 
         double q_meas = held_measured;
         if (!held && !measured(q + bias, quantum, &q_meas))
             goto python;
-        /* the drive's servo (JointDriveNode._servo + servo_torque) */
-        if (kind == SERVO_OFF) {
-            q_ref = q_meas;
-            v_ref = 0.0;
-            tau_m = 0.0;
-        } else {
-            q_ref = q_start + s * (q_end - q_start);
-            v_ref = v_ff;
-            double tau_joint = inertia * (w * w * (q_ref - q_meas) + 2.0 * damping * w * (v_ref - qd));
-            tau_m = tau_joint / gear_ratio + torque_ff;
-        }
-        tau_m = tau_m < limit ? tau_m : limit;
-        tau_m = tau_m > -limit ? tau_m : -limit;
+        tau_m = servo(&p, s, q_meas, qd, &q_ref, &v_ref);
         if (held) {
             qd = thetad = 0.0;
             continue;
         }
-        double drive = tau_m * gear_ratio * efficiency;
-        if (!constant_load) {
-            if (!isfinite(q + angle))
+        double drive = tau_m * p.gear_ratio * p.efficiency;
+        if (!p.constant_load) {
+            if (!isfinite(q + p.angle))
                 goto python;                     /* math.cos raises on an infinity */
-            load = amplitude * cos(q + angle);
+            load = p.amplitude * cos(q + p.angle);
         }
         double tau = drive - external - load;
         double v = thetad;
         if (fabs(v) > 1e-6 || static_ == 0.0) {
-            tau -= friction_torque(v, coulomb, viscous, stribeck, stribeck_velocity);
+            tau -= friction_torque(v, p.coulomb, p.viscous, p.stribeck, p.stribeck_velocity);
         } else if (fabs(tau) <= static_) {
             tau = 0.0;
             thetad = 0.0;
         } else {
             tau -= copysign(static_, tau);
         }
-        thetad += tau / inertia * h;
+        thetad += tau / p.inertia * h;
         theta += thetad * h;
-        if (te_amplitude > 0.0) {
+        if (p.te_amplitude > 0.0) {
             /* transmission_error and its slope (effects/transmission.py); math.sin raises on an infinity */
-            double wt = te_harmonic * gear_ratio;
-            double phase = wt * theta + te_phase;
+            double wt = p.te_harmonic * p.gear_ratio;
+            double phase = wt * theta + p.te_phase;
             if (!isfinite(phase))
                 goto python;
-            q = theta + te_amplitude * sin(phase);
-            qd = thetad * (1.0 + te_amplitude * wt * cos(phase));
+            q = theta + p.te_amplitude * sin(phase);
+            qd = thetad * (1.0 + p.te_amplitude * wt * cos(phase));
         } else {
             q = theta;
             qd = thetad;
         }
+    }
+    Py_DECREF(fractions);
+    return Py_BuildValue("(ddddddd)", q, qd, theta, thetad, tau_m, q_ref, v_ref);
+python:
+    Py_DECREF(fractions);
+    Py_RETURN_NONE;
+}
+
+/* two_mass_period(fractions, kind, h, held, external, q, qd, theta, thetad, tau_m, q_start, q_end,
+ *                 v_ff, torque_ff, constants)
+ * firmware_sim/two_mass.py's two_mass_period, a loose or elastic gear's period: the arguments and
+ * answer as rigid_period's; the constants those of a two-mass JointModel._core_constants():
+ * rigid_period's, then j_link, stiffness, j_motor, gear damping, half the play. None where
+ * Python's round(), cos() or sin() might raise: the caller reruns the period in Python. */
+static PyObject *two_mass_period(PyObject *self, PyObject *const *args, Py_ssize_t nargs) {
+    (void)self;
+    struct period p;
+    if (!period_args("two_mass_period", args, nargs, N_CONSTANTS_TWO_MASS, &p))
+        return NULL;
+    PyObject *fractions = p.fractions;
+    const double h = p.h, external = p.external, half = p.half;
+    double q = p.q, qd = p.qd, theta = p.theta, thetad = p.thetad, tau_m = p.tau_m, load = p.load;
+    const double te_arg = p.te_harmonic * p.gear_ratio;
+    const double static_ = p.coulomb + p.stribeck;
+    double q_ref = NAN, v_ref = NAN;
+
+    Py_ssize_t n = PySequence_Fast_GET_SIZE(fractions);
+    PyObject **items = PySequence_Fast_ITEMS(fractions);
+    if (n == 0)
+        goto python;
+    for (Py_ssize_t i = 0; i < n; i++) {
+        double s = PyFloat_AsDouble(items[i]);
+        if (s == -1.0 && PyErr_Occurred()) {
+            Py_DECREF(fractions);
+            return NULL;
+        }
+        double q_meas;
+        if (!measured(q + p.bias, p.quantum, &q_meas))
+            goto python;
+        /* drive_torque(): the servo on the motor's own speed (collocated) */
+        tau_m = servo(&p, s, q_meas, thetad, &q_ref, &v_ref);
+        if (p.held) {
+            qd = thetad = 0.0;
+            continue;
+        }
+        double drive = tau_m * p.gear_ratio * p.efficiency;
+        /* advance_motor() */
+        double te = 0.0;
+        if (p.te_amplitude != 0.0) {
+            double phase = te_arg * theta + p.te_phase;
+            if (!isfinite(phase))
+                goto python;                     /* math.sin raises on an infinity */
+            te = p.te_amplitude * sin(phase);
+        }
+        double deflection = theta + te - q;
+        deflection = deflection > half ? deflection - half : deflection < -half ? deflection + half : 0.0;
+        double coupling = p.stiffness * deflection + (deflection != 0.0 ? p.gear_damping * (thetad - qd) : 0.0);
+        thetad += (drive - coupling) / p.j_motor * h;
+        theta += thetad * h;
+        /* _substep_two_mass(): the link */
+        if (!p.constant_load) {
+            if (!isfinite(q + p.angle))
+                goto python;                     /* math.cos raises on an infinity */
+            load = p.amplitude * cos(q + p.angle);
+        }
+        double tau = coupling - external - load;
+        if (fabs(qd) > 1e-6 || static_ == 0.0) {
+            tau -= friction_torque(qd, p.coulomb, p.viscous, p.stribeck, p.stribeck_velocity);
+            qd += tau / p.j_link * h;
+        } else if (fabs(tau) > static_) {
+            qd += (tau - copysign(static_, tau)) / p.j_link * h;
+        } else {
+            qd = 0.0;
+        }
+        q += qd * h;
     }
     Py_DECREF(fractions);
     return Py_BuildValue("(ddddddd)", q, qd, theta, thetad, tau_m, q_ref, v_ref);
@@ -1197,6 +1303,8 @@ static PyMethodDef methods[] = {
      "A drive's SYNC begin that changes no state (see the module source)."},
     {"rigid_period", (PyCFunction)(void (*)(void))rigid_period, METH_FASTCALL,
      "A rigid-gear joint's SYNC period with its drive's servo law (see the module source)."},
+    {"two_mass_period", (PyCFunction)(void (*)(void))two_mass_period, METH_FASTCALL,
+     "A loose or elastic gear's SYNC period with its drive's servo law (see the module source)."},
     {"actual_values", (PyCFunction)(void (*)(void))actual_values, METH_FASTCALL,
      "A drive's actual values as its objects count them (see the module source)."},
     {NULL, NULL, 0, NULL},

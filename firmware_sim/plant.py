@@ -36,6 +36,7 @@ from spacearm.firmware_sim.laser_ranger import LaserTarget
 from spacearm.firmware_sim.contact.config import ContactConfig
 from spacearm.firmware_sim.rigid_body_config import RigidBodyParams
 from spacearm.firmware_sim import simcore
+from spacearm.firmware_sim.two_mass import two_mass_period
 
 ARCSEC = math.pi / (180.0 * 3600.0)
 
@@ -321,27 +322,46 @@ class JointModel:
         interpolation point), in order. Plant.step hands a joint the whole period at once: a
         rigid gear is integrated on local variables with the constants read once, the same
         arithmetic in the same order as one substep() at a time (issue 35: 60 method calls
-        and 80 property reads a cycle were a tenth of the simulator's CPU). With the compiled
-        core (simcore.py) a rigid gear's period under a servo law the core models is one call."""
+        and 80 property reads a cycle were a tenth of the simulator's CPU). Under a servo law
+        the drive hands over for the whole period, a loose or elastic gear's period is
+        one call (two_mass.py, or the compiled core's copy of it), and so, with the compiled core
+        (simcore.py), is a rigid gear's."""
         servo = self.period_servo
-        p = self.params          # two_mass inlined: every joint, every SYNC
-        if simcore.core is not None and servo is not None and servo[0] is self.controller \
-                and not (p.joint_stiffness > 0.0 or p.backlash > 0.0):
-            law = servo[1]()
-            if law is not None and self._core_period(fractions, h, law):
-                return
+        if servo is not None and servo[0] is self.controller and fractions:
+            p = self.params          # two_mass inlined: every joint, every SYNC
+            if p.joint_stiffness > 0.0 or p.backlash > 0.0:
+                law = servo[1]()
+                if law is not None:
+                    self._two_mass_period(fractions, h, law, self._constants())
+                    return
+            elif simcore.core is not None:
+                law = servo[1]()
+                if law is not None and self._core_period(fractions, h, law, self._constants()):
+                    return
         for _ in self.stepper(fractions, h, coupled=False):
             pass
 
-    def _core_period(self, fractions, h: float, law: tuple) -> bool:
-        """stepper()'s rigid-gear period in the compiled core, with the servo law `law` =
-        (kind, q_start, q_end, v_ff, torque_ff, finish): finish(q_ref, v_ref) hands the drive
-        its reference at the period's end. False: the core left this period to Python (a value
-        Python's round() or cos() raises on), nothing changed."""
+    def _two_mass_period(self, fractions, h: float, law: tuple, constants: tuple) -> None:
+        """stepper()'s two-mass period under the servo law `law` (as _core_period takes it): in
+        the compiled core, or in Python where there is none or it leaves the period to Python."""
         held = self.brake_engaged or self.stalled
-        key = self._core_key     # _core_constants' usual answer inline: every joint, every SYNC
-        constants = self._core_values if key is not None and key[0] is self.params \
-            and key[1] == self.max_motor_torque and key[2] == self.load_amplitude else self._core_constants()
+        args = (fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta, self.thetad,
+                self.motor_torque, law[1], law[2], law[3], law[4], constants)
+        # getattr: a core built before it had this period (an extension not rebuilt) leaves it to Python
+        fast = None if simcore.core is None else getattr(simcore.core, "two_mass_period", None)
+        out = None if fast is None else fast(*args)
+        q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = out or two_mass_period(*args)
+        if not held:      # held, they stand still: the very objects kept (as stepper() leaves them)
+            self.q, self.theta = q, theta
+        law[5](q_ref, v_ref)
+
+    def _core_period(self, fractions, h: float, law: tuple, constants: tuple) -> bool:
+        """stepper()'s rigid-gear period in the compiled core, with the servo law `law` =
+        (kind, q_start, q_end, v_ff, torque_ff, finish) and `constants` = _core_constants():
+        finish(q_ref, v_ref) hands the drive its reference at the period's end. False: the
+        core left this period to Python (a value Python's round() or cos() raises on),
+        nothing changed."""
+        held = self.brake_engaged or self.stalled
         out = simcore.core.rigid_period(fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta,
                                         self.thetad, self.motor_torque, law[1], law[2], law[3], law[4], constants)
         if out is None:
@@ -363,22 +383,32 @@ class JointModel:
         servo = self.period_servo
         if simcore.core is not None and servo is not None and servo[0] is self.controller:
             law = servo[1]()
-            key = self._core_key     # _core_constants' usual answer inline, as in _core_period
-            constants = self._core_values if key is not None and key[0] is self.params \
-                and key[1] == self.max_motor_torque and key[2] == self.load_amplitude else self._core_constants()
-            if law is not None and law[0] == simcore.SERVO_OFF and constants[1] > 0.0 and constants[2] > 0.0 \
-                    and self._core_period(fractions, h, law):
-                return
+            if law is not None and law[0] == simcore.SERVO_OFF:
+                constants = self._constants()
+                if constants[1] > 0.0 and constants[2] > 0.0 and self._core_period(fractions, h, law, constants):
+                    return
         for _ in self.stepper(fractions, h, coupled=False):
             pass
 
     _core_key = None      # _core_constants' cache (no annotation: class attributes, not dataclass fields)
     _core_values = ()
 
+    def _constants(self) -> tuple:
+        """_core_constants(), its usual answer (the cache holds) without the call: every joint,
+        every SYNC."""
+        key = self._core_key
+        if key is not None and key[0] is self.params and key[1] == self.max_motor_torque \
+                and key[2] == self.load_amplitude:
+            return self._core_values
+        return self._core_constants()
+
     def _core_constants(self) -> tuple:
         """What stepper() reads once a period and the servo law's gains, as the core takes them:
         worked out again only when the parameters, the drive's torque limit or the load
-        amplitude changed (the same expressions as stepper(), so the same floats)."""
+        amplitude changed (the same expressions as stepper() and advance_motor(), so the same
+        floats). A loose or elastic gear's has advance_motor()'s constants after them (j_link,
+        stiffness, j_motor, gear damping, half the play): two_mass_period() takes them (the
+        core's and two_mass.py's), the core's rigid_period() refuses them."""
         key = (self.params, self.max_motor_torque, self.load_amplitude)
         if self._core_key != key:
             p = self.params
@@ -388,10 +418,14 @@ class JointModel:
             amplitude = self.load_amplitude
             constant_load = p.prismatic or amplitude == 0.0
             load = self._load() if constant_load else 0.0    # else the first sub-step works it out
-            self._core_values = (p.encoder_bias, p.position_quantum, limit, p.gear_ratio, p.gear_efficiency, amplitude,
-                                 p.gravity_angle, constant_load, load, p.coulomb_friction, p.viscous_friction,
-                                 p.stribeck_friction, p.stribeck_velocity, self.effective_inertia, p.te_amplitude,
-                                 p.te_harmonic, p.te_phase, p.servo_bandwidth_hz, p.servo_damping)
+            values = (p.encoder_bias, p.position_quantum, limit, p.gear_ratio, p.gear_efficiency, amplitude,
+                      p.gravity_angle, constant_load, load, p.coulomb_friction, p.viscous_friction,
+                      p.stribeck_friction, p.stribeck_velocity, self.effective_inertia, p.te_amplitude,
+                      p.te_harmonic, p.te_phase, p.servo_bandwidth_hz, p.servo_damping)
+            if self.two_mass:
+                j_link = max(p.link_inertia, 1e-3)
+                values += (j_link,) + self._gear_coupling(j_link) + (0.5 * p.backlash,)
+            self._core_values = values
             self._core_key = key
         return self._core_values
 
@@ -490,15 +524,21 @@ class JointModel:
         """Integrate the motor side of an elastic/loose gear; returns the coupling torque on
         the link. Damping defaults to 20 % of critical for the motor and `j_link`."""
         p = self.params
-        stiffness = p.joint_stiffness or self.RIGID_GEAR_STIFFNESS
-        j_motor = p.motor_inertia * p.gear_ratio ** 2
-        damping = p.joint_damping or 0.2 * math.sqrt(stiffness * j_motor * j_link / (j_motor + j_link))
+        stiffness, j_motor, damping = self._gear_coupling(j_link)
         out = self.theta + transmission_error(self.theta, p.te_amplitude, p.te_harmonic, p.te_phase, p.gear_ratio)
         deflection = dead_zone(out - self.q, p.backlash)
         coupling = stiffness * deflection + (damping * (self.thetad - self.qd) if deflection != 0.0 else 0.0)
         self.thetad += (drive - coupling) / j_motor * h
         self.theta += self.thetad * h
         return coupling
+
+    def _gear_coupling(self, j_link: float) -> tuple[float, float, float]:
+        """(stiffness, motor inertia at the joint, damping) of the gear between motor and link."""
+        p = self.params
+        stiffness = p.joint_stiffness or self.RIGID_GEAR_STIFFNESS
+        j_motor = p.motor_inertia * p.gear_ratio ** 2
+        damping = p.joint_damping or 0.2 * math.sqrt(stiffness * j_motor * j_link / (j_motor + j_link))
+        return stiffness, j_motor, damping
 
     def _substep_two_mass(self, drive: float, h: float) -> None:
         """Motor and link as two inertias joined by the gear: stiffness, play, transmission error."""

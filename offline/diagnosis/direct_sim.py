@@ -37,7 +37,6 @@ from spacearm.controller.daemon.hardware import with_drive_limits
 from spacearm.firmware_sim.joint_drive import servo_torque
 from spacearm.firmware_sim.simcore import SERVO_CSP
 from spacearm.firmware_sim.plant import JointModel, JointParams, Plant, PlantConfig
-from spacearm.offline.diagnosis.two_mass_period import two_mass_period
 
 FT_FORCE_QUANTUM = 0.01      # N: 100 counts/N (2201h default)
 FT_TORQUE_QUANTUM = 0.001    # N m: 1000 counts/N m (2202h default)
@@ -183,9 +182,10 @@ class _CspDrive:
         joint.brake_engaged = False
         joint.max_motor_torque = settings.max_torque * settings.rated_torque
         servo = joint.controller = self._servo      # one bound method: the core checks it `is` the controller
-        # the same servo law for the whole period, as the compiled core runs a rigid gear's
-        # period in one call (plant.JointModel._core_period; the same bits as _servo sub-step by
-        # sub-step): the per-sub-step Python calls were most of a diagnosis's replay time
+        # the same servo law for the whole period, as the plant runs a period in one call (a
+        # rigid gear's in the compiled core, a loose or elastic gear's in firmware_sim.two_mass;
+        # the same bits as _servo sub-step by sub-step): the per-sub-step Python calls were most
+        # of a diagnosis's replay time
         joint.period_servo = (servo, self._period_law)
 
     def latch(self, target: float, velocity_offset: float) -> None:
@@ -204,7 +204,9 @@ class _CspDrive:
         return servo_torque(self.joint, self.q_ref, self.v_ff, q_meas, qd)
 
     def _period_law(self) -> tuple:
-        return SERVO_CSP, self.q_start, self.q_end, self.v_ff, 0.0, self._end_period
+        # torque offset -0.0: the plant's law adds it, _servo adds nothing, and x + -0.0 is x to
+        # the bit where x + 0.0 turns a -0.0 torque into +0.0
+        return SERVO_CSP, self.q_start, self.q_end, self.v_ff, -0.0, self._end_period
 
     def _end_period(self, q_ref: float, v_ref: float) -> None:
         self.q_ref = q_ref
@@ -248,9 +250,6 @@ def simulate(config: PlantConfig, q_cmd: np.ndarray, dt: float, q0: np.ndarray |
         # nothing reads the end effector's grip and screw here (no contact world): stepping them,
         # ten sub-steps a row, cost a sixth of a gear fit's replays
         plant.ee = None
-        for joint, drive in zip(plant.joints, drives):
-            if joint.two_mass:      # the compiled core takes rigid gears only (_CspDrive)
-                joint.substeps = two_mass_period(joint, drive)
     fe = 0.0
     cols = q_cmd[:, index]
     if dq_cmd is not None:

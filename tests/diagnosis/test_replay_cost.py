@@ -57,15 +57,16 @@ def test_the_refit_replays_only_the_fitted_joints_and_matches_a_full_replay(monk
 
 
 def _own_paths(monkeypatch) -> None:
-    """The plant's own sub-step-by-sub-step Python paths: no compiled core, no local two-mass period."""
+    """The plant's own sub-step-by-sub-step Python paths: no compiled core, and no servo law for
+    a whole period (so no two-mass period either)."""
     from spacearm.firmware_sim import simcore
     from spacearm.offline.diagnosis import direct_sim
     monkeypatch.setattr(simcore, "core", None)
-    monkeypatch.setattr(direct_sim, "two_mass_period", lambda joint, drive: type(joint).substeps.__get__(joint))
+    monkeypatch.setattr(direct_sim._CspDrive, "_period_law", lambda self: None)
 
 
 def test_the_fast_replay_paths_give_the_plants_own_bits(monkeypatch) -> None:
-    """The compiled core's rigid-gear period and the local two-mass period (a loose, elastic,
+    """The compiled core's rigid-gear period and the plant's two-mass period (a loose, elastic,
     rubbing gear with transmission error, torque noise and feedback latency) replay exactly
     what the plant's own Python path replays."""
     commands = _commands(400) + 0.002 * (np.arange(400) % 37 == 0)[:, None]

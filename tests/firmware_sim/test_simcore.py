@@ -53,14 +53,8 @@ def _state(joint, law):
 finite = st.floats(-3.0, 3.0, allow_nan=False)
 
 
-@needs_core
-@settings(max_examples=300, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), q=finite, qd=finite, q_end=finite, torque_ff=st.floats(-2.0, 2.0),
-       kind=st.sampled_from([SERVO_OFF, SERVO_CSP]), brake=st.booleans(), friction=st.booleans(),
-       te=st.booleans(), prismatic=st.booleans(), substeps=st.integers(1, 20))
-def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff, kind, brake, friction, te,
-                                                     prismatic, substeps):
-    rng = random.Random(seed)
+def random_fields(rng: random.Random, prismatic: bool, friction: bool, te: bool) -> dict:
+    """A random joint's parameters (rigid gear) for JointParams, with the effects asked for."""
     fields = dict(servo_bandwidth_hz=rng.uniform(1.0, 50.0), servo_damping=rng.uniform(0.3, 2.0),
                   gear_ratio=rng.uniform(1.0, 200.0), gear_efficiency=rng.uniform(0.5, 1.0),
                   link_inertia=rng.uniform(0.0, 20.0), torque_limit=rng.choice([0.0, rng.uniform(0.01, 5.0)]),
@@ -75,7 +69,18 @@ def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff
     if te:
         fields.update(te_amplitude=rng.uniform(1e-5, 1e-3), te_harmonic=rng.uniform(1.0, 3.0),
                       te_phase=rng.uniform(-3.0, 3.0))
-    params = JointParams(**fields)
+    return fields
+
+
+@needs_core
+@settings(max_examples=300, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), q=finite, qd=finite, q_end=finite, torque_ff=st.floats(-2.0, 2.0),
+       kind=st.sampled_from([SERVO_OFF, SERVO_CSP]), brake=st.booleans(), friction=st.booleans(),
+       te=st.booleans(), prismatic=st.booleans(), substeps=st.integers(1, 20))
+def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff, kind, brake, friction, te,
+                                                     prismatic, substeps):
+    rng = random.Random(seed)
+    params = JointParams(**random_fields(rng, prismatic, friction, te))
     amplitude = rng.choice([0.0, rng.uniform(-50.0, 50.0)])
     max_torque = rng.choice([math.inf, rng.uniform(0.1, 10.0)])
     n = substeps
@@ -91,7 +96,7 @@ def test_a_period_in_the_core_is_the_python_period(seed, q, qd, q_end, torque_ff
         joint.period_servo = (law.servo, law.law)
         results.append((joint, law))
     core_joint, core_law = results[0]
-    assert core_joint._core_period(fractions, h, core_law.law())
+    assert core_joint._core_period(fractions, h, core_law.law(), core_joint._core_constants())
     py_joint, py_law = results[1]
     py_joint.period_servo = None
     py_joint.substeps(fractions, h)
@@ -104,7 +109,7 @@ def test_a_period_python_raises_on_is_left_to_python():
     joint = _joint(JointParams(), math.nan, 0.0, 0.0, False, 0.0, math.inf)
     law = _Law(SERVO_CSP, 0.0, 0.1, 5.0, 0.0, joint)
     joint.controller, joint.period_servo = law.servo, (law.servo, law.law)
-    assert not joint._core_period([0.5, 1.0], 0.01, law.law())
+    assert not joint._core_period([0.5, 1.0], 0.01, law.law(), joint._core_constants())
     assert math.isnan(joint.q) and joint.motor_torque == 0.0 and law.q_ref is None
     with pytest.raises(ValueError):
         joint.substeps([0.5, 1.0], 0.01)
