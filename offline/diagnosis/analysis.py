@@ -611,8 +611,12 @@ def replayed_choice(fit: ChannelFit, alternatives: list[ChannelFit], table: Reco
 def _stiff_gear_wins(stiff: ChannelFit | None, fit: ChannelFit | None) -> bool:
     """A significant stiff-gear fit whose held-out torque error beats the joint's fit so far by
     STIFF_GEAR_BETTER (or there is none)."""
+    # ... and whose size is known: one that is not is dropped later (honesty.uncertain), and had
+    # it displaced the joint's fit, that fit was lost with it (viscous friction 3.4x the noise on
+    # a slow ramp left "no catalogue effect" after a stiff gear of 2.1e5 +- 2.6e5 N m/rad beat it
+    # by the noise)
     return stiff_significant(stiff) and (fit is None or stiff.rms_heldout_after < STIFF_GEAR_BETTER *
-                                         fit.rms_heldout_after)
+                                         fit.rms_heldout_after) and not uncertain(*plant_parameters(stiff))
 
 
 MODEL_WRONG = "the model is wrong here"

@@ -35,3 +35,21 @@ def test_stiction_by_breakaway_whose_interval_spans_zero_is_no_finding():
 def test_stiction_by_breakaway_clearly_above_zero_stays_a_finding():
     findings, rejected = _judge(_stiction_by_peaks(6.0, 0.5, 500))
     assert rejected == [] and len(findings) == 1 and findings[0].params["stribeck_friction"] == 6.0
+
+
+def _gear(stiffness: float, stderr: float, after: float) -> ChannelFit:
+    return ChannelFit(effects=("elasticity",), channel="tau", index=4, coef=np.array([stiffness]),
+                      stderr=np.array([stderr]), columns=("joint_stiffness",), shape=(np.nan,), sse_train=1.0,
+                      sse_null_train=2.0, rms_heldout_before=4.28, rms_heldout_after=after, p_value=1e-12, block=2,
+                      prediction=np.zeros(10), n_train=10, n_params=1, judged_by="stiff gear")
+
+
+def test_a_stiff_gear_whose_size_is_unknown_does_not_displace_the_joints_friction():
+    # viscous friction 3.4x the noise on a slow ramp: a stiff gear of 2.1e5 +- 2.6e5 N m/rad beat it
+    # by the noise, displaced it, was dropped as unknown, and the joint was left unexplained
+    from spacearm.offline.diagnosis.analysis import _stiff_gear_wins
+    viscous = _stiction_by_peaks(6.0, 0.5, 10)
+    viscous.effects, viscous.columns, viscous.judged_by, viscous.rms_heldout_after = \
+        ("viscous",), ("viscous_friction",), "samples", 1.30
+    assert not _stiff_gear_wins(_gear(2.12e5, 1.33e5, 1.27), viscous)
+    assert _stiff_gear_wins(_gear(2.12e5, 0.1e5, 1.27), viscous)
