@@ -6,7 +6,7 @@ a coupled plant (contact world, rigid-body arm) needs that, since something acts
 sub-steps. A joint on its own does not, and re-reading the parameters and calling back into the
 drive were most of the cost of the diagnosis's gear fits (some fifty replays of one joint).
 This is that arithmetic in the same order (the same bits: tests/firmware_sim/
-test_twomass15_period.py), with the constants read once a period and the servo law handed in
+test_two_mass_period.py), with the constants read once a period and the servo law handed in
 as data, as the compiled core's rigid_period() takes it (simcore.SERVO_OFF / SERVO_CSP). The
 core has a copy of it in C (_simcore.c two_mass_period), which JointModel runs where it is
 built; this one is the pure-Python path and the reference the core is tested against.
