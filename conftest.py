@@ -11,7 +11,6 @@ import time
 import pytest
 
 _started: dict[str, float] = {}
-VCAN_VM_TEST = "hil_tests/test_vcan_suite.py"    # its one test boots a VM: a scope of its own
 _worker_last_report: dict[str, float] = {}     # xdist worker -> wall s of its last test report
 
 
@@ -54,25 +53,14 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 def pytest_xdist_make_scheduler(config, log):
     """With pytest-xdist (the README's test command runs two workers): every HIL test on one
     worker, one after another in file order, while the unit tests share out over both. HIL
-    stacks time real motion on 2 cores and must not pile up on each other.
-
-    The vcan VM is a scope of its own, handed out last: to the first worker that runs out of
-    work, in practice the unit tests' worker while the HIL worker finishes its last minutes.
-    In the HIL group, last, it ran after 13-14 min of HIL tests while the other worker sat idle
-    for 8.5 min (CI of 0a437cb: 19.9 min wall). Started at once beside the HIL tests instead
-    (tried 2026-11-30, other load beside it, load 8-12), its two TCG vCPUs starved them: 3 HIL
-    and VM tests failed on starvation."""
+    stacks time real motion on 2 cores and must not pile up on each other. The vcan VM stays in
+    the HIL group, last. As a scope of its own, started at once beside the HIL tests (tried
+    2026-11-30, other load beside it, load 8-12), its two TCG vCPUs starve them: 3 HIL and VM
+    tests failed on starvation; not kept until measured on a quiet machine."""
     from xdist.scheduler import LoadScopeScheduling
 
     class HilInOrder(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            if nodeid.startswith(VCAN_VM_TEST):
-                return VCAN_VM_TEST
             return "hil_tests" if nodeid.startswith("hil_tests/") else nodeid
-
-        def _assign_work_unit(self, node) -> None:
-            if len(self.workqueue) > 1 and VCAN_VM_TEST in self.workqueue:
-                self.workqueue.move_to_end(VCAN_VM_TEST)
-            super()._assign_work_unit(node)
 
     return HilInOrder(config, log)
