@@ -258,14 +258,8 @@ class JointModel:
 
     def readings(self) -> tuple[float, float, float]:
         """(q_measured, q_reported, qd_reported) in one call: a drive's SYNC end reads all three
-        (issue 35), the encoder's reading worked out once (q_measured's body inline: a property call less a SYNC)."""
-        p = self.params
-        if p is not self._quantum_of:
-            self._quantum_of, self._quantum = p, p.position_quantum
-        q_measured = self.q + p.encoder_bias
-        quantum = self._quantum
-        if not quantum <= 0.0:       # q_measured's test as it is written there (a NaN step rounds and raises)
-            q_measured = round(q_measured / quantum) * quantum
+        (issue 35), the encoder's reading worked out once."""
+        q_measured = self.q_measured
         if self.feedback is None:
             return q_measured, q_measured, self.qd
         return q_measured, self.feedback.output, self.feedback_velocity.output
@@ -347,9 +341,7 @@ class JointModel:
         held = self.brake_engaged or self.stalled
         args = (fractions, law[0], h, held, self.external_torque, self.q, self.qd, self.theta, self.thetad,
                 self.motor_torque, law[1], law[2], law[3], law[4], constants)
-        # getattr: a core built before it had this period (an extension not rebuilt) leaves it to Python
-        fast = None if simcore.core is None else getattr(simcore.core, "two_mass_period", None)
-        out = None if fast is None else fast(*args)
+        out = None if simcore.core is None else simcore.core.two_mass_period(*args)
         q, self.qd, theta, self.thetad, self.motor_torque, q_ref, v_ref = out or two_mass_period(*args)
         if not held:      # held, they stand still: the very objects kept (as stepper() leaves them)
             self.q, self.theta = q, theta
